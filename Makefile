@@ -1,0 +1,62 @@
+# flagsim entry points. `make demo` and `make test` bootstrap a fresh Debian/Ubuntu machine:
+# missing Debian packages are installed with apt-get when run as root (otherwise the command to
+# run is printed), Python packages go into .venv, and the build is incremental in build/.
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+BUILD := build
+CTEST := $(VENV)/bin/ctest
+APT_PACKAGES := g++ make python3-venv python3-dev libeigen3-dev libfftw3-dev libgtest-dev povray
+JOBS ?= 2
+
+.PHONY: all demo test test-cpp test-python build bench study clean system-deps
+
+all: build
+
+system-deps:
+	@missing=""; for p in $(APT_PACKAGES); do \
+	  dpkg-query -W -f='$${Status}' $$p 2>/dev/null | grep -q "ok installed" || missing="$$missing $$p"; \
+	done; \
+	if [ -n "$$missing" ]; then \
+	  if [ "$$(id -u)" = 0 ]; then \
+	    echo "installing Debian packages:$$missing"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing; \
+	  else \
+	    echo "flagsim needs these Debian packages:$$missing"; \
+	    echo "run:  sudo apt-get install -y$$missing   and then make again"; exit 1; \
+	  fi; \
+	fi
+
+$(VENV)/.deps: pyproject.toml | system-deps
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q "scikit-build-core>=0.10" "pybind11>=2.12" cmake ninja
+	$(PY) -m pip install -q "numpy>=1.24" "tqdm>=4.60" "tomli>=2.0; python_version < '3.11'" \
+	    "pytest>=7.4" "hypothesis>=6.80" "imageio>=2.20" "matplotlib>=3.6"
+	@touch $@
+
+# Incremental: scikit-build-core reuses build/ and ninja rebuilds only what changed.
+build: $(VENV)/.deps
+	@PATH="$(abspath $(VENV))/bin:$$PATH" $(PY) -m pip install -q --no-build-isolation --no-deps -e . \
+	    -Cbuild-dir=$(BUILD) -Ccmake.define.FLAGSIM_BUILD_TESTS=ON \
+	    -Ccmake.build-type=Release -Cbuild.tool-args=-j$(JOBS)
+
+test: build
+	$(CTEST) --test-dir $(BUILD) --output-on-failure -j$(JOBS)
+	$(PY) -m pytest -q
+
+test-cpp: build
+	$(CTEST) --test-dir $(BUILD) --output-on-failure -j$(JOBS)
+
+test-python: build
+	$(PY) -m pytest -q
+
+demo: build
+	$(VENV)/bin/flagsim run paper --seconds 4 --fps 25 --out out/demo --render --gif
+
+bench: build
+	$(VENV)/bin/flagsim bench --out out/bench
+
+clean:
+	rm -rf $(BUILD) out

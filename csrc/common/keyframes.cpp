@@ -1,0 +1,63 @@
+#include "common/keyframes.h"
+
+#include <algorithm>
+
+#include "common/errors.h"
+
+namespace flagsim {
+
+Vec3 WindSchedule::at(double t) const {
+  if (keys.empty()) return Vec3::Zero();
+  if (t <= keys.front().time) return keys.front().velocity;
+  if (t >= keys.back().time) return keys.back().velocity;
+  auto hi = std::upper_bound(keys.begin(), keys.end(), t,
+                             [](double x, const WindKey& k) { return x < k.time; });
+  auto lo = hi - 1;
+  const double s = (t - lo->time) / (hi->time - lo->time);
+  return (1 - s) * lo->velocity + s * hi->velocity;
+}
+
+bool WindSchedule::constant() const {
+  for (const auto& k : keys)
+    if (k.velocity != keys.front().velocity) return false;
+  return true;
+}
+
+double WindSchedule::max_speed() const {
+  double m = 0;
+  for (const auto& k : keys) m = std::max(m, k.velocity.norm());
+  return m;
+}
+
+void WindSchedule::validate(const std::string& name) const {
+  for (size_t i = 0; i < keys.size(); ++i) {
+    check_finite(name + "[" + std::to_string(i) + "].time", keys[i].time);
+    check_finite_vec(name + "[" + std::to_string(i) + "].velocity", keys[i].velocity);
+    if (i > 0 && !(keys[i].time > keys[i - 1].time))
+      fail_param(name + "[" + std::to_string(i) + "].time",
+                 "> the previous key's time " + detail::to_text(keys[i - 1].time), keys[i].time);
+  }
+}
+
+double ScalarSchedule::at(double t, double fallback) const {
+  if (keys.empty()) return fallback;
+  if (t <= keys.front().first) return keys.front().second;
+  if (t >= keys.back().first) return keys.back().second;
+  auto hi = std::upper_bound(keys.begin(), keys.end(), t,
+                             [](double x, const std::pair<double, double>& k) { return x < k.first; });
+  auto lo = hi - 1;
+  const double s = (t - lo->first) / (hi->first - lo->first);
+  return (1 - s) * lo->second + s * hi->second;
+}
+
+void ScalarSchedule::validate(const std::string& name) const {
+  for (size_t i = 0; i < keys.size(); ++i) {
+    check_finite(name + "[" + std::to_string(i) + "].time", keys[i].first);
+    check_finite(name + "[" + std::to_string(i) + "].value", keys[i].second);
+    if (i > 0 && !(keys[i].first > keys[i - 1].first))
+      fail_param(name + "[" + std::to_string(i) + "].time",
+                 "> the previous key's time " + detail::to_text(keys[i - 1].first), keys[i].first);
+  }
+}
+
+}  // namespace flagsim

@@ -1,0 +1,13 @@
+// Thread-count control for OpenMP loops. Results are deterministic for a given thread count.
+#pragma once
+
+namespace flagsim {
+
+/// Number of threads flagsim's loops use (default: OpenMP's default, usually all cores).
+int num_threads();
+/// Set the thread count for flagsim's loops; n >= 1. Throws InvalidArgument otherwise.
+void set_num_threads(int n);
+/// True when compiled with OpenMP.
+bool has_openmp();
+
+}  // namespace flagsim

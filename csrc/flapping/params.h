@@ -1,0 +1,19 @@
+// Parameters of the paper's flapping model (eq. 5).
+#pragma once
+#include <cstdint>
+#include <string>
+
+namespace flagsim {
+
+struct FlappingParams {
+  std::string mode = "off";   ///< "displace" (paper) | "force" | "visual" | "off"
+  double amplitude = 0.01;    ///< A at L >= l_max, m of displacement per m/s of u_p
+  double l_max = 0.2;         ///< m, distance from the nearest pin where A stops growing
+  double speed = 1.0;         ///< v, wave speed in normalised flag lengths per second
+  double parabola = 1.0;      ///< a, parabola shape coefficient (eq. 5)
+  double frequency = 3.0;     ///< noise lattice cells per normalised flag length
+  uint32_t seed = 0;
+  void validate(const std::string& prefix) const;
+};
+
+}  // namespace flagsim

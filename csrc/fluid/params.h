@@ -1,0 +1,41 @@
+// Parameters of the air solver (Stable Fluids on a MAC grid). Plain struct, validated by validate().
+#pragma once
+#include <array>
+#include <string>
+#include <vector>
+
+#include "common/keyframes.h"
+#include "common/types.h"
+
+namespace flagsim {
+
+/// A region that pushes the air: force density f (N/m^3) along `direction` inside a box or sphere.
+struct FanParams {
+  std::string shape = "box";            ///< "box" | "sphere"
+  Vec3 center{0, 0, 0};                 ///< m
+  Vec3 half_size{0.25, 0.25, 0.25};     ///< m, box half extents (shape "box")
+  double radius = 0.25;                 ///< m (shape "sphere")
+  Vec3 direction{1, 0, 0};              ///< normalised on use
+  double force_density = 20.0;          ///< N/m^3
+  ScalarSchedule strength;              ///< (time s, factor) keyframes; empty = always 1
+  void validate(const std::string& prefix) const;
+};
+
+struct FluidParams {
+  std::array<int, 3> resolution{16, 16, 16};  ///< cells nx, ny, nz
+  double cell_size = 0.125;                   ///< m
+  Vec3 origin{-0.5, -1.0, -1.0};              ///< m, min corner of the domain
+  std::string boundary = "periodic";          ///< "periodic" | "tunnel"
+  std::string advection = "semi_lagrangian";  ///< "semi_lagrangian" | "maccormack"
+  std::string pressure = "fft";               ///< "fft" (periodic only) | "pcg"
+  std::string precision = "double";           ///< "double" | "float"
+  double viscosity = 1.5e-5;                  ///< m^2/s, kinematic; 0 = no diffusion stage
+  double density = 1.2;                       ///< kg/m^3
+  double pcg_tolerance = 1e-8;                ///< relative residual
+  int pcg_max_iterations = 500;
+  WindSchedule wind;        ///< periodic: mean flow (k = 0 mode); tunnel: inflow velocity
+  std::vector<FanParams> fans;
+  void validate(const std::string& prefix) const;
+};
+
+}  // namespace flagsim
