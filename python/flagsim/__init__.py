@@ -7,18 +7,30 @@ CLI, plotting and rendering helpers load when used.
 """
 from ._core import (
     DivergenceError,
+    FlappingParams,
+    PoleParams,
+    SelfCollisionParams,
     __version__,
+    flapping_displacement,
+    flapping_ramp,
     has_fftw,
     has_openmp,
     num_threads,
+    perlin1d,
     set_num_threads,
 )
 
 __all__ = [
     "DivergenceError",
+    "FlappingParams",
+    "PoleParams",
+    "SelfCollisionParams",
     "__version__",
+    "flapping_displacement",
+    "flapping_ramp",
     "has_fftw",
     "has_openmp",
     "num_threads",
+    "perlin1d",
     "set_num_threads",
 ]
