@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include "common/parallel.h"
+
 #include "common/timer.h"
 
 namespace flagsim {
@@ -59,7 +61,7 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
     compute_forces(topo, fs, x, v, u, s.f, t);
     // symplectic Euler: v <- v + h M^-1 f(x, v); x <- x + h v
     const Index N = topo.num_vertices();
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (N >= kParallelGrain)
     for (Index i = 0; i < N; ++i) {
       v.row(i) += (hs * topo.inv_mass[i]) * s.f.row(i);
       x.row(i) += hs * v.row(i);
@@ -75,7 +77,7 @@ void apply_system(const ClothTopology& topo, double h, IntegratorScratch& s, con
   apply_position_jacobian(topo, s.K, p, s.tmp);
   apply_velocity_jacobian(topo, s.Dv, s.Jw, p, out);
   const Index N = topo.num_vertices();
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (N >= kParallelGrain)
   for (Index i = 0; i < N; ++i) {
     if (topo.inv_mass[i] == 0.0) {
       out.row(i).setZero();
@@ -113,7 +115,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   if (!fs.springs) {
     for (auto& k : s.K) k.setZero();
   }
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (N >= kParallelGrain)
   for (Index i = 0; i < N; ++i) {
     Mat3 D = topo.mass[i] * Mat3::Identity() + h * s.Dv[i];
     for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k) {
@@ -164,7 +166,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     stats.cg_iterations += it;
     if (!converged) return IntegrateStatus::kCgFailed;
   }
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (N >= kParallelGrain)
   for (Index i = 0; i < N; ++i) {
     v.row(i) += s.dv.row(i);
     x.row(i) += h * v.row(i);
