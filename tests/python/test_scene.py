@@ -137,3 +137,12 @@ def test_import_loads_no_cli_plotting_or_rendering_library():
             "if m in sys.modules]; print(','.join(bad))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == ""
+
+
+def test_example_scene_files_load():
+    import pathlib
+    root = pathlib.Path(__file__).resolve().parents[2] / "examples" / "scenes"
+    files = sorted(root.glob("*.toml"))
+    assert files
+    for f in files:
+        flagsim.Simulation(flagsim.Scene.load(f)).step(2)
