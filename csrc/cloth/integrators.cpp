@@ -203,9 +203,22 @@ IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const I
                           double h, const MatX3& u, MatX3& x, MatX3& v, IntegratorScratch& s,
                           IntegratorStats& stats, ForceTimings* t) {
   stats = IntegratorStats{};
-  if (ip.method == "explicit") return explicit_step(topo, fs, ip, h, u, x, v, s, stats, t);
-  if (ip.method == "implicit") return implicit_step(topo, fs, ip, h, u, x, v, s, stats, t);
-  throw std::logic_error("integrate: unknown method '" + ip.method + "' (validate() lets none through)");
+  const double hs = h / double(ip.substeps);
+  long explicit_substeps = 0;
+  for (int k = 0; k < ip.substeps; ++k) {
+    IntegrateStatus st;
+    if (ip.method == "explicit") {
+      st = explicit_step(topo, fs, ip, hs, u, x, v, s, stats, t);
+      explicit_substeps += stats.substeps;
+    } else if (ip.method == "implicit") {
+      st = implicit_step(topo, fs, ip, hs, u, x, v, s, stats, t);
+    } else {
+      throw std::logic_error("integrate: unknown method '" + ip.method + "' (validate() lets none through)");
+    }
+    if (st != IntegrateStatus::kOk) return st;
+  }
+  if (ip.method == "explicit") stats.substeps = explicit_substeps;
+  return IntegrateStatus::kOk;
 }
 
 void limit_strain(const ClothTopology& topo, double limit, int iterations, double h, MatX3& x,

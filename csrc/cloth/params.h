@@ -39,6 +39,7 @@ struct DragParams {
 
 struct IntegratorParams {
   std::string method = "implicit";   ///< "explicit" (symplectic Euler) | "implicit" (Baraff-Witkin)
+  int substeps = 1;                   ///< fixed substeps per step (each of dt / substeps)
   bool adaptive = true;               ///< explicit: substep below the stable step estimate
   double safety = 0.9;                ///< fraction of the stable step used when substepping
   int max_substeps = 1000000;         ///< explicit: per step; more is a DivergenceError
