@@ -1,6 +1,7 @@
-"""Small stand-ins for flagsim.Scene / flagsim.Simulation used by the POV-Ray and CLI tests.
+"""A small stand-in for flagsim.Simulation used by the POV-Ray tests: a mesh whose motion the
+test knows exactly, with the Simulation's array interface.
 
-The stand-in flag is a rows x cols sheet hanging from a pole at x = 0 (r = 0 the top row, c = 0
+The flag is a rows x cols sheet hanging from a pole at x = 0 (r = 0 the top row, c = 0
 the pole side, as the real topology) with a travelling wave z = A (x / L) sin(k x - w t): a
 deterministic, flapping-looking motion with the same array interface as the Simulation.
 """
@@ -58,46 +59,3 @@ def standin_scene(dt=0.01):
     pole = SimpleNamespace(enabled=True, radius=0.055, height=2.6, base=(0.0, -2.5, 0.0))
     return SimpleNamespace(dt=dt, pole=pole)
 
-
-class StandInScene:
-    """The part of flagsim.Scene's class API the CLI uses (builtins, named, load), for tests
-    that run before (or without) the real Scene."""
-
-    BUILTINS = {"paper": "the paper's flag in its air field (stand-in)",
-                "calm": "a flag in a light breeze (stand-in)"}
-    KEYS = {"flag": {"rows", "cols"}, "air": {"model", "wind"}}
-
-    def __init__(self, name):
-        self.name = name
-        self.dt = 0.01
-        self.pole = standin_scene().pole
-
-    @classmethod
-    def builtins(cls):
-        return dict(cls.BUILTINS)
-
-    @classmethod
-    def named(cls, name):
-        if name not in cls.BUILTINS:
-            raise ValueError(f"scene should be one of {sorted(cls.BUILTINS)}, got '{name}'")
-        return cls(name)
-
-    @classmethod
-    def load(cls, path):
-        try:
-            import tomllib
-        except ImportError:  # Python 3.10
-            import tomli as tomllib
-
-        with open(path, "rb") as f:
-            data = tomllib.load(f)
-        for section, table in data.items():
-            for key in table:
-                if key not in cls.KEYS.get(section, ()):
-                    raise ValueError(f"{path}: unknown key '{key}' in section [{section}]")
-        return cls(str(path))
-
-
-class StandInSimulation(StandInSim):
-    def __init__(self, scene):
-        super().__init__(dt=scene.dt)

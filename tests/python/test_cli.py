@@ -7,19 +7,9 @@ import pytest
 
 import flagsim
 from flagsim import cli
-from _standin import StandInScene, StandInSimulation
 
 needs_povray = pytest.mark.skipif(shutil.which("povray") is None,
                                   reason="POV-Ray is not installed (Debian package povray)")
-
-
-@pytest.fixture
-def scene_api(monkeypatch):
-    """The real Scene/Simulation when the package has them, else the stand-ins."""
-    if not hasattr(flagsim, "Scene"):
-        monkeypatch.setattr(flagsim, "Scene", StandInScene, raising=False)
-        monkeypatch.setattr(flagsim, "Simulation", StandInSimulation, raising=False)
-    return flagsim.Scene
 
 
 def flagsim_cmd(capsys, *argv):
@@ -45,17 +35,17 @@ def test_help_lists_commands_and_every_command_has_help(capsys):
     assert code == 2 and "unknown command 'fly' (choose from run, render, scenes)" in err
 
 
-def test_scenes_lists_builtins_with_descriptions(capsys, scene_api):
+def test_scenes_lists_builtins_with_descriptions(capsys):
     code, out, _ = flagsim_cmd(capsys, "scenes")
     assert code == 0
     lines = out.strip().splitlines()
-    assert len(lines) == len(scene_api.builtins())
-    for name, summary in scene_api.builtins().items():
+    assert len(lines) == len(flagsim.Scene.builtins())
+    for name, summary in flagsim.Scene.builtins().items():
         assert any(line.split()[0] == name and line.endswith(summary) for line in lines)
 
 
-def test_run_without_render_exports_frames(capsys, scene_api, tmp_path):
-    name = sorted(scene_api.builtins())[0]
+def test_run_without_render_exports_frames(capsys, tmp_path):
+    name = "paper"
     out = tmp_path / "out dir"
     code, stdout, err = flagsim_cmd(capsys, "run", name, "--seconds", "0.2", "--fps", "10",
                                     "--out", str(out), "--quiet")
@@ -70,19 +60,19 @@ def test_run_without_render_exports_frames(capsys, scene_api, tmp_path):
     assert code == 0 and "3 frames" in err and "0 written, 3 kept" in err
 
 
-def test_unknown_scene_lists_the_known_ones(capsys, scene_api, tmp_path):
+def test_unknown_scene_lists_the_known_ones(capsys, tmp_path):
     code, out, err = flagsim_cmd(capsys, "run", "no_such_scene", "--out", str(tmp_path / "o"))
     assert code == 2 and out == ""
     assert err.startswith("flagsim: error: unknown scene 'no_such_scene': the built-in scenes "
-                          "are " + ", ".join(sorted(scene_api.builtins())))
+                          "are " + ", ".join(sorted(flagsim.Scene.builtins())))
     assert "Traceback" not in err and not (tmp_path / "o").exists()
 
 
-def test_bad_toml_key_is_reported_as_scene_load_reports_it(capsys, scene_api, tmp_path):
+def test_bad_toml_key_is_reported_as_scene_load_reports_it(capsys, tmp_path):
     toml = tmp_path / "bad.toml"
     toml.write_text("[flag]\nrows = 8\ncolour = 'red'\n")
     with pytest.raises(ValueError) as direct:
-        scene_api.load(str(toml))
+        flagsim.Scene.load(str(toml))
     assert "colour" in str(direct.value) and "flag" in str(direct.value)
     code, _, err = flagsim_cmd(capsys, "run", str(toml), "--out", str(tmp_path / "o"))
     assert code == 2
@@ -92,8 +82,8 @@ def test_bad_toml_key_is_reported_as_scene_load_reports_it(capsys, scene_api, tm
     assert code == 2 and "scene file" in err and "missing.toml' not found" in err
 
 
-def test_bad_values_and_folders_are_user_errors(capsys, scene_api, tmp_path):
-    name = sorted(scene_api.builtins())[0]
+def test_bad_values_and_folders_are_user_errors(capsys, tmp_path):
+    name = "paper"
     code, _, err = flagsim_cmd(capsys, "run", name, "--out", str(tmp_path), "--fps", "0")
     assert code == 2 and "fps should be finite and > 0, got 0.0" in err
     code, _, err = flagsim_cmd(capsys, "run", name, "--out", str(tmp_path), "--texture",
@@ -103,9 +93,9 @@ def test_bad_values_and_folders_are_user_errors(capsys, scene_api, tmp_path):
     assert code == 2 and "is not a flagsim export" in err and "Traceback" not in err
 
 
-def test_missing_povray_fails_before_simulating(capsys, scene_api, tmp_path, monkeypatch):
+def test_missing_povray_fails_before_simulating(capsys, tmp_path, monkeypatch):
     monkeypatch.setenv("FLAGSIM_POVRAY", "povray-not-installed")
-    name = sorted(scene_api.builtins())[0]
+    name = "paper"
     code, _, err = flagsim_cmd(capsys, "run", name, "--out", str(tmp_path / "o"), "--render")
     assert code == 1
     assert "install the Debian package 'povray'" in err
@@ -113,10 +103,10 @@ def test_missing_povray_fails_before_simulating(capsys, scene_api, tmp_path, mon
 
 
 @needs_povray
-def test_run_render_gif_prints_the_animation_path(capsys, scene_api, tmp_path):
+def test_run_render_gif_prints_the_animation_path(capsys, tmp_path):
     import imageio.v3 as iio
 
-    name = sorted(scene_api.builtins())[0]
+    name = "paper"
     out = tmp_path / "anim"
     code, stdout, err = flagsim_cmd(capsys, "run", name, "--seconds", "0.1", "--fps", "20",
                                     "--out", str(out), "--render", "--gif", "--width", "64",
@@ -130,8 +120,8 @@ def test_python_dash_m_flagsim_and_lazy_imports():
     proc = subprocess.run([sys.executable, "-m", "flagsim", "--help"], capture_output=True,
                           text=True)
     assert proc.returncode == 0 and "usage: flagsim" in proc.stdout
-    code = ("import sys, flagsim, flagsim.povray; "
-            "print(sorted(m for m in ('tqdm', 'imageio', 'matplotlib', 'flagsim.cli') "
+    code = ("import sys, flagsim; a = 'flagsim.povray' in sys.modules; flagsim.povray.export; "
+            "print(a, sorted(m for m in ('tqdm', 'imageio', 'matplotlib', 'flagsim.cli') "
             "if m in sys.modules))")
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
-    assert proc.stdout.strip() == "[]", proc.stderr
+    assert proc.stdout.strip() == "False []", proc.stderr

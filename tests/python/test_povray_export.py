@@ -117,3 +117,40 @@ def test_master_scene_takes_the_pole_from_the_scene_in_povray_frame(tmp_path):
     pov.export(StandInSim(), tmp_path / "nopole", seconds=0.1, fps=10, scene=scene,
                progress=False)
     assert "cylinder" not in (tmp_path / "nopole" / "flag.pov").read_text()
+
+
+def test_paper_flag_hoist_touches_the_drawn_pole(tmp_path):
+    import re
+
+    import flagsim
+    from flagsim.povray import scenefiles
+
+    sim = flagsim.Simulation(flagsim.Scene.paper())
+    pov.export(sim, tmp_path, seconds=0.0, fps=10, progress=False)  # scene: sim.scene
+    pole = scenefiles.scene_pole(sim.scene)  # scene.pole, or the default for a pole-pinned flag
+    text = (tmp_path / "flag.pov").read_text()
+    base, top, radius = re.search(r"cylinder \{ <([^>]*)>, <([^>]*)>, ([0-9.]+) \}",
+                                  text).groups()
+    base = np.array([float(c) for c in base.split(",")]) * [1, 1, -1]
+    assert np.allclose(base, pole.base) and float(radius) == pytest.approx(pole.radius)
+    hoist = sim.positions[sim.uv[:, 0] == 0.0]
+    axis_distance = np.hypot(hoist[:, 0] - base[0], hoist[:, 2] - base[2])
+    assert np.allclose(axis_distance, pole.radius, atol=1e-9)
+    assert base[1] < hoist[:, 1].min() and hoist[:, 1].max() < base[1] + pole.height
+
+
+def test_camera_faces_the_flag_from_its_plus_z_side_within_elevation_limits():
+    from flagsim.povray.scenefiles import view_direction
+
+    def angles(d):
+        return np.degrees(np.arctan2(d[0], d[2])), np.degrees(np.arcsin(d[1]))
+
+    # facing +z or -z (double-sided): 17 degrees to the right, 5 below
+    for facing in ([0, 0, 1], [0, 0, -3], None, [0, 0, 0]):
+        assert np.allclose(angles(view_direction(facing)), (17.0, -5.0))
+    # a flag turned by the wind to face +x: the camera turns with it
+    assert np.allclose(angles(view_direction([1, 0, 0.001])), (90.0 + 17.0 - 0.057, -5.0),
+                       atol=1e-2)
+    # a banner blown flat faces up: seen from at most 40 degrees above
+    assert np.isclose(angles(view_direction([0, 1, 0.2]))[1], 40.0)
+    assert np.isclose(np.linalg.norm(view_direction([0.3, 0.4, 0.5])), 1.0)

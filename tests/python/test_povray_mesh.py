@@ -5,6 +5,7 @@ import re
 import numpy as np
 import pytest
 
+import flagsim
 import flagsim.povray as pov
 from _standin import StandInSim
 
@@ -22,9 +23,25 @@ def parse_mesh2(text):
     return out
 
 
-def test_parses_back_to_positions_after_undoing_handedness(tmp_path):
-    sim = StandInSim(rows=11, cols=17)
+@pytest.fixture(params=["paper", "standin"])
+def moved_sim(request):
+    """The paper's flag after 0.5 s in a wind turned 27 degrees out of its plane (so z varies),
+    or the stand-in's travelling wave."""
+    if request.param == "paper":
+        from flagsim.scene import from_dict
+
+        sim = flagsim.Simulation(from_dict({"base": "paper",
+                                            "air": {"wind": [[0.0, [2.0, 0.0, 1.0]]]}}))
+        sim.step(50)
+        return sim
+    sim = StandInSim(rows=11, cols=17, amplitude=0.4)
     sim.step(37)
+    return sim
+
+
+def test_parses_back_to_positions_after_undoing_handedness(tmp_path, moved_sim):
+    sim = moved_sim
+    assert np.abs(sim.positions[:, 2]).max() > 1e-3  # z matters: the flag has left its plane
     path = tmp_path / "flag.inc"
     pov.write_mesh2(sim, path)
     m = parse_mesh2(path.read_text())
@@ -38,9 +55,8 @@ def test_parses_back_to_positions_after_undoing_handedness(tmp_path):
     assert np.array_equal(m["face_indices"].astype(int), sim.triangles[:, [0, 2, 1]])
 
 
-def test_winding_in_file_agrees_with_file_normals(tmp_path):
-    sim = StandInSim(rows=9, cols=13, amplitude=0.4)
-    sim.step(11)
+def test_winding_in_file_agrees_with_file_normals(tmp_path, moved_sim):
+    sim = moved_sim
     pov.write_mesh2(sim, tmp_path / "f.inc")
     m = parse_mesh2((tmp_path / "f.inc").read_text())
     v, n, f = m["vertex_vectors"], m["normal_vectors"], m["face_indices"].astype(int)

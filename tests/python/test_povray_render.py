@@ -10,6 +10,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 
+import flagsim
 import flagsim.povray as pov
 from _standin import StandInSim, standin_scene
 from test_povray_mesh import parse_mesh2
@@ -47,12 +48,15 @@ def project(points, text, width, height):
 
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
-    """One frame exported into a folder whose name has spaces and POV-Ray syntax in it, rendered
-    at 80x60 by the default (process pool) driver."""
+    """The paper's flag in a wind turned out of its plane, exported into a folder whose name has
+    spaces and POV-Ray syntax in it, four frames rendered at 80x60 by the default (process pool)
+    driver."""
+    from flagsim.scene import from_dict
+
     out = tmp_path_factory.mktemp("render") / 'my out; #declare "x'
-    sim = StandInSim(rows=9, cols=13)
-    pov.export(sim, out, seconds=0.3, fps=10, scene=standin_scene(), width=80, height=60,
-               progress=False)
+    sim = flagsim.Simulation(from_dict({"base": "paper",
+                                        "air": {"wind": [[0.0, [2.0, 0.0, 1.0]]]}}))
+    pov.export(sim, out, seconds=0.3, fps=10, width=80, height=60, progress=False)
     result = pov.render(out, progress=False)
     return out, result
 

@@ -12,8 +12,8 @@ class UnknownScene(ValueError):
 def load_scene(spec):
     """(scene, description) for SCENE: a TOML file, or a built-in scene name.
 
-    The description (JSON-able) identifies the scene for the export's resume check: the file's
-    path and content hash, or the built-in name and the flagsim version.
+    The description (JSON-able) identifies what the frames depend on, for the export's resume
+    check: the source and every scene field (flagsim.scene.to_dict).
     """
     import flagsim
 
@@ -21,14 +21,20 @@ def load_scene(spec):
     if spec.endswith(".toml") or path.is_file():
         if not path.is_file():
             raise FileNotFoundError(f"scene file '{spec}' not found")
-        digest = hashlib.sha256(path.read_bytes()).hexdigest()
         # Scene.load's own ValueError (e.g. an unknown key, named with its section) passes on.
-        return flagsim.Scene.load(str(path)), {"file": str(path.resolve()), "sha256": digest}
-    known = flagsim.Scene.builtins()
-    if spec not in known:
-        raise UnknownScene(f"unknown scene '{spec}': the built-in scenes are "
-                           f"{', '.join(sorted(known))} (or give a .toml scene file)")
-    return flagsim.Scene.named(spec), {"builtin": spec, "flagsim": flagsim.__version__}
+        scene = flagsim.Scene.load(str(path))
+        source = {"file": str(path.resolve()),
+                  "sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
+    else:
+        known = flagsim.Scene.builtins()
+        if spec not in known:
+            raise UnknownScene(f"unknown scene '{spec}': the built-in scenes are "
+                               f"{', '.join(sorted(known))} (or give a .toml scene file)")
+        scene = flagsim.Scene.named(spec)
+        source = {"builtin": spec}
+    from flagsim.scene import to_dict
+
+    return scene, {"source": source, "scene": to_dict(scene), "flagsim": flagsim.__version__}
 
 
 def add_animation_options(parser):

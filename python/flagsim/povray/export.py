@@ -56,6 +56,13 @@ def frame_steps(seconds, fps, dt):
     return [int(round(k / (fps * dt))) for k in range(n)]
 
 
+def _area_normal(positions, triangles):
+    """Sum over triangles of (area x unit normal), oriented by the winding."""
+    t = np.asarray(triangles)
+    x = positions
+    return 0.5 * np.cross(x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 0]]).sum(axis=0)
+
+
 def read_manifest(out_dir):
     path = Path(out_dir) / MANIFEST
     if not path.is_file():
@@ -95,7 +102,8 @@ def export(sim, out_dir, *, seconds, fps=25.0, dt=None, scene=None, width=640, h
     sim        a flagsim.Simulation (or anything with step(n), step_count, time and the mesh
                arrays of write_mesh2); frames are counted from its current step
     dt         time step, s; default scene.dt, else sim.dt
-    scene      supplies dt and the pole (scene.pole.radius/height/base) for the master scene
+    scene      supplies dt and the pole (scene.pole.radius/height/base) for the master scene;
+               default sim.scene
     width, height  picture size written into flag.ini (flagsim render can override it)
     texture    image file mapped onto the flag (uv), or None for the built-in red-and-white flag
     key        JSON-able description of what determines the frames (scene, fps, dt): a folder
@@ -105,6 +113,8 @@ def export(sim, out_dir, *, seconds, fps=25.0, dt=None, scene=None, width=640, h
     Writes flag.pov, flag.ini, frames/flag_NNNNN.inc, export.json (and render/, .povray/).
     An interrupted call can be repeated: frames already written identically are kept.
     """
+    if scene is None:
+        scene = getattr(sim, "scene", None)  # a flagsim.Simulation knows its scene
     if dt is None:
         dt = scene.dt if scene is not None else sim.dt
     dt = float(dt)
@@ -114,7 +124,7 @@ def export(sim, out_dir, *, seconds, fps=25.0, dt=None, scene=None, width=640, h
         if not 16 <= v <= 8192:
             raise ValueError(f"{name} should be in [16, 8192] pixels, got {v}")
     scenefiles.check_texture(texture)
-    pole = getattr(scene, "pole", None) if scene is not None else None
+    pole = scenefiles.scene_pole(scene)
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -146,6 +156,7 @@ def export(sim, out_dir, *, seconds, fps=25.0, dt=None, scene=None, width=640, h
                               "[{elapsed}<{remaining}{postfix}]")
     start_step = sim.step_count
     written = kept = 0
+    facing = np.zeros(3)  # area-weighted normal summed over the frames: where the flag faces
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
     t0 = time.perf_counter()
@@ -157,9 +168,11 @@ def export(sim, out_dir, *, seconds, fps=25.0, dt=None, scene=None, width=640, h
                 ts = time.perf_counter()
                 sim.step(n)
                 step_time += time.perf_counter() - ts
-            positions = np.asarray(mesh_arrays(sim)[0])
+            positions, _, _, triangles = mesh_arrays(sim)
+            positions = np.asarray(positions)
             lo = np.minimum(lo, positions.min(axis=0))
             hi = np.maximum(hi, positions.max(axis=0))
+            facing += _area_normal(positions, triangles)
             path = out / scenefiles.frame_file(k)
             text = format_mesh2(sim, comment=f"flagsim frame {k}, t = {target * dt:.6f} s")
             if scenefiles.write_text(path, text):
@@ -176,7 +189,7 @@ def export(sim, out_dir, *, seconds, fps=25.0, dt=None, scene=None, width=640, h
         if bar is not None:
             bar.close()
 
-    view = scenefiles.frame_view(lo, hi, pole, aspect=width / height)
+    view = scenefiles.frame_view(lo, hi, pole, facing=facing, aspect=width / height)
     scenefiles.write_static_files(out, view=view, pole=pole, texture=texture, width=width,
                                   height=height, final_frame=len(steps) - 1,
                                   final_clock=steps[-1] * dt, povray_binary=povray_binary)

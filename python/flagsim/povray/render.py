@@ -224,6 +224,8 @@ def render(out_dir, *, width=None, height=None, executor=None, jobs=None, retrie
         (out / name).parent.mkdir(parents=True, exist_ok=True)
         scenefiles.write_text(out / name, text)
     (out / scenefiles.RENDER_DIR).mkdir(exist_ok=True)
+    for p in (out / scenefiles.RENDER_DIR).glob(".*.tmp.png"):  # left by an interrupted render
+        p.unlink(missing_ok=True)
 
     n = manifest["frames"]
     final = n - 1

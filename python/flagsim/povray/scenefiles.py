@@ -13,6 +13,7 @@ import shutil
 import string
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -85,9 +86,31 @@ class View:
     ground_y: float
 
 
-def frame_view(lo, hi, pole=None, *, aspect=4 / 3, angle=40.0):
-    """A camera in front of the flag (its +z side), a little right of and above it, far enough
-    that the box [lo, hi] (flagsim frame, m) and the top of the pole fill ~80% of the picture."""
+def view_direction(facing=None, *, min_elevation=-25.0, max_elevation=40.0):
+    """Unit vector from the flag towards the camera: along ``facing`` (the flag's mean normal
+    over the run; +z when unknown), turned 17 degrees to the right and 5 down so the picture has
+    depth and the flag stands against the sky, its elevation kept in the given range (degrees)."""
+    f = np.array([0.0, 0.0, 1.0]) if facing is None else np.asarray(facing, dtype=float)
+    if not np.all(np.isfinite(f)) or np.linalg.norm(f) < 1e-12:
+        f = np.array([0.0, 0.0, 1.0])
+    f = _unit(f)
+    if f[2] < 0:  # double-sided: prefer the +z side (hoist on the left for +x wind)
+        f = -f
+    horizontal = f * [1.0, 0.0, 1.0]
+    if np.linalg.norm(horizontal) < 1e-6:  # flag lying flat: look from +z
+        horizontal = np.array([0.0, 0.0, 1.0])
+    horizontal = _unit(horizontal)
+    azimuth = math.atan2(horizontal[0], horizontal[2]) + math.radians(17.0)
+    elevation = math.degrees(math.asin(float(np.clip(f[1], -1.0, 1.0)))) - 5.0
+    elevation = math.radians(min(max(elevation, min_elevation), max_elevation))
+    return np.array([math.cos(elevation) * math.sin(azimuth), math.sin(elevation),
+                     math.cos(elevation) * math.cos(azimuth)])
+
+
+def frame_view(lo, hi, pole=None, *, facing=None, aspect=4 / 3, angle=40.0):
+    """A camera in front of the flag (see view_direction), far enough that the box [lo, hi]
+    (flagsim frame, m) and the top of the pole fill ~90% of the picture; the sun comes from
+    above, behind the camera's left shoulder."""
     lo = np.asarray(lo, dtype=float).copy()
     hi = np.asarray(hi, dtype=float).copy()
     ground_y = lo[1] - 1.0
@@ -102,7 +125,7 @@ def frame_view(lo, hi, pole=None, *, aspect=4 / 3, angle=40.0):
     pad = 0.05 * float(np.max(hi - lo))
     lo, hi = lo - pad, hi + pad
     target = 0.5 * (lo + hi)
-    d = _unit([0.3, 0.12, 1.0])  # from the target towards the camera
+    d = view_direction(facing)
     right = _unit(np.cross([0.0, 1.0, 0.0], d))
     up = np.cross(d, right)
     tan_h = math.tan(math.radians(angle) / 2)
@@ -114,8 +137,27 @@ def frame_view(lo, hi, pole=None, *, aspect=4 / 3, angle=40.0):
         dist = max(dist, abs(rel @ right) / tan_h + depth_offset,
                    abs(rel @ up) / tan_v + depth_offset)
     dist = max(dist, 1e-3)
-    return View(location=target + dist * d, look_at=target, angle=angle,
-                sun_direction=_unit([-0.45, 0.8, 0.55]), ground_y=ground_y)
+    sun = _unit(0.55 * d - 0.45 * right + 0.8 * np.array([0.0, 1.0, 0.0]))
+    return View(location=target + dist * d, look_at=target, angle=angle, sun_direction=sun,
+                ground_y=ground_y)
+
+
+# PoleParams' defaults (csrc/collision/params.h): the pole drawn for a flag pinned to a pole
+# ("pole" or "grommets") while the Scene does not expose its own `pole`.
+DEFAULT_POLE = SimpleNamespace(enabled=True, radius=0.055, height=2.6, base=(0.0, -2.5, 0.0))
+
+
+def scene_pole(scene):
+    """The pole to draw: scene.pole, else the default pole for a pole-pinned flag, else None."""
+    if scene is None:
+        return None
+    pole = getattr(scene, "pole", None)
+    if pole is not None:
+        return pole
+    flag = getattr(scene, "flag", None)
+    if getattr(flag, "pin", None) in ("pole", "grommets"):
+        return DEFAULT_POLE
+    return None
 
 
 def pole_enabled(pole):
