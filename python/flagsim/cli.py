@@ -23,6 +23,8 @@ COMMANDS = {
             "simulate a scene and export it for POV-Ray (--render: render it to a GIF/MP4)"),
     "render": ("flagsim.commands.render", "render an existing export with POV-Ray"),
     "scenes": ("flagsim.commands.scenes", "list the built-in scenes"),
+    "study": ("flagsim.commands.study",
+              "accuracy (error against run time) or stability (stiff and extreme cases) study"),
 }
 
 EXIT_OK = 0
