@@ -56,9 +56,10 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
   long n = 0;
   while (done < h) {
     double hs = h - done;
+    const double stable = stable_step_estimate(topo, fs.drag_params, fs.rho, fs.drag, x, v, u);
+    if (n == 0) stats.stable_step = stable;
+    if (!ip.adaptive && hs > stable) return IntegrateStatus::kUnstableStep;
     if (ip.adaptive) {
-      const double stable = stable_step_estimate(topo, fs.drag_params, fs.rho, fs.drag, x, v, u);
-      if (n == 0) stats.stable_step = stable;
       const double remaining_pieces = std::ceil(hs / (ip.safety * stable));
       if (remaining_pieces + n > ip.max_substeps) return IntegrateStatus::kTooManySubsteps;
       hs = hs / remaining_pieces;  // even pieces of what is left, each below the stable step

@@ -29,7 +29,10 @@ struct ForceTimings {
 void compute_forces(const ClothTopology& topo, const ForceSet& fs, const MatX3& x, const MatX3& v,
                     const MatX3& u, MatX3& f, ForceTimings* timings = nullptr);
 
-enum class IntegrateStatus { kOk, kTooManySubsteps, kCgFailed };
+/// kUnstableStep: explicit without adaptive substeps was asked for a step above the stable-step
+/// estimate. It is refused rather than run, because strain limiting would turn the instability
+/// into bounded jitter that no finiteness or strain check can see.
+enum class IntegrateStatus { kOk, kTooManySubsteps, kCgFailed, kUnstableStep };
 
 struct IntegratorStats {
   long substeps = 0;       ///< explicit: substeps of the last step

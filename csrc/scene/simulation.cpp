@@ -112,6 +112,13 @@ void Simulation::stage_integrate() {
       << scene_.integrator.max_substeps << " substeps (integrator.max_substeps)";
     diverge("substeps", -1, s.str());
   }
+  if (status == IntegrateStatus::kUnstableStep) {
+    std::ostringstream s;
+    s << "explicit step dt / substeps = " << scene_.dt / scene_.integrator.substeps
+      << " s exceeds the stable step estimate " << stats_.stable_step
+      << " s (integrator.adaptive = false)";
+    diverge("unstable_step", -1, s.str());
+  }
   if (status == IntegrateStatus::kCgFailed) {
     std::ostringstream s;
     s << "conjugate gradient did not reach integrator.cg_tolerance = "
@@ -132,7 +139,13 @@ void Simulation::stage_check() {
   if (e > scene_.integrator.max_strain) {
     std::ostringstream s;
     s << "spring strain " << e << " exceeds integrator.max_strain = " << scene_.integrator.max_strain;
-    diverge("strain", worst >= 0 ? long(topo_.springs(worst, 0)) : -1L, s.str());
+    // the worst vertex: whichever end of the worst spring moved more in this step
+    long vertex = -1;
+    if (worst >= 0) {
+      const int a = topo_.springs(worst, 0), b = topo_.springs(worst, 1);
+      vertex = (x_.row(a) - x_start_.row(a)).norm() >= (x_.row(b) - x_start_.row(b)).norm() ? a : b;
+    }
+    diverge("strain", vertex, s.str());
   }
 }
 

@@ -23,7 +23,7 @@ def test_help_lists_commands_and_every_command_has_help(capsys):
         cli.main(["--help"])
     assert e.value.code == 0
     out = capsys.readouterr().out
-    for name in ("run", "render", "scenes"):
+    for name in ("run", "render", "scenes", "study"):
         assert f"  {name}  " in out or f"  {name} " in out
     for name in cli.COMMANDS:
         with pytest.raises(SystemExit) as e:
@@ -32,7 +32,7 @@ def test_help_lists_commands_and_every_command_has_help(capsys):
         assert f"usage: flagsim {name}" in capsys.readouterr().out
     assert flagsim_cmd(capsys)[0] == 2  # no command: help on stderr, usage error
     code, _, err = flagsim_cmd(capsys, "fly")
-    assert code == 2 and "unknown command 'fly' (choose from run, render, scenes)" in err
+    assert code == 2 and f"unknown command 'fly' (choose from {', '.join(cli.COMMANDS)})" in err
 
 
 def test_scenes_lists_builtins_with_descriptions(capsys):

@@ -37,7 +37,7 @@ def test_implicit_and_adaptive_explicit_are_stable_in_every_reduced_case(stabili
 def test_plain_explicit_reports_its_divergence(stability_rows):
     rows, _ = stability_rows
     diverged = [r for r in rows if r["integrator"] == "explicit" and r["outcome"] == "diverged"]
-    assert diverged and all(r["cause"] in ("strain", "non-finite") for r in diverged)
+    assert diverged and all(r["cause"] in ("unstable_step", "strain", "non-finite") for r in diverged)
 
 
 def test_stability_report_counts_every_case(stability_rows):
