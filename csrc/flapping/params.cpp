@@ -4,15 +4,14 @@
 
 namespace flagsim {
 
-void FlappingParams::validate(const std::string& prefix) const {
+void FlappingParams::validate(const std::string& p) const {
   if (mode != "displace" && mode != "force" && mode != "visual" && mode != "off")
-    fail_param(prefix + ".mode", "one of \"displace\", \"force\", \"visual\", \"off\"",
-               "\"" + mode + "\"");
-  check_nonnegative(prefix + ".amplitude", amplitude);
-  check_positive(prefix + ".l_max", l_max);
-  check_finite(prefix + ".speed", speed);
-  check_finite(prefix + ".parabola", parabola);
-  check_positive(prefix + ".frequency", frequency);
+    fail_param(p + ".mode", "one of 'displace', 'force', 'visual', 'off'", "'" + mode + "'");
+  check_nonnegative(p + ".amplitude", amplitude);
+  check_positive(p + ".l_max", l_max);
+  check_finite(p + ".speed", speed);
+  check_finite(p + ".parabola", parabola);
+  check_positive(p + ".frequency", frequency);
 }
 
 }  // namespace flagsim

@@ -4,12 +4,24 @@ The method is Okamoto, Fujisawa and Miura, "Real Time Simulation of Whipped Flag
 Stable Fluids air pushing a mass-spring flag one way, vertex-triangle self-collision, and
 Perlin-noise flapping (eq. 5). ``import flagsim`` loads only numpy and the compiled core; the
 CLI, plotting and rendering helpers load when used.
+
+    >>> import flagsim
+    >>> sim = flagsim.Simulation(flagsim.Scene.paper())
+    >>> sim.step(100)
+    >>> round(sim.time, 6)
+    1.0
 """
 from ._core import (
+    AirParams,
     DivergenceError,
+    DragParams,
+    FlagParams,
     FlappingParams,
+    IntegratorParams,
     PoleParams,
+    Scene,
     SelfCollisionParams,
+    Simulation,
     __version__,
     flapping_displacement,
     flapping_ramp,
@@ -19,12 +31,19 @@ from ._core import (
     perlin1d,
     set_num_threads,
 )
+from . import scene as _scene  # attaches Scene.load, Scene.builtins, Scene.named, ...
 
 __all__ = [
+    "AirParams",
     "DivergenceError",
+    "DragParams",
+    "FlagParams",
     "FlappingParams",
+    "IntegratorParams",
     "PoleParams",
+    "Scene",
     "SelfCollisionParams",
+    "Simulation",
     "__version__",
     "flapping_displacement",
     "flapping_ramp",
@@ -34,3 +53,12 @@ __all__ = [
     "perlin1d",
     "set_num_threads",
 ]
+
+
+def __getattr__(name):
+    # flagsim.povray (POV-Ray export and rendering) loads on first use: simulating needs none of it.
+    if name == "povray":
+        import importlib
+
+        return importlib.import_module(".povray", __name__)
+    raise AttributeError(f"module 'flagsim' has no attribute {name!r}")

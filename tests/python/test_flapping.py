@@ -125,8 +125,8 @@ def test_flapping_params_validation():
         p.l_max = 0.0
     with pytest.raises(ValueError, match=r"flapping\.l_max should be finite and > 0, got -1"):
         p.l_max = -1.0
-    with pytest.raises(ValueError, match=r'flapping\.mode should be one of "displace", "force", '
-                                         r'"visual", "off", got "flap"'):
+    with pytest.raises(ValueError, match=r"flapping\.mode should be one of 'displace', 'force', "
+                                         r"'visual', 'off', got 'flap'"):
         p.mode = "flap"
     with pytest.raises(ValueError, match=r"flapping\.frequency should be finite and > 0, got inf"):
         p.frequency = float("inf")

@@ -132,8 +132,7 @@ TEST(FlappingParams, ValidateNamesTheParameter) {
   p = FlappingParams{};
   p.mode = "wobble";
   EXPECT_EQ(message(p),
-            "flapping.mode should be one of \"displace\", \"force\", \"visual\", \"off\", got "
-            "\"wobble\"");
+            "flapping.mode should be one of 'displace', 'force', 'visual', 'off', got 'wobble'");
   p = FlappingParams{};
   p.amplitude = -1;
   EXPECT_EQ(message(p), "flapping.amplitude should be finite and >= 0, got -1");
