@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 
+#include "common/parallel.h"
+
 namespace flagsim {
 
 namespace {
@@ -88,10 +90,11 @@ bool inside_pole(const PoleParams& pole, const Vec3& p, double tolerance) {
 }
 
 Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
-                   const VecX& inv_mass) {
+                   const VecX& inv_mass, double* max_move) {
   Index moved = 0;
+  double largest = 0;
   const Index n = x.rows();
-#pragma omp parallel for schedule(static) reduction(+ : moved)
+#pragma omp parallel for schedule(static) reduction(+ : moved) reduction(max : largest) if (n >= kParallelGrain)
   for (Index i = 0; i < n; ++i) {
     if (inv_mass[i] == 0) continue;
     const Vec3 a = x0.row(i).transpose();
@@ -110,11 +113,13 @@ Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
     } else {
       continue;
     }
+    largest = std::max(largest, (p - x.row(i).transpose()).norm());
     x.row(i) = p.transpose();
     const double vn = v.row(i).dot(normal.transpose());
     if (vn < 0) v.row(i) -= vn * normal.transpose();
     ++moved;
   }
+  if (max_move) *max_move = largest;
   return moved;
 }
 

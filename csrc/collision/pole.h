@@ -16,7 +16,9 @@ bool inside_pole(const PoleParams& pole, const Vec3& p, double tolerance = 0.0);
 /// A vertex ending inside is moved to the nearest point of the surface (side or a cap; sliding
 /// is kept); one whose path x0 -> x passed through the pole and out again is stopped where it
 /// entered. The velocity's component into the surface (outward normal n, v . n < 0) is removed.
-/// Returns the number of vertices moved. Vertices inside the pole at x0 are projected like the rest.
-Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass);
+/// Returns the number of vertices moved (and the largest move, m, in *max_move if given).
+/// Vertices inside the pole at x0 are projected to its surface like the rest.
+Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
+                   double* max_move = nullptr);
 
 }  // namespace flagsim

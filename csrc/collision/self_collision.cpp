@@ -5,6 +5,7 @@
 
 #include "collision/pole.h"
 #include "collision/vertex_triangle.h"
+#include "common/parallel.h"
 #ifdef _OPENMP
 #include <omp.h>
 #endif
@@ -31,6 +32,10 @@ int thread_id() {
 
 inline Vec3 row(const MatX3& m, Index i) { return m.row(i).transpose(); }
 
+// Pair loops parallelise above this many pairs: a pair costs about a vertex update, and waking a
+// thread team on a loaded machine costs far more than a few thousand of them.
+constexpr std::ptrdiff_t kPairGrain = 4 * kParallelGrain;
+
 }  // namespace
 
 SelfCollision::SelfCollision(const MatX3i& triangles, Index num_vertices,
@@ -42,10 +47,9 @@ SelfCollision::SelfCollision(const MatX3i& triangles, Index num_vertices,
       vhi_(num_vertices, 3),
       tlo_(triangles.rows(), 3),
       thi_(triangles.rows(), 3),
-      dx_(num_vertices, 3),
       dv_(num_vertices, 3),
-      count_x_(static_cast<size_t>(num_vertices), 0),
       count_v_(static_cast<size_t>(num_vertices), 0),
+      on_pole_(static_cast<size_t>(num_vertices), 0),
       frozen_(static_cast<size_t>(num_vertices), 0) {
   hash_.reserve(triangles.rows());
   const int threads = max_threads();
@@ -88,7 +92,7 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
   if (static_cast<int>(thread_pairs_.size()) < threads) thread_pairs_.resize(threads);
   for (auto& buffer : thread_pairs_) buffer.clear();
   const double reach = h + margin;
-#pragma omp parallel
+#pragma omp parallel if (n_ >= kParallelGrain)
   {
     std::vector<Pair>& buffer = thread_pairs_[static_cast<size_t>(thread_id())];
     // Static schedule: thread k gets the k-th contiguous block of vertices, so concatenating the
@@ -128,24 +132,52 @@ bool SelfCollision::within_boxes(const MatX3& x0, const MatX3& x) const {
   return true;
 }
 
-void SelfCollision::accumulate(const Pair& pr, const Contact& c, const MatX3& v,
-                               const VecX& inv_mass) {
+bool SelfCollision::weights(const Pair& pr, const Contact& c, const VecX& inv_mass, double w[4],
+                            double& W, double& limit) const {
   const int32_t idx[4] = {pr.v, tris_(pr.t, 0), tris_(pr.t, 1), tris_(pr.t, 2)};
-  // Constraint C = (p - sum_k b_k x_k) . n - thickness >= 0: gradient coefficients per vertex.
   const double g[4] = {1.0, -c.bary[0], -c.bary[1], -c.bary[2]};
-  double W = 0;
-  for (int k = 0; k < 4; ++k) W += g[k] * g[k] * inv_mass[idx[k]];
-  if (!(W > 0)) return;
-  // Position (PBD projection, mass-weighted).
-  const double lambda = -c.C / W;
+  // Vertices resting on the pole count as immovable (contact mass scaling): the layers on top
+  // take the whole correction instead of pushing the bottom one back into the pole each sweep,
+  // unless that leaves the constraint nearly immovable (only small-barycentric vertices free).
+  double W_full = 0;
+  W = 0;
   for (int k = 0; k < 4; ++k) {
-    const double s = lambda * inv_mass[idx[k]] * g[k];
-    if (s == 0) continue;
-    dx_.row(idx[k]) += s * c.n.transpose();
-    ++count_x_[idx[k]];
+    W_full += g[k] * g[k] * inv_mass[idx[k]];
+    W += g[k] * g[k] * (w[k] = on_pole_[idx[k]] ? 0.0 : inv_mass[idx[k]]);
   }
-  // Velocity: remove the approaching normal relative velocity, then Coulomb friction takes up to
-  // mu times that change off the tangential relative velocity.
+  if (!(W_full > 0)) return false;
+  if (W < 0.25 * W_full) {
+    W = W_full;
+    for (int k = 0; k < 4; ++k) w[k] = inv_mass[idx[k]];
+  }
+  // No vertex moves further than the constraint's own change (it never needs to when the vertex
+  // or the nearest triangle corner is free; when only a far corner is free, the full answer
+  // C / b_k would fling it, so the rest is left to later sweeps and the fallback).
+  double largest = 0;
+  for (int k = 0; k < 4; ++k) largest = std::max(largest, std::abs(w[k] * g[k]) / W);
+  limit = largest > 1 ? 1 / largest : 1.0;
+  return true;
+}
+
+void SelfCollision::project(const Pair& pr, const Contact& c, double C, MatX3& x,
+                            const VecX& inv_mass) const {
+  double w[4], W, limit;
+  if (C >= 0 || !weights(pr, c, inv_mass, w, W, limit)) return;
+  const int32_t idx[4] = {pr.v, tris_(pr.t, 0), tris_(pr.t, 1), tris_(pr.t, 2)};
+  const double g[4] = {1.0, -c.bary[0], -c.bary[1], -c.bary[2]};
+  // PBD projection of C = (p - sum_k b_k x_k) . n - thickness onto C >= 0, mass-weighted.
+  const double lambda = -C / W * limit;
+  for (int k = 0; k < 4; ++k) x.row(idx[k]) += (lambda * w[k] * g[k]) * c.n.transpose();
+}
+
+void SelfCollision::accumulate_impulse(const Pair& pr, const Contact& c, const MatX3& v,
+                                       const VecX& inv_mass) {
+  double w[4], W, limit;
+  if (!weights(pr, c, inv_mass, w, W, limit)) return;
+  const int32_t idx[4] = {pr.v, tris_(pr.t, 0), tris_(pr.t, 1), tris_(pr.t, 2)};
+  const double g[4] = {1.0, -c.bary[0], -c.bary[1], -c.bary[2]};
+  // Remove the approaching normal relative velocity, then Coulomb friction takes up to mu times
+  // that change off the tangential relative velocity.
   Vec3 vrel = Vec3::Zero();
   for (int k = 0; k < 4; ++k) vrel += g[k] * v.row(idx[k]).transpose();
   const double vn = vrel.dot(c.n);
@@ -157,7 +189,7 @@ void SelfCollision::accumulate(const Pair& pr, const Contact& c, const MatX3& v,
     if (speed > 0) dvrel -= std::min(params_.friction * (-vn), speed) / speed * vt;
   }
   for (int k = 0; k < 4; ++k) {
-    const double s = inv_mass[idx[k]] * g[k] / W;
+    const double s = limit * w[k] * g[k] / W;
     if (s == 0) continue;
     dv_.row(idx[k]) += s * dvrel.transpose();
     ++count_v_[idx[k]];
@@ -169,16 +201,20 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
   const double h = params_.thickness;
   bool changed = false;
   if (pole) {
-    const Index moved = collide_pole(*pole, x0, x, v, inv_mass);
-    stats_.pole += moved;
-    changed = moved > 0;
+    // On the pole: within half the thickness of its surface (the sweeps end on the pole's
+    // projection, so these are the vertices it holds).
+    PoleParams grown = *pole;
+    grown.radius += 0.5 * h;
+    grown.height += h;
+    grown.base.y() -= 0.5 * h;
+    for (Index i = 0; i < n_; ++i) on_pole_[i] = inside_pole(grown, row(x, i));
   }
-  // Detection (parallel, one state for all pairs): a crossing of the step's trajectory x0 -> x is
-  // answered at its hit point along the triangle normal at the hit time (Bridson et al. 2002
-  // §7.3), towards the side the vertex started on; otherwise a proximity at x closer than the
-  // thickness along the closest-point direction.
+  // Detection (parallel, one state for all pairs): a crossing of the step's trajectory x0 -> x,
+  // with its hit point and the triangle's normal at the hit time towards the side the vertex
+  // started on (Bridson et al. 2002 §7.3, for the impulse); otherwise a proximity at x closer
+  // than the thickness, along the closest-point direction.
   const auto P = static_cast<std::ptrdiff_t>(pairs_.size());
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (P >= kPairGrain)
   for (std::ptrdiff_t k = 0; k < P; ++k) {
     const Pair pr = pairs_[k];
     const int32_t a = tris_(pr.t, 0), b = tris_(pr.t, 1), c = tris_(pr.t, 2);
@@ -194,7 +230,6 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
         const double f0 = (b0 - a0).cross(c0 - a0).dot(p0 - a0);
         const double f1 = (b1 - a1).cross(c1 - a1).dot(p1 - a1);
         ct.n = (f0 > 0 || (f0 == 0 && f1 >= 0)) ? Vec3(n / len) : Vec3(-n / len);
-        ct.C = (p1 - (ct.bary[0] * a1 + ct.bary[1] * b1 + ct.bary[2] * c1)).dot(ct.n) - h;
         ct.kind = Contact::kCrossing;
       }
       continue;
@@ -215,28 +250,49 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
     ct.C = d - h;
     ct.kind = Contact::kProximity;
   }
-  // Response (Jacobi): every contact's mass-weighted correction from the same state, averaged
-  // per vertex over the contacts that move it, so that several contacts sharing a vertex (a
-  // vertex over a shared edge, a vertex on a pinned bump) neither overshoot nor bounce it.
-  dx_.setZero();
+  // Response, in pair order. A crossing moves the pair's four points back along their paths to
+  // the time the vertex was still the thickness (or its starting distance) off the triangle's
+  // plane: an inelastic stop short of the hit, which only ever undoes motion, so it cannot push
+  // anything through a third layer (the freeze fallback is its limit, everything back at x0).
+  // A proximity is projected apart (Gauss-Seidel, C re-evaluated on the current positions along
+  // its detected normal and point). Velocities: Jacobi, every impulse from the sweep's starting
+  // velocities, averaged per vertex over the impulses that move it, so contacts sharing a vertex
+  // (a vertex over a shared edge, a triangle on two pinned bumps) neither add up nor bounce it.
   dv_.setZero();
-  std::fill(count_x_.begin(), count_x_.end(), 0);
   std::fill(count_v_.begin(), count_v_.end(), 0);
   for (std::ptrdiff_t k = 0; k < P; ++k) {
-    const Contact& ct = contacts_[k];
+    Contact& ct = contacts_[k];
     if (ct.kind == Contact::kNone) continue;
-    accumulate(pairs_[k], ct, v, inv_mass);
+    const Pair pr = pairs_[k];
+    const int32_t idx[4] = {pr.v, tris_(pr.t, 0), tris_(pr.t, 1), tris_(pr.t, 2)};
     if (ct.kind == Contact::kCrossing) {
+      double t;
+      Vec3 bary;
+      const Vec3 p0 = row(x0, idx[0]), a0 = row(x0, idx[1]), b0 = row(x0, idx[2]), c0 = row(x0, idx[3]);
+      const Vec3 p1 = row(x, idx[0]), a1 = row(x, idx[1]), b1 = row(x, idx[2]), c1 = row(x, idx[3]);
+      if (!vertex_triangle_ccd(p0, a0, b0, c0, p1, a1, b1, c1, t, bary)) continue;  // undone
+      const double back = separation_time(p0, a0, b0, c0, p1, a1, b1, c1, t, h);
+      for (const int32_t i : idx)
+        if (inv_mass[i] > 0) x.row(i) = x0.row(i) + back * (x.row(i) - x0.row(i));
       ++stats_.crossings;
       changed = true;
     } else {
+      const double C = (row(x, idx[0]) - (ct.bary[0] * row(x, idx[1]) + ct.bary[1] * row(x, idx[2]) +
+                                          ct.bary[2] * row(x, idx[3])))
+                           .dot(ct.n) - h;
+      project(pr, ct, C, x, inv_mass);
       ++stats_.contacts;
-      changed = changed || ct.C < -1e-3 * h;
+      changed = changed || ct.C < -1e-2 * h;
     }
+    accumulate_impulse(pr, ct, v, inv_mass);
   }
-  for (Index i = 0; i < n_; ++i) {
-    if (count_x_[i]) x.row(i) += dx_.row(i) / count_x_[i];
+  for (Index i = 0; i < n_; ++i)
     if (count_v_[i]) v.row(i) += dv_.row(i) / count_v_[i];
+  // The pole last: no sweep leaves a vertex inside it.
+  if (pole) {
+    double largest = 0;
+    stats_.pole += collide_pole(*pole, x0, x, v, inv_mass, &largest);
+    changed = changed || largest > 1e-2 * h;
   }
   return changed;
 }
@@ -247,7 +303,7 @@ bool SelfCollision::find_violations(const MatX3& x0, const MatX3& x, const VecX&
   auto still = [&](int32_t i) { return frozen_[i] || inv_mass[i] == 0; };
   const auto P = static_cast<std::ptrdiff_t>(pairs_.size());
   bool any = false;
-#pragma omp parallel for schedule(static) reduction(|| : any)
+#pragma omp parallel for schedule(static) reduction(|| : any) if (P >= kPairGrain)
   for (std::ptrdiff_t k = 0; k < P; ++k) {
     const Pair pr = pairs_[k];
     const int32_t a = tris_(pr.t, 0), b = tris_(pr.t, 1), c = tris_(pr.t, 2);
@@ -323,18 +379,19 @@ void SelfCollision::freeze_fallback(const MatX3& x0, MatX3& x, MatX3& v, const V
 const SelfCollisionStats& SelfCollision::resolve(const MatX3& x0, MatX3& x, MatX3& v,
                                                  const VecX& inv_mass, const PoleParams* pole) {
   stats_ = SelfCollisionStats{};
-  for (int attempt = 0;; ++attempt) {
+  if (pole) stats_.pole += collide_pole(*pole, x0, x, v, inv_mass);  // the sweeps start outside
+  bool complete = false;  // candidates cover every pair that can violate at the current x
+  for (int attempt = 0; attempt <= kMaxRebuilds && !complete; ++attempt) {
     broad_phase(x0, x, inv_mass, /*shifted=*/true);
-    if (attempt < kMaxRebuilds) {
-      for (int s = 0; s < params_.iterations; ++s) {
-        ++stats_.sweeps;
-        if (!sweep(x0, x, v, inv_mass, pole)) break;
-      }
-      if (!within_boxes(x0, x)) continue;  // a push left the candidates' reach: collect again
+    for (int s = 0; s < params_.iterations; ++s) {
+      ++stats_.sweeps;
+      if (!sweep(x0, x, v, inv_mass, pole)) break;
     }
-    freeze_fallback(x0, x, v, inv_mass, pole);
-    return stats_;
+    complete = within_boxes(x0, x);  // else a push left the candidates' reach: collect again
   }
+  if (!complete) broad_phase(x0, x, inv_mass, /*shifted=*/true);
+  freeze_fallback(x0, x, v, inv_mass, pole);
+  return stats_;
 }
 
 }  // namespace flagsim

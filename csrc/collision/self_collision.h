@@ -10,16 +10,21 @@
 //   broad phase: swept boxes of vertices and triangles over the step in a frame moving with the
 //     cloth's mean displacement (crossings are invariant under a common translation, so a 30 m/s
 //     gust does not stretch the boxes) -> spatial hash -> candidate pairs (v, t), v not in t;
-//   sweeps (<= params.iterations): pole; continuous crossings (coplanarity cubic) pushed back to
-//     the start side at the thickness along the collision-time normal; proximities (closest
-//     point within the thickness) pushed apart. Each push is the mass-weighted projection of
-//       C = (p - sum_i b_i x_i) . n - thickness >= 0
-//     (PBD, Mueller et al. 2007): p moves by w_p lambda n, x_i by -w_i b_i lambda n,
-//     lambda = -C / (w_p + sum_i b_i^2 w_i), w = inverse mass; the approaching normal relative
-//     velocity is removed by the impulse with the same weights, and Coulomb friction (mu) takes
-//     up to mu |dv_n| of the tangential relative velocity. All contacts of a sweep are detected
-//     on one state and their corrections averaged per vertex (Jacobi), so contacts sharing a
-//     vertex do not overshoot it;
+//   sweeps (<= params.iterations), each detecting on one state (in parallel), then answering in
+//     pair order:
+//     - a crossing of the trajectory x0 -> x (roots of the coplanarity cubic, Provot 1997,
+//       Bridson et al. 2002) moves the pair's four points back along their paths to the time the
+//       vertex was still the thickness off the triangle's plane: an inelastic stop short of the
+//       hit that only undoes motion, so it cannot push anything through a third layer;
+//     - a proximity (closest point closer than the thickness) is pushed apart by the
+//       mass-weighted projection of C = (p - sum_i b_i x_i) . n - thickness >= 0 (PBD, Mueller et
+//       al. 2007): p moves by w_p lambda n, x_i by -w_i b_i lambda n,
+//       lambda = -C / (w_p + sum_i b_i^2 w_i), w = inverse mass, no vertex further than |C|;
+//     - the approaching normal relative velocity is removed by the impulse with the same weights,
+//       and Coulomb friction (mu) takes up to mu |dv_n| of the tangential relative velocity;
+//       impulses are averaged per vertex (Jacobi) so contacts sharing a vertex do not overshoot;
+//     - with a pole, its projection ends the sweep, and vertices resting on it count as
+//       immovable for the pushes (contact mass scaling), so stacked layers do not fight it;
 //   fallback: a pair still crossing or closer than thickness / 2 (or a vertex in the pole) has its
 //     free vertices sent back to x0 with their momentum-weighted mean velocity (an inelastic
 //     impact zone in the sense of Provot 1997 / Bridson et al. 2002, with zero motion over the
@@ -73,7 +78,7 @@ class SelfCollision {
     enum Kind : uint8_t { kNone, kCrossing, kProximity } kind;
     Vec3 bary;       // barycentric point of the triangle
     Vec3 n;          // unit direction the vertex must be on, from that point
-    double C;        // (p - point) . n - thickness at the end positions, < 0 to correct
+    double C;        // proximity: distance - thickness at detection, < 0
   };
   void broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv_mass, bool shifted);
   bool find_violations(const MatX3& x0, const MatX3& x, const VecX& inv_mass,
@@ -82,7 +87,10 @@ class SelfCollision {
   bool sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass, const PoleParams* pole);
   void freeze_fallback(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
                        const PoleParams* pole);
-  void accumulate(const Pair& pr, const Contact& c, const MatX3& v, const VecX& inv_mass);
+  bool weights(const Pair& pr, const Contact& c, const VecX& inv_mass, double w[4], double& W,
+               double& limit) const;
+  void project(const Pair& pr, const Contact& c, double C, MatX3& x, const VecX& inv_mass) const;
+  void accumulate_impulse(const Pair& pr, const Contact& c, const MatX3& v, const VecX& inv_mass);
 
   MatX3i tris_;
   Index n_;
@@ -95,8 +103,9 @@ class SelfCollision {
   std::vector<Pair> pairs_;
   std::vector<uint8_t> flag_;    // per pair: crossing / violation found by the parallel pass
   std::vector<Contact> contacts_;  // per pair, in a sweep
-  MatX3 dx_, dv_;                  // N x 3 summed corrections of a sweep
-  std::vector<int> count_x_, count_v_;  // per vertex: contacts in those sums
+  MatX3 dv_;                       // N x 3 summed velocity changes of a sweep
+  std::vector<int> count_v_;       // per vertex: impulses in that sum
+  std::vector<uint8_t> on_pole_;   // per vertex: resting on the pole in this sweep
   std::vector<uint8_t> frozen_;  // per vertex
   SelfCollisionStats stats_;
 };

@@ -146,4 +146,26 @@ bool vertex_triangle_ccd(const Vec3& p0, const Vec3& a0, const Vec3& b0, const V
   return false;
 }
 
+double separation_time(const Vec3& p0, const Vec3& a0, const Vec3& b0, const Vec3& c0,
+                       const Vec3& p1, const Vec3& a1, const Vec3& b1, const Vec3& c1,
+                       double t_hit, double gap) {
+  auto distance = [&](double t) {  // signed distance of p(t) to the plane of abc(t)
+    const Vec3 a = a0 + t * (a1 - a0);
+    const Vec3 n = (b0 + t * (b1 - b0) - a).cross(c0 + t * (c1 - c0) - a);
+    const double len = n.norm();
+    return len > 0 ? n.dot(p0 + t * (p1 - p0) - a) / len : 0.0;
+  };
+  const double d0 = distance(0.0);
+  if (d0 == 0) return 0.0;
+  const double side = d0 > 0 ? 1.0 : -1.0;
+  const double target = std::min(gap, side * d0);
+  double lo = 0, hi = t_hit;  // side * d(lo) >= target > side * d(hi)
+  if (side * distance(hi) >= target) return hi;
+  while (hi - lo > 1e-9) {
+    const double mid = 0.5 * (lo + hi);
+    (side * distance(mid) >= target ? lo : hi) = mid;
+  }
+  return lo;
+}
+
 }  // namespace flagsim

@@ -33,4 +33,12 @@ bool vertex_triangle_ccd(const Vec3& p0, const Vec3& a0, const Vec3& b0, const V
                          const Vec3& p1, const Vec3& a1, const Vec3& b1, const Vec3& c1,
                          double& t_hit, Vec3& bary);
 
+/// For a vertex that meets triangle abc at t_hit (from vertex_triangle_ccd): the latest time in
+/// [0, t_hit] at which p is still min(gap, d(0)) from the triangle's plane on the side it started
+/// on, d(t) being that signed distance, found by bisection (1e-9 in t); 0 if it starts on the
+/// plane. Moving every point back to that time stops the vertex short of the triangle.
+double separation_time(const Vec3& p0, const Vec3& a0, const Vec3& b0, const Vec3& c0,
+                       const Vec3& p1, const Vec3& a1, const Vec3& b1, const Vec3& c1,
+                       double t_hit, double gap);
+
 }  // namespace flagsim

@@ -42,7 +42,7 @@ TEST(SelfCollision, VertexDrivenThroughATriangleAt30MetresPerSecondStopsAtTheThi
   s.x = s.x0 + 0.01 * s.v;  // ends 0.25 m below the triangle
   SelfCollision collide(s.tris, 4, params());
   const auto& stats = collide.resolve(s.x0, s.x, s.v, s.w);
-  EXPECT_NEAR(s.x(0, 2), 0.005, 1e-12);
+  EXPECT_NEAR(s.x(0, 2), 0.005, 1e-9);  // stopped on its way down, the thickness above
   EXPECT_EQ(s.x(0, 0), 0.2);
   EXPECT_EQ(s.x(0, 1), 0.3);
   EXPECT_EQ(s.v(0, 2), 0.0);
