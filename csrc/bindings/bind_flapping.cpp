@@ -6,6 +6,7 @@
 #include <cmath>
 #include <vector>
 
+#include "bindings/fields.h"
 #include "common/errors.h"
 #include "flapping/flapping.h"
 #include "flapping/params.h"
@@ -18,71 +19,43 @@ namespace flagsim::bindings {
 
 namespace {
 
-// Python's shortest round-trip repr of a number (0.2, not 0.20000000000000001).
-template <class T>
-std::string num(T x) {
-  return std::string(py::str(py::repr(py::cast(x))));
-}
-
-// A field setter that validates the edited copy (named as the scene section "flapping") and
-// leaves the object unchanged when the value is rejected.
-template <class T>
-auto checked_setter(T FlappingParams::*field) {
-  return [field](FlappingParams& p, const T& value) {
-    FlappingParams edited = p;
-    edited.*field = value;
-    edited.validate("flapping");
-    p = edited;
-  };
-}
-
-uint32_t checked_seed(int64_t seed) {
-  if (seed < 0 || seed > 0xFFFFFFFFll) fail_param("seed", "in [0, 4294967295]", seed);
+uint32_t checked_seed(const std::string& name, int64_t seed) {
+  if (seed < 0 || seed > 0xFFFFFFFFll) fail_param(name, "in [0, 4294967295]", seed);
   return static_cast<uint32_t>(seed);
 }
 
 }  // namespace
 
 void bind_flapping(py::module_& m) {
-  py::class_<FlappingParams>(m, "FlappingParams",
-                             "Paper eq. 5 flapping: z = u_p A(L) f_n(k (x - v t - a (1 - y) y)).")
-      .def(py::init<>())
-      .def_property("mode", [](const FlappingParams& p) { return p.mode; },
-                    checked_setter(&FlappingParams::mode),
-                    "\"displace\" (paper) | \"force\" | \"visual\" | \"off\"")
-      .def_property("amplitude", [](const FlappingParams& p) { return p.amplitude; },
-                    checked_setter(&FlappingParams::amplitude),
-                    "A for L >= l_max, m of displacement per m/s of u_p")
-      .def_property("l_max", [](const FlappingParams& p) { return p.l_max; },
-                    checked_setter(&FlappingParams::l_max),
-                    "m, distance from the nearest pin beyond which A(L) is constant")
-      .def_property("speed", [](const FlappingParams& p) { return p.speed; },
-                    checked_setter(&FlappingParams::speed),
-                    "v, wave speed, flag lengths per second")
-      .def_property("parabola", [](const FlappingParams& p) { return p.parabola; },
-                    checked_setter(&FlappingParams::parabola),
-                    "a, parabola coefficient of the wave front, flag lengths")
-      .def_property("frequency", [](const FlappingParams& p) { return p.frequency; },
-                    checked_setter(&FlappingParams::frequency),
-                    "k, noise lattice cells per flag length")
-      .def_property(
-          "seed", [](const FlappingParams& p) { return p.seed; },
-          [](FlappingParams& p, int64_t seed) { p.seed = checked_seed(seed); }, "noise seed")
-      .def("validate", &FlappingParams::validate, "prefix"_a = "flapping",
-           "Raise ValueError naming the first invalid field.")
-      .def("__repr__", [](const FlappingParams& p) {
-        return "FlappingParams(mode='" + p.mode + "', amplitude=" + num(p.amplitude) +
-               ", l_max=" + num(p.l_max) + ", speed=" + num(p.speed) +
-               ", parabola=" + num(p.parabola) +
-               ", frequency=" + num(p.frequency) +
-               ", seed=" + num(p.seed) + ")";
-      });
+  py::class_<FlappingParams> fp(
+      m, "FlappingParams",
+      "Paper eq. 5 flapping: z = u_p A(L) f_n(frequency (x - speed t - parabola (1 - y) y)).");
+  fp.def(py::init<>());
+  def_field(fp, "mode", &FlappingParams::mode, "flapping",
+            "'displace' (paper: moves the cloth) | 'force' (a normal force) | 'visual' (exported "
+            "geometry only) | 'off'");
+  def_field(fp, "amplitude", &FlappingParams::amplitude, "flapping",
+            "A for L >= l_max: m of displacement per m/s of u_p");
+  def_field(fp, "l_max", &FlappingParams::l_max, "flapping",
+            "m, distance from the nearest pin beyond which A(L) is constant");
+  def_field(fp, "speed", &FlappingParams::speed, "flapping",
+            "v, wave speed, flag lengths per second");
+  def_field(fp, "parabola", &FlappingParams::parabola, "flapping",
+            "a, parabola coefficient of the wave front, flag lengths");
+  def_field(fp, "frequency", &FlappingParams::frequency, "flapping",
+            "noise lattice cells per flag length");
+  fp.def_property(
+      "seed", [](const FlappingParams& p) { return p.seed; },
+      [](FlappingParams& p, int64_t seed) { p.seed = checked_seed("flapping.seed", seed); },
+      "noise seed, an integer in [0, 2**32)");
+  fp.def("validate", &FlappingParams::validate, "prefix"_a = "flapping",
+         "Raise ValueError naming the first invalid field.");
 
   m.def(
       "perlin1d",
       [](py::array_t<double, py::array::c_style | py::array::forcecast> x,
          int64_t seed) -> py::object {
-        const Perlin1D noise(checked_seed(seed));
+        const Perlin1D noise(checked_seed("seed", seed));
         const py::ssize_t n = x.size();
         const double* in = x.data();
         for (py::ssize_t i = 0; i < n; ++i)
@@ -109,7 +82,7 @@ void bind_flapping(py::module_& m) {
       "flapping_displacement",
       [](const MatX2& xy, const VecX& L, double u_p, double t, const FlappingParams& p) {
         if (xy.rows() != L.size())
-          fail_param("L", "of length " + num(xy.rows()) + " (one per row of xy)",
+          fail_param("L", "of length " + std::to_string(xy.rows()) + " (one per row of xy)",
                      L.size());
         check_finite_vec("xy", Eigen::Map<const VecX>(xy.data(), xy.size()));
         check_finite_vec("L", L);

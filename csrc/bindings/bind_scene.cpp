@@ -127,6 +127,9 @@ the scene unchanged. Build one with Scene.paper(), Scene.named(name) or Scene.lo
   part("air", &Scene::air, "AirParams");
   part("drag", &Scene::drag, "DragParams");
   part("integrator", &Scene::integrator, "IntegratorParams");
+  part("flapping", &Scene::flapping, "FlappingParams (paper eq. 5)");
+  part("self_collision", &Scene::self_collision, "SelfCollisionParams");
+  part("pole", &Scene::pole, "PoleParams");
   scene.def_property(
       "dt", [](const Scene& s) { return s.dt; },
       [](Scene& s, double dt) {

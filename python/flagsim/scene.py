@@ -175,7 +175,8 @@ def _install() -> None:
     Scene.from_dict = staticmethod(from_dict)
     Scene.to_dict = to_dict
     Scene.__reduce__ = lambda self: (from_dict, (to_dict(self),))
-    for cls in (Scene, _core.FlagParams, _core.AirParams, _core.DragParams, _core.IntegratorParams):
+    for cls in (Scene, _core.FlagParams, _core.AirParams, _core.DragParams, _core.IntegratorParams,
+                _core.FlappingParams, _core.SelfCollisionParams, _core.PoleParams):
         cls.__repr__ = _repr
 
 

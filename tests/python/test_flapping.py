@@ -130,10 +130,18 @@ def test_flapping_params_validation():
         p.mode = "flap"
     with pytest.raises(ValueError, match=r"flapping\.frequency should be finite and > 0, got inf"):
         p.frequency = float("inf")
-    with pytest.raises(ValueError, match=r"seed should be in"):
+    with pytest.raises(ValueError, match=r"flapping\.seed should be in"):
         p.seed = 2**32
     # Rejected values leave the parameters as they were.
     assert p.l_max == 0.2 and p.mode == "off" and p.frequency == 3.0
     for mode in ("displace", "force", "visual", "off"):
         p.mode = mode
     assert "mode='off'" in repr(p) and "l_max=0.2," in repr(p)
+
+
+def test_flapping_seed_validation():
+    p = flagsim.FlappingParams()
+    with pytest.raises(ValueError, match=r"flapping\.seed should be in \[0, 4294967295\], got -3"):
+        p.seed = -3
+    p.seed = 2**32 - 1
+    assert p.seed == 2**32 - 1
