@@ -18,9 +18,14 @@ struct FanParams {
   Vec3 direction{1, 0, 0};              ///< normalised on use
   double force_density = 20.0;          ///< N/m^3
   ScalarSchedule strength;              ///< (time s, factor) keyframes; empty = always 1
+  /// Throws InvalidArgument naming "<prefix>.<field>" (e.g. "air.fans[0].radius").
   void validate(const std::string& prefix) const;
 };
 
+/// Stable Fluids (Stam 1999) on a staggered MAC grid; see csrc/fluid/fluid.h for the layout.
+/// Periodic boundary: the mean flow (k = 0 mode) follows `wind` when it has keys (gusts are its
+/// keyframes) and is left free otherwise. Tunnel: inflow `wind` through the x-min face,
+/// zero-pressure outflow at x-max, free-slip walls on the y and z faces.
 struct FluidParams {
   std::array<int, 3> resolution{16, 16, 16};  ///< cells nx, ny, nz
   double cell_size = 0.125;                   ///< m
@@ -32,9 +37,11 @@ struct FluidParams {
   double viscosity = 1.5e-5;                  ///< m^2/s, kinematic; 0 = no diffusion stage
   double density = 1.2;                       ///< kg/m^3
   double pcg_tolerance = 1e-8;                ///< relative residual
-  int pcg_max_iterations = 500;
+  int pcg_max_iterations = 500;               ///< per solve (pressure and each diffusion solve)
   WindSchedule wind;        ///< periodic: mean flow (k = 0 mode); tunnel: inflow velocity
   std::vector<FanParams> fans;
+  /// Throws InvalidArgument naming "<prefix>.<field>" ("resolution" when prefix is empty);
+  /// MissingFeature for pressure "fft" in a build without FFTW.
   void validate(const std::string& prefix) const;
 };
 

@@ -7,6 +7,8 @@ CLI, plotting and rendering helpers load when used.
 """
 from ._core import (
     DivergenceError,
+    FanParams,
+    Fluid,
     __version__,
     has_fftw,
     has_openmp,
@@ -16,6 +18,8 @@ from ._core import (
 
 __all__ = [
     "DivergenceError",
+    "FanParams",
+    "Fluid",
     "__version__",
     "has_fftw",
     "has_openmp",
