@@ -255,6 +255,9 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
         d["pressure_converged"] = s.pressure_converged;
         d["diffusion_iterations"] = s.diffusion_iterations;
         d["samples_outside"] = s.samples_outside;
+        d["seconds_advect"] = s.seconds_advect;
+        d["seconds_forces"] = s.seconds_forces;
+        d["seconds_project"] = s.seconds_project;
         return d;
       })
       .def("__repr__", [](const Fluid& f) {

@@ -7,6 +7,12 @@ namespace flagsim {
 
 namespace {
 
+/// floor for |q| < 2^31 without a libm call (std::floor is one unless SSE4.1 is enabled).
+inline int ifloor(double q) {
+  const int i = int(q);
+  return i - (q < i);
+}
+
 /// Grid-node pair (i0, i1) and weight f of coordinate q (node units) along an axis of n nodes.
 struct Axis {
   int i0, i1;
@@ -15,14 +21,16 @@ struct Axis {
 
 inline Axis locate(double q, int n, bool periodic) {
   if (periodic) {
-    const double fl = std::floor(q);
-    long i = long(fl);
-    i %= n;
-    if (i < 0) i += n;
-    const int i0 = int(i);
-    return {i0, i0 + 1 == n ? 0 : i0 + 1, q - fl};
+    q = q > -1e9 ? (q < 1e9 ? q : 1e9) : -1e9;  // NaN or absurd departure: stay in range
+    int i = ifloor(q);
+    const double f = q - i;
+    if (unsigned(i) >= unsigned(n)) {
+      i %= n;
+      if (i < 0) i += n;
+    }
+    return {i, i + 1 == n ? 0 : i + 1, f};
   }
-  if (!(q > 0)) return {0, 0, 0.0};  // also catches NaN: never index out of range
+  if (!(q > 0)) return {0, 0, 0.0};  // also catches NaN
   if (q >= n - 1) return {n - 1, n - 1, 0.0};
   const int i0 = int(q);
   return {i0, i0 + 1, q - i0};
@@ -33,44 +41,60 @@ inline T lerp(T a, T b, double f) {
   return T(a + f * (b - a));
 }
 
-struct Stencil {
-  Axis a[3];
+/// Trilinear interpolation of one component array (shape sh, staggering offset off) at a point p
+/// in cell units. Uses a + f (b - a) so that a uniform field is reproduced exactly.
+template <class T>
+struct Interpolator {
+  const T* q;
+  int n0, n1, n2;
+  double o0, o1, o2;
+  bool periodic;
+
+  Interpolator(const MacGrid<T>& g, int c)
+      : q(g.comp[c].data()),
+        n0(g.shape[c].n[0]),
+        n1(g.shape[c].n[1]),
+        n2(g.shape[c].n[2]),
+        o0(GridGeometry::offset(c, 0)),
+        o1(GridGeometry::offset(c, 1)),
+        o2(GridGeometry::offset(c, 2)),
+        periodic(g.geo.periodic) {}
+
+  struct Corners {
+    std::size_t r00, r01, r10, r11;
+    int k0, k1;
+    double fx, fy, fz;
+  };
+
+  inline Corners corners(double px, double py, double pz) const {
+    const Axis x = locate(px - o0, n0, periodic);
+    const Axis y = locate(py - o1, n1, periodic);
+    const Axis z = locate(pz - o2, n2, periodic);
+    return {(std::size_t(x.i0) * n1 + y.i0) * n2, (std::size_t(x.i0) * n1 + y.i1) * n2,
+            (std::size_t(x.i1) * n1 + y.i0) * n2, (std::size_t(x.i1) * n1 + y.i1) * n2,
+            z.i0, z.i1, x.f, y.f, z.f};
+  }
+
+  inline T operator()(const Corners& c) const {
+    const T c00 = lerp(q[c.r00 + c.k0], q[c.r00 + c.k1], c.fz);
+    const T c01 = lerp(q[c.r01 + c.k0], q[c.r01 + c.k1], c.fz);
+    const T c10 = lerp(q[c.r10 + c.k0], q[c.r10 + c.k1], c.fz);
+    const T c11 = lerp(q[c.r11 + c.k0], q[c.r11 + c.k1], c.fz);
+    return lerp(lerp(c00, c01, c.fy), lerp(c10, c11, c.fy), c.fx);
+  }
+  inline T operator()(double px, double py, double pz) const { return (*this)(corners(px, py, pz)); }
+
+  /// Extrema of the 8 nodes of an interpolation (Selle et al. 2008 §4 limiter).
+  inline void extrema(const Corners& c, T& lo, T& hi) const {
+    const T v[8] = {q[c.r00 + c.k0], q[c.r00 + c.k1], q[c.r01 + c.k0], q[c.r01 + c.k1],
+                    q[c.r10 + c.k0], q[c.r10 + c.k1], q[c.r11 + c.k0], q[c.r11 + c.k1]};
+    lo = hi = v[0];
+    for (int a = 1; a < 8; ++a) {
+      lo = std::min(lo, v[a]);
+      hi = std::max(hi, v[a]);
+    }
+  }
 };
-
-template <class T>
-inline Stencil stencil_of(const MacGrid<T>& g, int c, const double p[3]) {
-  Stencil s;
-  for (int d = 0; d < 3; ++d)
-    s.a[d] = locate(p[d] - GridGeometry::offset(c, d), g.shape[c].n[d], g.geo.periodic);
-  return s;
-}
-
-template <class T>
-inline T interpolate(const T* q, const Shape3& sh, const Stencil& s) {
-  const Axis &x = s.a[0], &y = s.a[1], &z = s.a[2];
-  const std::size_t r00 = (std::size_t(x.i0) * sh.n[1] + y.i0) * sh.n[2];
-  const std::size_t r01 = (std::size_t(x.i0) * sh.n[1] + y.i1) * sh.n[2];
-  const std::size_t r10 = (std::size_t(x.i1) * sh.n[1] + y.i0) * sh.n[2];
-  const std::size_t r11 = (std::size_t(x.i1) * sh.n[1] + y.i1) * sh.n[2];
-  const T c00 = lerp(q[r00 + z.i0], q[r00 + z.i1], z.f);
-  const T c01 = lerp(q[r01 + z.i0], q[r01 + z.i1], z.f);
-  const T c10 = lerp(q[r10 + z.i0], q[r10 + z.i1], z.f);
-  const T c11 = lerp(q[r11 + z.i0], q[r11 + z.i1], z.f);
-  return lerp(lerp(c00, c01, y.f), lerp(c10, c11, y.f), x.f);
-}
-
-template <class T>
-inline void extrema(const T* q, const Shape3& sh, const Stencil& s, T& lo, T& hi) {
-  lo = hi = q[sh.index(s.a[0].i0, s.a[1].i0, s.a[2].i0)];
-  for (int a = 0; a < 2; ++a)
-    for (int b = 0; b < 2; ++b)
-      for (int e = 0; e < 2; ++e) {
-        const T v = q[sh.index(a ? s.a[0].i1 : s.a[0].i0, b ? s.a[1].i1 : s.a[1].i0,
-                               e ? s.a[2].i1 : s.a[2].i0)];
-        lo = std::min(lo, v);
-        hi = std::max(hi, v);
-      }
-}
 
 /// Node index along an axis of n nodes: wrapped (periodic) or clamped to [0, n-1].
 inline int node(int i, int n, bool periodic) {
@@ -78,58 +102,90 @@ inline int node(int i, int n, bool periodic) {
   return i < 0 ? 0 : (i >= n ? n - 1 : i);
 }
 
-/// Velocity (m/s) at node (i, j, k) of component c: its own value, and for each other component
-/// e the mean of the 4 e-nodes around it (= trilinear interpolation at that point: weights 1/2).
+/// Velocity at the nodes of one row (i, j, k = 0..n2-1) of component c: its own value, and for
+/// each other component e the mean of the 4 e-nodes around the node (= trilinear interpolation
+/// there: all weights 1/2). Along c the e-nodes sit half a cell either side, along e on the
+/// faces either side. Each of the 4 nodes is a row pointer plus a k shift of -1, 0 or +1.
 template <class T>
-inline void face_velocity(const MacGrid<T>& g, int c, int i, int j, int k, double vel[3]) {
-  const int ijk[3] = {i, j, k};
-  const bool per = g.geo.periodic;
-  vel[c] = g.comp[c][g.shape[c].index(i, j, k)];
-  for (int e = 0; e < 3; ++e) {
-    if (e == c) continue;
-    const Shape3& sh = g.shape[e];
-    int lo[3], hi[3];
-    for (int d = 0; d < 3; ++d) lo[d] = hi[d] = ijk[d];
-    lo[c] = ijk[c] - 1;  // along c the e-nodes sit half a cell either side
-    hi[e] = ijk[e] + 1;  // along e they sit on the faces either side
-    int ic[2] = {node(lo[c], sh.n[c], per), node(ijk[c], sh.n[c], per)};
-    int ie[2] = {node(ijk[e], sh.n[e], per), node(hi[e], sh.n[e], per)};
-    double s = 0;
-    for (int a = 0; a < 2; ++a)
-      for (int b = 0; b < 2; ++b) {
-        int idx[3] = {ijk[0], ijk[1], ijk[2]};
-        idx[c] = ic[a];
-        idx[e] = ie[b];
-        s += g.comp[e][sh.index(idx[0], idx[1], idx[2])];
-      }
-    vel[e] = 0.25 * s;
-  }
-}
+struct RowVelocity {
+  const T* own;
+  const T* rows[2][4];
+  int shift[2][4];
+  int comp[2];
+  int n2e[2];
+  bool periodic;
 
-/// Runs body(c, i, j, k, index) over every node of every component, in parallel over (i, j).
+  RowVelocity(const MacGrid<T>& g, int c, int i, int j) {
+    periodic = g.geo.periodic;
+    own = g.comp[c].data() + g.shape[c].index(i, j, 0);
+    int slot = 0;
+    for (int e = 0; e < 3; ++e) {
+      if (e == c) continue;
+      const Shape3& sh = g.shape[e];
+      comp[slot] = e;
+      n2e[slot] = sh.n[2];
+      int q = 0;
+      for (int a = 0; a < 2; ++a)    // along c: ijk[c] - 1 + a
+        for (int b = 0; b < 2; ++b) {  // along e: ijk[e] + b
+          int idx[3] = {i, j, 0};
+          int dk = 0;
+          if (c == 2) dk += a - 1; else idx[c] = node(idx[c] - 1 + a, sh.n[c], periodic);
+          if (e == 2) dk += b; else idx[e] = node(idx[e] + b, sh.n[e], periodic);
+          rows[slot][q] = g.comp[e].data() + sh.index(idx[0], idx[1], 0);
+          shift[slot][q] = dk;
+          ++q;
+        }
+      ++slot;
+    }
+  }
+
+  /// Range [1, k_end) of k where every k + shift lies inside the e-rows (no wrap or clamp).
+  int interior_end() const { return std::min(n2e[0], n2e[1]) - 1; }
+
+  inline void at(int k, double vel[3]) const {
+    for (int s = 0; s < 2; ++s) {
+      const int n = n2e[s];
+      double sum = 0;
+      for (int q = 0; q < 4; ++q) {
+        const int kk = node(k + shift[s][q], n, periodic);
+        sum += rows[s][q][kk];
+      }
+      vel[comp[s]] = 0.25 * sum;
+    }
+  }
+  inline void at_interior(int k, double vel[3]) const {
+    for (int s = 0; s < 2; ++s) {
+      double sum = 0;
+      for (int q = 0; q < 4; ++q) sum += rows[s][q][k + shift[s][q]];
+      vel[comp[s]] = 0.25 * sum;
+    }
+  }
+  inline void velocity(int k, int k_end, double vel[3]) const {
+    if (k >= 1 && k < k_end)
+      at_interior(k, vel);
+    else
+      at(k, vel);
+  }
+};
+
+inline bool upstream_of_inflow(const GridGeometry& geo, double px) { return !geo.periodic && px < 0; }
+
+/// Runs row(c, i, j, index of (i, j, 0)) over every row of every component, in parallel.
 template <class T, class F>
-void for_each_node(const MacGrid<T>& g, F&& body) {
+void for_each_row(const MacGrid<T>& g, F&& row) {
   for (int c = 0; c < 3; ++c) {
     const Shape3 sh = g.shape[c];
     const long rows = long(sh.n[0]) * sh.n[1];
 #pragma omp parallel for schedule(static) if (sh.size() > 16384)
-    for (long r = 0; r < rows; ++r) {
-      const int i = int(r / sh.n[1]), j = int(r % sh.n[1]);
-      std::size_t idx = std::size_t(r) * sh.n[2];
-      for (int k = 0; k < sh.n[2]; ++k, ++idx) body(c, i, j, k, idx);
-    }
+    for (long r = 0; r < rows; ++r) row(c, int(r / sh.n[1]), int(r % sh.n[1]), std::size_t(r) * sh.n[2]);
   }
-}
-
-inline bool upstream_of_inflow(const GridGeometry& geo, const double p[3]) {
-  return !geo.periodic && p[0] < 0;
 }
 
 }  // namespace
 
 template <class T>
 T sample_component(const MacGrid<T>& g, int c, const double p[3]) {
-  return interpolate(g.comp[c].data(), g.shape[c], stencil_of(g, c, p));
+  return Interpolator<T>(g, c)(p[0], p[1], p[2]);
 }
 
 template <class T>
@@ -137,6 +193,7 @@ long sample_velocity(const MacGrid<T>& g, const double* points, long m, double* 
   const GridGeometry& geo = g.geo;
   const double inv_h = 1.0 / geo.h;
   const double n[3] = {double(geo.nx), double(geo.ny), double(geo.nz)};
+  const Interpolator<T> iu(g, 0), iv(g, 1), iw(g, 2);
   long outside = 0;
 #pragma omp parallel for schedule(static) reduction(+ : outside) if (m > 4096)
   for (long r = 0; r < m; ++r) {
@@ -151,7 +208,9 @@ long sample_velocity(const MacGrid<T>& g, const double* points, long m, double* 
       p[d] = q;
     }
     outside += out_of_box;
-    for (int c = 0; c < 3; ++c) out[3 * r + c] = double(sample_component(g, c, p));
+    out[3 * r + 0] = double(iu(p[0], p[1], p[2]));
+    out[3 * r + 1] = double(iv(p[0], p[1], p[2]));
+    out[3 * r + 2] = double(iw(p[0], p[1], p[2]));
   }
   return outside;
 }
@@ -159,13 +218,20 @@ long sample_velocity(const MacGrid<T>& g, const double* points, long m, double* 
 template <class T>
 void advect_semi_lagrangian(const MacGrid<T>& u, double dt, const SampleBoundary& bc, MacGrid<T>& out) {
   const double s = dt / u.geo.h;
-  for_each_node(u, [&](int c, int i, int j, int k, std::size_t idx) {
-    double vel[3];
-    face_velocity(u, c, i, j, k, vel);
-    const double p[3] = {i + GridGeometry::offset(c, 0) - s * vel[0],
-                         j + GridGeometry::offset(c, 1) - s * vel[1],
-                         k + GridGeometry::offset(c, 2) - s * vel[2]};
-    out.comp[c][idx] = upstream_of_inflow(u.geo, p) ? T(bc.inflow[c]) : sample_component(u, c, p);
+  for_each_row(u, [&](int c, int i, int j, std::size_t base) {
+    const Interpolator<T> q(u, c);
+    const RowVelocity<T> rv(u, c, i, j);
+    const double x0 = i + q.o0, y0 = j + q.o1;
+    const T inflow = T(bc.inflow[c]);
+    T* dst = out.comp[c].data() + base;
+    const int k_end = rv.interior_end();
+    for (int k = 0; k < q.n2; ++k) {
+      double vel[3];
+      vel[c] = rv.own[k];
+      rv.velocity(k, k_end, vel);
+      const double px = x0 - s * vel[0], py = y0 - s * vel[1], pz = k + q.o2 - s * vel[2];
+      dst[k] = upstream_of_inflow(u.geo, px) ? inflow : q(px, py, pz);
+    }
   });
 }
 
@@ -174,25 +240,31 @@ void advect_maccormack(const MacGrid<T>& u, double dt, const SampleBoundary& bc,
                        MacGrid<T>& out) {
   advect_semi_lagrangian(u, dt, bc, hat);
   const double s = dt / u.geo.h;
-  for_each_node(u, [&](int c, int i, int j, int k, std::size_t idx) {
-    double vel[3];
-    face_velocity(u, c, i, j, k, vel);
-    double back[3], fwd[3];
-    for (int d = 0; d < 3; ++d) {
-      const double x = (d == 0 ? i : d == 1 ? j : k) + GridGeometry::offset(c, d);
-      back[d] = x - s * vel[d];
-      fwd[d] = x + s * vel[d];
+  for_each_row(u, [&](int c, int i, int j, std::size_t base) {
+    const Interpolator<T> q(u, c), qhat(hat, c);
+    const RowVelocity<T> rv(u, c, i, j);
+    const double x0 = i + q.o0, y0 = j + q.o1;
+    const T inflow = T(bc.inflow[c]);
+    const T* h = hat.comp[c].data() + base;
+    T* dst = out.comp[c].data() + base;
+    const int k_end = rv.interior_end();
+    for (int k = 0; k < q.n2; ++k) {
+      double vel[3];
+      vel[c] = rv.own[k];
+      rv.velocity(k, k_end, vel);
+      const double z0 = k + q.o2;
+      const double bx = x0 - s * vel[0], by = y0 - s * vel[1], bz = z0 - s * vel[2];
+      if (upstream_of_inflow(u.geo, bx)) {  // inflow value: nothing to correct
+        dst[k] = h[k];
+        continue;
+      }
+      const double fx = x0 + s * vel[0], fy = y0 + s * vel[1], fz = z0 + s * vel[2];
+      const T bar = upstream_of_inflow(u.geo, fx) ? inflow : qhat(fx, fy, fz);
+      const T corrected = T(h[k] + 0.5 * (rv.own[k] - bar));
+      T lo, hi;
+      q.extrema(q.corners(bx, by, bz), lo, hi);
+      dst[k] = std::min(hi, std::max(lo, corrected));
     }
-    const T h = hat.comp[c][idx];
-    if (upstream_of_inflow(u.geo, back)) {  // inflow value: nothing to correct
-      out.comp[c][idx] = h;
-      return;
-    }
-    const T bar = upstream_of_inflow(u.geo, fwd) ? T(bc.inflow[c]) : sample_component(hat, c, fwd);
-    const T corrected = T(h + 0.5 * (u.comp[c][idx] - bar));
-    T lo, hi;
-    extrema(u.comp[c].data(), u.shape[c], stencil_of(u, c, back), lo, hi);
-    out.comp[c][idx] = std::min(hi, std::max(lo, corrected));
   });
 }
 

@@ -4,6 +4,7 @@
 #include <limits>
 
 #include "common/errors.h"
+#include "common/timer.h"
 #include "fluid/advect.h"
 #include "fluid/forces.h"
 #include "fluid/pressure.h"
@@ -85,13 +86,20 @@ struct TypedSolver final : Fluid::Solver {
     SampleBoundary bc;
     if (!geo.periodic) bc.inflow = p.wind.at(t0);
     // 1. self-advection of u^n (reads prev, writes u)
-    copy_grid(u, prev);
-    if (maccormack)
-      advect_maccormack(prev, dt, bc, hat, u);
-    else
-      advect_semi_lagrangian(prev, dt, bc, u);
+    {
+      ScopedTimer timer(stats.seconds_advect);
+      copy_grid(u, prev);
+      if (maccormack)
+        advect_maccormack(prev, dt, bc, hat, u);
+      else
+        advect_semi_lagrangian(prev, dt, bc, u);
+    }
     // 2. external force
-    apply_fans(fans, t0, dt, u);
+    {
+      ScopedTimer timer(stats.seconds_forces);
+      apply_fans(fans, t0, dt, u);
+    }
+    ScopedTimer timer(stats.seconds_project);
     // 3. boundary values at the new time: tunnel faces, or the periodic mean flow
     if (!geo.periodic) apply_tunnel_boundary(p.wind.at(t1), u);
     const bool drive_mean = geo.periodic && !p.wind.keys.empty();

@@ -22,6 +22,8 @@ struct FluidStats {
   bool pressure_converged = true;   ///< pcg reached its tolerance in the last projection
   int diffusion_iterations = 0;     ///< iterative diffusion: max CG iterations over components
   long samples_outside = 0;         ///< points sampled outside the domain box, cumulative
+  /// Cumulative wall-clock seconds per stage of step().
+  double seconds_advect = 0, seconds_forces = 0, seconds_project = 0;
 };
 
 class Fluid {

@@ -23,12 +23,16 @@ void divergence(const MacGrid<T>& u, T* div) {
     const int i = int(r / ny), j = int(r % ny);
     const int ip = (per && i + 1 == nx) ? 0 : i + 1;
     const int jp = (per && j + 1 == ny) ? 0 : j + 1;
-    for (int k = 0; k < nz; ++k) {
-      const int kp = (per && k + 1 == nz) ? 0 : k + 1;
-      const double d = (double(U[su.index(ip, j, k)]) - U[su.index(i, j, k)]) +
-                       (double(V[sv.index(i, jp, k)]) - V[sv.index(i, j, k)]) +
-                       (double(W[sw.index(i, j, kp)]) - W[sw.index(i, j, k)]);
-      div[sc.index(i, j, k)] = T(d * inv_h);
+    const T *u0 = U + su.index(i, j, 0), *u1 = U + su.index(ip, j, 0);
+    const T *v0 = V + sv.index(i, j, 0), *v1 = V + sv.index(i, jp, 0);
+    const T* w0 = W + sw.index(i, j, 0);
+    T* d = div + sc.index(i, j, 0);
+    const int kend = per ? nz - 1 : nz;  // periodic: the last cell's top face is face 0
+    for (int k = 0; k < kend; ++k)
+      d[k] = T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[k + 1]) - w0[k])) * inv_h);
+    if (per) {
+      const int k = nz - 1;
+      d[k] = T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[0]) - w0[k])) * inv_h);
     }
   }
 }
@@ -60,41 +64,42 @@ template <class T>
 void subtract_gradient(const T* phi, MacGrid<T>& u) {
   const GridGeometry& g = u.geo;
   const Shape3 sc = g.cells();
-  const double inv_h = 1.0 / g.h;
+  const T inv_h = T(1.0 / g.h);
+  const bool per = g.periodic;
   const Laplace7 p = pressure_operator(g);
   for (int c = 0; c < 3; ++c) {
     const Shape3 sh = u.shape[c];
     T* q = u.comp[c].data();
     const long rows = long(sh.n[0]) * sh.n[1];
+    const int nc = sc.n[c];
 #pragma omp parallel for schedule(static) if (sh.size() > 16384)
     for (long r = 0; r < rows; ++r) {
-      int ijk[3] = {int(r / sh.n[1]), int(r % sh.n[1]), 0};
-      for (int k = 0; k < sh.n[2]; ++k) {
-        ijk[2] = k;
-        const int f = ijk[c];  // face index along c: between cells f-1 and f
-        double hi_phi, lo_phi;
-        int cell[3] = {ijk[0], ijk[1], ijk[2]};
-        if (g.periodic) {
-          hi_phi = phi[sc.index(cell[0], cell[1], cell[2])];
-          cell[c] = f == 0 ? sc.n[c] - 1 : f - 1;
-          lo_phi = phi[sc.index(cell[0], cell[1], cell[2])];
-        } else {
-          const bool at_lo = f == 0, at_hi = f == sc.n[c];
-          if ((at_lo && p.lo[c] == Side::kNeumann) || (at_hi && p.hi[c] == Side::kNeumann)) continue;
-          if (at_hi) {
-            hi_phi = 0;  // GhostZero
-          } else {
-            hi_phi = phi[sc.index(cell[0], cell[1], cell[2])];
-          }
-          if (at_lo) {
-            lo_phi = 0;
-          } else {
-            cell[c] = f - 1;
-            lo_phi = phi[sc.index(cell[0], cell[1], cell[2])];
-          }
+      const int i = int(r / sh.n[1]), j = int(r % sh.n[1]);
+      T* dst = q + std::size_t(r) * sh.n[2];
+      const int ij[2] = {i, j};
+      if (c < 2) {
+        // Face f = ij[c] lies between cells f-1 (lo) and f (hi) of the same k-row.
+        const int f = ij[c];
+        const bool held = !per && ((f == 0 && p.lo[c] == Side::kNeumann) || (f == nc && p.hi[c] == Side::kNeumann));
+        if (held) continue;
+        int lo[2] = {i, j}, hi[2] = {i, j};
+        lo[c] = per ? (f == 0 ? nc - 1 : f - 1) : f - 1;
+        const T* ph = (per || f < nc) ? phi + sc.index(hi[0], hi[1], 0) : nullptr;  // null: ghost 0
+        const T* pl = lo[c] >= 0 ? phi + sc.index(lo[0], lo[1], 0) : nullptr;
+        for (int k = 0; k < sh.n[2]; ++k) {
+          const T a = ph ? ph[k] : T(0), b = pl ? pl[k] : T(0);
+          dst[k] -= (a - b) * inv_h;
         }
-        T& x = q[std::size_t(r) * sh.n[2] + k];
-        x = T(x - (hi_phi - lo_phi) * inv_h);
+      } else {
+        const T* pr = phi + sc.index(i, j, 0);
+        const int n2 = sc.n[2];
+        if (per) {
+          dst[0] -= (pr[0] - pr[n2 - 1]) * inv_h;
+          for (int k = 1; k < n2; ++k) dst[k] -= (pr[k] - pr[k - 1]) * inv_h;
+        } else {
+          // k = 0 and k = n2 are walls (held); the z axis has no open side in the tunnel.
+          for (int k = 1; k < n2; ++k) dst[k] -= (pr[k] - pr[k - 1]) * inv_h;
+        }
       }
     }
   }
