@@ -53,7 +53,7 @@ test-python: build
 	$(PY) -m pytest -q
 
 demo: build
-	$(VENV)/bin/flagsim run paper --seconds 4 --fps 25 --out out/demo --render --gif
+	$(PY) examples/paper_demo.py
 
 bench: build
 	$(VENV)/bin/flagsim bench --out out/bench

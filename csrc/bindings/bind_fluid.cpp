@@ -6,9 +6,12 @@
 
 #include <string>
 
+#include "bindings/fields.h"
+#include "bindings/fluid_fields.h"
 #include "common/errors.h"
 #include "fluid/fluid.h"
 #include "fluid/params.h"
+#include "scene/scene.h"
 
 namespace py = pybind11;
 
@@ -77,12 +80,54 @@ void set_component_from(Fluid& f, int c, const py::handle& values) {
 
 }  // namespace
 
+void def_fluid_fields(py::class_<AirParams>& cls, const std::string& section) {
+  cls.def_property(
+      "resolution",
+      [](const AirParams& a) { return py::make_tuple(a.resolution[0], a.resolution[1], a.resolution[2]); },
+      [section](AirParams& a, const py::object& o) {
+        std::array<long long, 3> n;
+        try {
+          n = o.cast<std::array<long long, 3>>();
+        } catch (const py::cast_error&) {
+          throw InvalidArgument(section + ".resolution should be 3 cell counts (nx, ny, nz), got " +
+                                std::string(py::str(py::repr(o))));
+        }
+        AirParams copy = a;
+        for (int d = 0; d < 3; ++d) copy.resolution[d] = (n[d] < -1000000 || n[d] > 1000000) ? -1 : int(n[d]);
+        copy.validate(section);
+        a = copy;
+      },
+      "grid cells (nx, ny, nz) ('grid')");
+  def_field<AirParams, double>(cls, "cell_size", &AirParams::cell_size, section, "m ('grid')");
+  def_vec3_field<AirParams>(cls, "origin", &AirParams::origin, section, "m, min corner of the grid ('grid')");
+  def_field<AirParams, std::string>(cls, "boundary", &AirParams::boundary, section,
+                                    "'periodic' (mean flow = wind) | 'tunnel' (inflow = wind through x-min)");
+  def_field<AirParams, std::string>(cls, "advection", &AirParams::advection, section,
+                                    "'semi_lagrangian' | 'maccormack'");
+  def_field<AirParams, std::string>(cls, "pressure", &AirParams::pressure, section,
+                                    "'fft' (periodic, FFTW) | 'pcg' (MIC(0) conjugate gradient)");
+  def_field<AirParams, std::string>(cls, "precision", &AirParams::precision, section, "'double' | 'float'");
+  def_field<AirParams, double>(cls, "pcg_tolerance", &AirParams::pcg_tolerance, section,
+                               "relative max-norm residual of the pcg solves");
+  def_field<AirParams, int>(cls, "pcg_max_iterations", &AirParams::pcg_max_iterations, section,
+                            "iteration cap of each pcg solve");
+  cls.def_property(
+      "fans", [](const AirParams& a) { return a.fans; },
+      [section](AirParams& a, const std::vector<FanParams>& fans) {
+        AirParams copy = a;
+        copy.fans = fans;
+        copy.validate(section);
+        a = copy;
+      },
+      "[FanParams, ...]: regions pushing the air ('grid'); a list copy: assign to change");
+}
+
 void bind_fluid(py::module_& m) {
-  py::class_<FanParams>(m, "FanParams",
+  py::class_<FanParams> fan_cls(m, "FanParams",
                         "A region pushing the air: force density (N/m^3) along direction inside a box "
-                        "or a sphere, times a keyframed strength.")
-      .def(py::init([](const std::string& shape, const py::object& center, const py::object& half_size,
-                       double radius, const py::object& direction, double force_density,
+                        "or a sphere, times a keyframed strength.");
+  fan_cls.def(py::init([](const std::string& shape, const py::object& center, const py::object& half_size,
+                       double radius, const py::object& direction, double force_density, double max_speed,
                        const std::vector<std::pair<double, double>>& strength) {
              FanParams f;
              f.shape = shape;
@@ -91,6 +136,7 @@ void bind_fluid(py::module_& m) {
              f.radius = radius;
              f.direction = to_vec3(direction, "direction");
              f.force_density = force_density;
+             f.max_speed = max_speed;
              f.strength.keys = strength;
              f.validate("");
              return f;
@@ -98,22 +144,27 @@ void bind_fluid(py::module_& m) {
            py::kw_only(), py::arg("shape") = "box", py::arg("center") = py::make_tuple(0.0, 0.0, 0.0),
            py::arg("half_size") = py::make_tuple(0.25, 0.25, 0.25), py::arg("radius") = 0.25,
            py::arg("direction") = py::make_tuple(1.0, 0.0, 0.0), py::arg("force_density") = 20.0,
-           py::arg("strength") = std::vector<std::pair<double, double>>{})
-      .def_readwrite("shape", &FanParams::shape, "\"box\" | \"sphere\"")
-      .def_readwrite("center", &FanParams::center, "m")
-      .def_readwrite("half_size", &FanParams::half_size, "m, box half extents")
-      .def_readwrite("radius", &FanParams::radius, "m, sphere radius")
-      .def_readwrite("direction", &FanParams::direction, "normalised on use")
-      .def_readwrite("force_density", &FanParams::force_density, "N/m^3")
+           py::arg("max_speed") = 0.0, py::arg("strength") = std::vector<std::pair<double, double>>{});
+  py::class_<FanParams>& fan = fan_cls;
+  def_field<FanParams, std::string>(fan, "shape", &FanParams::shape, "fan", "'box' | 'sphere'");
+  def_vec3_field<FanParams>(fan, "center", &FanParams::center, "fan", "m");
+  def_vec3_field<FanParams>(fan, "half_size", &FanParams::half_size, "fan", "m, box half extents");
+  def_field<FanParams, double>(fan, "radius", &FanParams::radius, "fan", "m, sphere radius");
+  def_vec3_field<FanParams>(fan, "direction", &FanParams::direction, "fan", "normalised on use");
+  def_field<FanParams, double>(fan, "force_density", &FanParams::force_density, "fan", "N/m^3");
+  def_field<FanParams, double>(fan, "max_speed", &FanParams::max_speed, "fan",
+                               "m/s: the force fades to 0 as the air reaches max_speed along direction; 0 = constant");
+  fan
       .def_property(
           "strength", [](const FanParams& f) { return f.strength.keys; },
-          [](FanParams& f, const std::vector<std::pair<double, double>>& k) { f.strength.keys = k; },
+          [](FanParams& f, const std::vector<std::pair<double, double>>& k) {
+            FanParams copy = f;
+            copy.strength.keys = k;
+            copy.validate("fan");
+            f = copy;
+          },
           "(time s, factor) keyframes; empty = always 1")
-      .def("validate", &FanParams::validate, py::arg("prefix") = "")
-      .def("__repr__", [](const FanParams& f) {
-        return "FanParams(shape='" + f.shape + "', center=(" + detail::to_text(f.center.transpose()) +
-               "), force_density=" + detail::to_text(f.force_density) + ")";
-      });
+      .def("validate", &FanParams::validate, py::arg("prefix") = "");
 
   py::class_<Fluid>(m, "Fluid", R"doc(
 Stable Fluids (Stam 1999) on a staggered MAC grid: the air solver alone.

@@ -1,7 +1,269 @@
+#include <pybind11/eigen.h>
+#include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include "bindings/fields.h"
+#include "bindings/fluid_fields.h"
+#include "common/errors.h"
+#include "scene/scene.h"
+#include "scene/simulation.h"
 
 namespace py = pybind11;
 
 namespace flagsim::bindings {
-void bind_scene(py::module_& m) { (void)m; }
+
+namespace {
+
+// A numpy view of an Eigen row-major matrix owned by `owner` (keeps it alive via base).
+template <class Mat>
+py::array view_of(Mat& m, py::handle owner, bool writeable) {
+  using Scalar = typename Mat::Scalar;
+  std::vector<py::ssize_t> shape{m.rows(), m.cols()};
+  std::vector<py::ssize_t> strides{py::ssize_t(sizeof(Scalar) * m.cols()), py::ssize_t(sizeof(Scalar))};
+  py::array a(py::dtype::of<Scalar>(), shape, strides, m.data(), owner);
+  if (!writeable) a.attr("setflags")(py::arg("write") = false);
+  return a;
+}
+
+template <class Vec>
+py::array view_of_vec(const Vec& v, py::handle owner) {
+  py::array a(py::dtype::of<typename Vec::Scalar>(), {v.size()}, {py::ssize_t(sizeof(typename Vec::Scalar))},
+              v.data(), owner);
+  a.attr("setflags")(py::arg("write") = false);
+  return a;
+}
+
+// Copy an (N, 3) array-like into m in place (views stay valid); rejects other shapes and non-finite.
+void assign_rows(MatX3& m, const std::string& name, const py::array_t<double, py::array::c_style | py::array::forcecast>& a) {
+  if (a.ndim() != 2 || a.shape(0) != m.rows() || a.shape(1) != 3)
+    throw InvalidArgument(name + " should have shape (" + std::to_string(m.rows()) + ", 3), got " +
+                          std::string(py::str(a.attr("shape"))));
+  auto r = a.unchecked<2>();
+  for (py::ssize_t i = 0; i < r.shape(0); ++i)
+    for (int k = 0; k < 3; ++k)
+      if (!std::isfinite(r(i, k)))
+        fail_param(name + "[" + std::to_string(i) + "]", "finite", r(i, k));
+  std::copy(a.data(), a.data() + a.size(), m.data());
+}
+
+py::list wind_to_list(const WindSchedule& w) {
+  py::list out;
+  for (const auto& k : w.keys) out.append(py::make_tuple(k.time, vec3_to_tuple(k.velocity)));
+  return out;
+}
+
+// Accepts a constant velocity (3 numbers) or keyframes [(time, (vx, vy, vz)), ...].
+WindSchedule wind_from(const std::string& name, const py::object& o) {
+  auto seq = py::reinterpret_borrow<py::sequence>(o);
+  if (!py::isinstance<py::sequence>(o) || py::isinstance<py::str>(o))
+    throw InvalidArgument(name + " should be a velocity (vx, vy, vz) or keyframes [(time, (vx, vy, vz)), ...], got " +
+                          std::string(py::str(py::repr(o))));
+  bool constant = seq.size() == 3;
+  if (constant)
+    for (auto item : seq) constant = constant && (py::isinstance<py::float_>(item) || py::isinstance<py::int_>(item));
+  if (constant) return WindSchedule(vec3_from(name, o));
+  WindSchedule w;
+  for (size_t i = 0; i < seq.size(); ++i) {
+    const std::string key = name + "[" + std::to_string(i) + "]";
+    py::object item = seq[i];
+    if (!py::isinstance<py::sequence>(item) || py::len(item) != 2)
+      throw InvalidArgument(key + " should be a pair (time, (vx, vy, vz)), got " + std::string(py::str(py::repr(item))));
+    double t;
+    try {
+      t = item[py::int_(0)].cast<double>();
+    } catch (const py::cast_error&) {
+      throw InvalidArgument(key + ".time should be a number, got " + std::string(py::str(py::repr(item[py::int_(0)]))));
+    }
+    w.keys.push_back({t, vec3_from(key + ".velocity", item[py::int_(1)])});
+  }
+  return w;
+}
+
+}  // namespace
+
+void bind_scene(py::module_& m) {
+  py::class_<AirParams> air(m, "AirParams",
+                            "The air: 'none', 'uniform' (analytic wind) or 'grid' (Stable Fluids).");
+  air.def(py::init<>());
+  def_field(air, "model", &AirParams::model, "air", "'none' | 'uniform' | 'grid'");
+  air.def_property(
+      "wind", [](const AirParams& a) { return wind_to_list(a.wind); },
+      [](AirParams& a, const py::object& o) {
+        AirParams copy = a;
+        copy.wind = wind_from("air.wind", o);
+        copy.validate("air");
+        a = copy;
+      },
+      "m/s: a constant (vx, vy, vz) or keyframes [(time s, (vx, vy, vz)), ...], linear between keys; "
+      "reads back as keyframes");
+  def_field<AirParams, double>(air, "density", &AirParams::density, "air", "kg/m^3");
+  def_field<AirParams, double>(air, "viscosity", &AirParams::viscosity, "air",
+                               "m^2/s, kinematic ('grid'; 0 = no diffusion)");
+  def_fluid_fields(air, "air");
+
+  py::class_<Scene> scene(m, "Scene", R"doc(Everything a Simulation needs, in SI units.
+
+Sections: flag, air, drag, integrator (and the areas' own sections); top-level dt and gravity.
+Every assignment is validated: a bad value raises ValueError naming the parameter and leaves
+the scene unchanged. Build one with Scene.paper(), Scene.named(name) or Scene.load(path).)doc");
+  scene.def(py::init<>());
+  scene.def_static("paper", &Scene::paper, "Paper §5: 8 x 11 flag, 0.54 m tall, dt = 0.01 s, 2 m/s air.");
+  scene.def_static("banner", &Scene::banner, "Banner hanging from its top edge in a 3 m/s wind along +z.");
+  scene.def_static("_builtins", &builtin_scenes);
+  scene.def_static("_named", &builtin_scene, py::arg("name"));
+  scene.def_readwrite("name", &Scene::name, "free text, used in exports and reports");
+  auto part = [&scene](const char* name, auto member, const char* doc) {
+    using T = std::remove_reference_t<decltype(std::declval<Scene>().*member)>;
+    scene.def_property(
+        name, [member](Scene& s) -> T& { return s.*member; },
+        [member](Scene& s, const T& value) {
+          Scene copy = s;
+          copy.*member = value;
+          copy.validate();
+          s = copy;
+        },
+        py::return_value_policy::reference_internal, doc);
+  };
+  part("flag", &Scene::flag, "FlagParams");
+  part("air", &Scene::air, "AirParams");
+  part("drag", &Scene::drag, "DragParams");
+  part("integrator", &Scene::integrator, "IntegratorParams");
+  scene.def_property(
+      "dt", [](const Scene& s) { return s.dt; },
+      [](Scene& s, double dt) {
+        check_positive("dt", dt);
+        s.dt = dt;
+      },
+      "s, one Simulation step");
+  scene.def_property(
+      "gravity", [](const Scene& s) { return vec3_to_tuple(s.gravity); },
+      [](Scene& s, const py::object& o) {
+        Vec3 g = vec3_from("gravity", o);
+        check_finite_vec("gravity", g);
+        s.gravity = g;
+      },
+      "m/s^2");
+  scene.def("validate", &Scene::validate, "Raise ValueError naming the first bad parameter.");
+  scene.def("__copy__", [](const Scene& s) { return Scene(s); });
+  scene.def("__deepcopy__", [](const Scene& s, py::dict) { return Scene(s); }, py::arg("memo"));
+
+  py::class_<Simulation> sim(m, "Simulation", R"doc(A scene built into the stages it needs.
+
+sim.step(n) advances n steps of scene.dt with the GIL released. positions, velocities and normals
+are (N, 3) float64 views into the simulation (no copy per access; they stay valid across steps
+and keep the simulation alive); assigning `sim.positions = x` copies into the same buffer.)doc");
+  sim.def(py::init<const Scene&>(), py::arg("scene"));
+  sim.def(
+      "step",
+      [](Simulation& s, long n) {
+        if (n < 0) fail_param("n", ">= 0", n);
+        py::gil_scoped_release release;
+        s.step(n);
+      },
+      py::arg("n") = 1, "Advance n steps of scene.dt. Raises DivergenceError (state restored).");
+  sim.def_property_readonly("time", &Simulation::time, "simulated time, s");
+  sim.def_property_readonly("step_count", &Simulation::step_count);
+  sim.def_property_readonly("scene", [](const Simulation& s) { return Scene(s.scene()); },
+                            "a copy of the scene this simulation was built from");
+  sim.def_property(
+      "positions", [](py::object self) { return view_of(self.cast<Simulation&>().positions(), self, true); },
+      [](Simulation& s, const py::array_t<double, py::array::c_style | py::array::forcecast>& a) {
+        assign_rows(s.positions(), "positions", a);
+        s.update_normals();
+      },
+      "(N, 3) m, view");
+  sim.def_property(
+      "velocities", [](py::object self) { return view_of(self.cast<Simulation&>().velocities(), self, true); },
+      [](Simulation& s, const py::array_t<double, py::array::c_style | py::array::forcecast>& a) {
+        assign_rows(s.velocities(), "velocities", a);
+      },
+      "(N, 3) m/s, view");
+  sim.def_property_readonly(
+      "normals", [](py::object self) { return view_of(const_cast<MatX3&>(self.cast<Simulation&>().normals()), self, false); },
+      "(N, 3) unit vertex normals, read-only view");
+  sim.def_property_readonly(
+      "triangles", [](py::object self) { return view_of(const_cast<MatX3i&>(self.cast<Simulation&>().topology().triangles), self, false); },
+      "(T, 3) int32 vertex indices, counter-clockwise seen from +z at rest");
+  sim.def_property_readonly(
+      "uv", [](py::object self) { return view_of(const_cast<MatX2&>(self.cast<Simulation&>().topology().uv), self, false); },
+      "(N, 2) texture coordinates in [0, 1]");
+  sim.def_property_readonly(
+      "rest_positions", [](py::object self) { return view_of(const_cast<MatX3&>(self.cast<Simulation&>().topology().rest_positions), self, false); },
+      "(N, 3) m");
+  sim.def_property_readonly(
+      "springs", [](py::object self) { return view_of(const_cast<MatX2i&>(self.cast<Simulation&>().topology().springs), self, false); },
+      "(S, 2) int32 vertex pairs (structural, shear, bend)");
+  sim.def_property_readonly(
+      "rest_lengths", [](py::object self) { return view_of_vec(self.cast<Simulation&>().topology().rest_length, self); },
+      "(S,) m");
+  sim.def_property_readonly(
+      "node_mass", [](py::object self) { return view_of_vec(self.cast<Simulation&>().topology().mass, self); },
+      "(N,) kg, areal density x node_area");
+  sim.def_property_readonly(
+      "node_area", [](py::object self) { return view_of_vec(self.cast<Simulation&>().topology().area, self); },
+      "(N,) m^2, a third of each adjacent triangle's rest area (S of eq. 3)");
+  sim.def_property_readonly(
+      "pinned",
+      [](const Simulation& s) {
+        const auto& im = s.topology().inv_mass;
+        py::array_t<bool> out(im.size());
+        auto w = out.mutable_unchecked<1>();
+        for (Index i = 0; i < im.size(); ++i) w(i) = im[i] == 0.0;
+        return out;
+      },
+      "(N,) bool, pinned vertices (inverse mass 0)");
+  sim.def_property_readonly("stages", [](const Simulation& s) { return py::tuple(py::cast(s.stages())); },
+                            "names of the stages this scene runs, in step order");
+  sim.def_property_readonly(
+      "timings",
+      [](const Simulation& s) {
+        py::dict d;
+        for (const auto& [k, v] : s.timings()) d[py::str(k)] = v;
+        return d;
+      },
+      "seconds spent per stage since construction");
+  sim.def(
+      "energy",
+      [](const Simulation& s) {
+        const ClothEnergy e = s.energy();
+        py::dict d;
+        d["kinetic"] = e.kinetic;
+        d["gravity"] = e.gravity;
+        d["spring"] = e.spring;
+        return d;
+      },
+      "dict of kinetic, gravity (potential) and spring energies, J");
+  sim.def("max_strain", &Simulation::max_strain, "largest spring strain (l - L) / L now");
+  sim.def_property_readonly(
+      "last_step_stats",
+      [](const Simulation& s) {
+        const IntegratorStats& st = s.last_step_stats();
+        py::dict d;
+        d["substeps"] = st.substeps;
+        d["cg_iterations"] = st.cg_iterations;
+        d["halvings"] = st.halvings;
+        d["stable_step"] = st.stable_step;
+        d["air_samples_outside"] = s.air_outside_last_step();
+        return d;
+      },
+      "integrator statistics of the last step");
+  sim.def_property_readonly(
+      "fluid", [](Simulation& s) { return s.fluid(); }, py::return_value_policy::reference_internal,
+      "the air grid (flagsim.Fluid) when the scene uses one (air.model 'grid'), else None; "
+      "stats['samples_outside'] counts masses that sampled it from outside its domain");
+  sim.def(
+      "air_velocity",
+      [](const Simulation& s, const py::array_t<double, py::array::c_style | py::array::forcecast>& pts) {
+        if (pts.ndim() != 2 || pts.shape(1) != 3)
+          throw InvalidArgument("points should have shape (M, 3), got " +
+                                std::string(py::str(pts.attr("shape"))));
+        MatX3 p = Eigen::Map<const MatX3>(pts.data(), pts.shape(0), 3);
+        MatX3 out;
+        s.air_velocity(p, out);
+        return out;
+      },
+      py::arg("points"), "(M, 3) air velocity at world points (M, 3) at the current time, m/s");
+}
+
 }  // namespace flagsim::bindings

@@ -1,6 +1,6 @@
 // Eigen aliases shared by every area. Cloth state is row-major N x 3 so numpy sees (N, 3) views.
 #pragma once
-#include <Eigen/Core>
+#include <Eigen/Dense>
 #include <cstdint>
 
 namespace flagsim {

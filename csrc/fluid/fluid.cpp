@@ -184,8 +184,9 @@ TypedSolver<T>& typed(Fluid::Solver& s) {
 
 }  // namespace
 
-Fluid::Fluid(const FluidParams& params) {
-  params.validate("");
+Fluid::Fluid(const FluidParams& params, const std::string& prefix) {
+  params.validate(prefix);
+  params.validate_combination(prefix);
   if (params.precision == "float")
     s_ = std::make_unique<TypedSolver<float>>(params);
   else

@@ -7,6 +7,7 @@
 #pragma once
 #include <array>
 #include <memory>
+#include <string>
 
 #include "common/types.h"
 #include "fluid/grid.h"
@@ -28,10 +29,10 @@ struct FluidStats {
 
 class Fluid {
  public:
-  /// Validates `params` (errors name the field without prefix, e.g. "resolution"), builds the
-  /// grid, the FFTW plans (fft) or the MIC(0) preconditioner (pcg), the fan stencils, and sets
-  /// the velocity to the wind at t = 0 (tunnel: (wind.x, 0, 0)).
-  explicit Fluid(const FluidParams& params);
+  /// Validates `params` (errors name "<prefix>.<field>", or the bare field when prefix is
+  /// empty), builds the grid, the FFTW plans (fft) or the MIC(0) preconditioner (pcg), the fan
+  /// stencils, and sets the velocity to the wind at t = 0 (tunnel: (wind.x, 0, 0)).
+  explicit Fluid(const FluidParams& params, const std::string& prefix = "");
   ~Fluid();
   Fluid(Fluid&&) noexcept;
   Fluid& operator=(Fluid&&) noexcept;

@@ -1,5 +1,7 @@
 #include "fluid/forces.h"
 
+#include <algorithm>
+
 namespace flagsim {
 
 template <class T>
@@ -11,6 +13,7 @@ std::vector<FanStencil<T>> build_fan_stencils(const GridGeometry& geo, const std
     FanStencil<T> s;
     s.strength = f.strength;
     const Vec3 acc = f.direction.normalized() * (f.force_density / rho);
+    s.target = f.direction.normalized() * f.max_speed;
     for (int c = 0; c < 3; ++c) {
       if (acc[c] == 0) continue;
       const Shape3 sh = geo.face_shape(c);
@@ -35,7 +38,15 @@ void apply_fans(const std::vector<FanStencil<T>>& fans, double t, double dt, Mac
     if (s == 0) continue;
     for (int c = 0; c < 3; ++c) {
       T* q = u.comp[c].data();
-      for (const auto& e : f.faces[c]) q[e.first] = T(q[e.first] + s * e.second);
+      if (f.target[c] == 0) {
+        for (const auto& e : f.faces[c]) q[e.first] = T(q[e.first] + s * e.second);
+      } else {
+        const double inv_target = 1.0 / f.target[c];
+        for (const auto& e : f.faces[c]) {
+          const double fade = std::max(0.0, 1.0 - q[e.first] * inv_target);
+          q[e.first] = T(q[e.first] + s * e.second * fade);
+        }
+      }
     }
   }
 }

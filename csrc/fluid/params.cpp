@@ -37,6 +37,7 @@ void FanParams::validate(const std::string& prefix) const {
   check_finite_vec(join(prefix, "direction"), direction);
   if (!(direction.norm() > 0)) fail_param(join(prefix, "direction"), "a non-zero vector", "(0 0 0)");
   check_finite(join(prefix, "force_density"), force_density);
+  check_nonnegative(join(prefix, "max_speed"), max_speed);
   strength.validate(join(prefix, "strength"));
 }
 
@@ -57,6 +58,16 @@ void FluidParams::validate(const std::string& prefix) const {
   check_choice(join(prefix, "advection"), advection, {"semi_lagrangian", "maccormack"});
   check_choice(join(prefix, "pressure"), pressure, {"fft", "pcg"});
   check_choice(join(prefix, "precision"), precision, {"double", "float"});
+  check_nonnegative(join(prefix, "viscosity"), viscosity);
+  check_positive(join(prefix, "density"), density);
+  if (!(std::isfinite(pcg_tolerance) && pcg_tolerance > 0 && pcg_tolerance < 1))
+    fail_param(join(prefix, "pcg_tolerance"), "in (0, 1)", pcg_tolerance);
+  if (pcg_max_iterations < 1) fail_param(join(prefix, "pcg_max_iterations"), ">= 1", pcg_max_iterations);
+  wind.validate(join(prefix, "wind"));
+  for (size_t i = 0; i < fans.size(); ++i) fans[i].validate(join(prefix, "fans[" + std::to_string(i) + "]"));
+}
+
+void FluidParams::validate_combination(const std::string& prefix) const {
   if (pressure == "fft" && boundary != "periodic")
     fail_param(join(prefix, "pressure"),
                "\"pcg\" with boundary " + quoted(boundary) + " (fft needs a periodic domain)",
@@ -67,13 +78,6 @@ void FluidParams::validate(const std::string& prefix) const {
                          " should be \"pcg\": this flagsim was built without FFTW "
                          "(FLAGSIM_WITH_FFTW=OFF), got \"fft\"");
 #endif
-  check_nonnegative(join(prefix, "viscosity"), viscosity);
-  check_positive(join(prefix, "density"), density);
-  if (!(std::isfinite(pcg_tolerance) && pcg_tolerance > 0 && pcg_tolerance < 1))
-    fail_param(join(prefix, "pcg_tolerance"), "in (0, 1)", pcg_tolerance);
-  if (pcg_max_iterations < 1) fail_param(join(prefix, "pcg_max_iterations"), ">= 1", pcg_max_iterations);
-  wind.validate(join(prefix, "wind"));
-  for (size_t i = 0; i < fans.size(); ++i) fans[i].validate(join(prefix, "fans[" + std::to_string(i) + "]"));
 }
 
 }  // namespace flagsim

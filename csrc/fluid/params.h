@@ -17,6 +17,9 @@ struct FanParams {
   double radius = 0.25;                 ///< m (shape "sphere")
   Vec3 direction{1, 0, 0};              ///< normalised on use
   double force_density = 20.0;          ///< N/m^3
+  /// m/s, fan curve: along each axis the force fades linearly to 0 as the air reaches
+  /// max_speed * direction (a fan pushes no faster than it blows); 0 = constant force.
+  double max_speed = 0.0;
   ScalarSchedule strength;              ///< (time s, factor) keyframes; empty = always 1
   /// Throws InvalidArgument naming "<prefix>.<field>" (e.g. "air.fans[0].radius").
   void validate(const std::string& prefix) const;
@@ -40,9 +43,12 @@ struct FluidParams {
   int pcg_max_iterations = 500;               ///< per solve (pressure and each diffusion solve)
   WindSchedule wind;        ///< periodic: mean flow (k = 0 mode); tunnel: inflow velocity
   std::vector<FanParams> fans;
-  /// Throws InvalidArgument naming "<prefix>.<field>" ("resolution" when prefix is empty);
-  /// MissingFeature for pressure "fft" in a build without FFTW.
+  /// Each field on its own: throws InvalidArgument naming "<prefix>.<field>" ("resolution" when
+  /// prefix is empty). Field setters run this, so fields can be set in any order.
   void validate(const std::string& prefix) const;
+  /// The fields together: pressure "fft" needs boundary "periodic", and FFTW in this build
+  /// (MissingFeature otherwise). Run by Scene::validate and by Fluid's constructor.
+  void validate_combination(const std::string& prefix) const;
 };
 
 }  // namespace flagsim

@@ -4,22 +4,41 @@ The method is Okamoto, Fujisawa and Miura, "Real Time Simulation of Whipped Flag
 Stable Fluids air pushing a mass-spring flag one way, vertex-triangle self-collision, and
 Perlin-noise flapping (eq. 5). ``import flagsim`` loads only numpy and the compiled core; the
 CLI, plotting and rendering helpers load when used.
+
+    >>> import flagsim
+    >>> sim = flagsim.Simulation(flagsim.Scene.paper())
+    >>> sim.step(100)
+    >>> round(sim.time, 6)
+    1.0
 """
 from ._core import (
+    AirParams,
     DivergenceError,
+    DragParams,
     FanParams,
+    FlagParams,
     Fluid,
+    IntegratorParams,
+    Scene,
+    Simulation,
     __version__,
     has_fftw,
     has_openmp,
     num_threads,
     set_num_threads,
 )
+from . import scene as _scene  # attaches Scene.load, Scene.builtins, Scene.named, ...
 
 __all__ = [
+    "AirParams",
     "DivergenceError",
+    "DragParams",
     "FanParams",
+    "FlagParams",
     "Fluid",
+    "IntegratorParams",
+    "Scene",
+    "Simulation",
     "__version__",
     "has_fftw",
     "has_openmp",

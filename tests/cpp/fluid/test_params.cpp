@@ -10,6 +10,7 @@ namespace {
 std::string error_of(const FluidParams& p, const std::string& prefix = "air") {
   try {
     p.validate(prefix);
+    p.validate_combination(prefix);
   } catch (const InvalidArgument& e) {
     return e.what();
   }
@@ -53,10 +54,11 @@ TEST(FluidParams, ErrorsNameTheParameter) {
 TEST(FluidParams, FftWithoutFftwIsAMissingFeature) {
   FluidParams p;
   p.pressure = "fft";
+  EXPECT_NO_THROW(p.validate("air"));  // each field is fine on its own
 #ifdef FLAGSIM_HAVE_FFTW
-  EXPECT_NO_THROW(p.validate("air"));
+  EXPECT_NO_THROW(p.validate_combination("air"));
 #else
-  EXPECT_THROW(p.validate("air"), MissingFeature);
+  EXPECT_THROW(p.validate_combination("air"), MissingFeature);
 #endif
 }
 

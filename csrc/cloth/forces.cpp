@@ -1,0 +1,249 @@
+#include "cloth/forces.h"
+
+#include <cmath>
+
+#include "common/parallel.h"
+#include <limits>
+
+namespace flagsim {
+
+namespace {
+constexpr double kTinyLength = 1e-12;  // m; below this a spring has no direction
+
+// Spring force on the first vertex, k (l - L) d/l (eq. 4). A spring of zero rest length is a
+// linear spring k (x_j - x_i), defined even when both ends coincide.
+inline Vec3 spring_force(const Vec3& d, double k, double L) {
+  const double l = d.norm();
+  if (l < kTinyLength) return L == 0.0 ? Vec3(k * d) : Vec3::Zero();
+  return (k * (l - L) / l) * d;
+}
+}  // namespace
+
+void add_gravity(const ClothTopology& topo, const Vec3& g, MatX3& f) {
+  const Index n = topo.num_vertices();
+#pragma omp parallel for schedule(static) if (n >= kParallelGrain)
+  for (Index i = 0; i < n; ++i) f.row(i) += topo.mass[i] * g.transpose();
+}
+
+void add_spring_forces(const ClothTopology& topo, const MatX3& x, const MatX3& v, MatX3& f) {
+  const Index n = topo.num_vertices();
+#pragma omp parallel for schedule(static) if (n >= kParallelGrain)
+  for (Index i = 0; i < n; ++i) {
+    Vec3 fi = Vec3::Zero();
+    const Vec3 xi = x.row(i), vi = v.row(i);
+    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k) {
+      const int32_t s = topo.adj_spring[k], j = topo.adj_other[k];
+      fi += spring_force(Vec3(x.row(j)) - xi, topo.stiffness[s], topo.rest_length[s]);
+      fi += topo.damping[s] * (Vec3(v.row(j)) - vi);
+    }
+    f.row(i) += fi;
+  }
+}
+
+namespace {
+
+// Per-triangle relative air velocity w = mean(u) - mean(v), unit normal n and area A.
+inline void triangle_frame(const ClothTopology& topo, Index t, const MatX3& x, const MatX3& v,
+                           const MatX3& u, Vec3& w, Vec3& n, double& A) {
+  const int a = topo.triangles(t, 0), b = topo.triangles(t, 1), c = topo.triangles(t, 2);
+  const Vec3 cr = (Vec3(x.row(b)) - Vec3(x.row(a))).cross(Vec3(x.row(c)) - Vec3(x.row(a)));
+  const double len = cr.norm();
+  A = 0.5 * len;
+  n = len > 0 ? Vec3(cr / len) : Vec3::Zero();
+  w = (Vec3(u.row(a) + u.row(b) + u.row(c)) - Vec3(v.row(a) + v.row(b) + v.row(c))) / 3.0;
+}
+
+}  // namespace
+
+void add_drag(const ClothTopology& topo, const DragParams& drag, double rho, const MatX3& x,
+              const MatX3& v, const MatX3& u, MatX3& f) {
+  const Index n = topo.num_vertices();
+  const double c = 0.5 * drag.coefficient * rho;
+  if (drag.model == "paper") {
+    // eq. 3: D = 1/2 C_D rho S (|u| u - |v| v)
+#pragma omp parallel for schedule(static) if (n >= kParallelGrain)
+    for (Index i = 0; i < n; ++i) {
+      const Vec3 ui = u.row(i), vi = v.row(i);
+      f.row(i) += c * topo.area[i] * (ui.norm() * ui - vi.norm() * vi);
+    }
+  } else if (drag.model == "relative") {
+#pragma omp parallel for schedule(static) if (n >= kParallelGrain)
+    for (Index i = 0; i < n; ++i) {
+      const Vec3 w = Vec3(u.row(i)) - Vec3(v.row(i));
+      f.row(i) += c * topo.area[i] * w.norm() * w;
+    }
+  } else {  // "triangle": flat plate, F = 1/2 rho A (C_D |w.n| (w.n) n + C_T |w_t| w_t)
+    const double ct = 0.5 * drag.tangential_coefficient * rho;
+#pragma omp parallel for schedule(static) if (n >= kParallelGrain)
+    for (Index i = 0; i < n; ++i) {
+      Vec3 fi = Vec3::Zero();
+      for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k) {
+        Vec3 w, nn;
+        double A;
+        triangle_frame(topo, topo.tri_adj[k], x, v, u, w, nn, A);
+        const double wn = w.dot(nn);
+        const Vec3 wt = w - wn * nn;
+        fi += (A / 3.0) * (c * std::abs(wn) * wn * nn + ct * wt.norm() * wt);
+      }
+      f.row(i) += fi;
+    }
+  }
+}
+
+void spring_position_jacobians(const ClothTopology& topo, const MatX3& x, bool clamp_compression,
+                               std::vector<Mat3>& K) {
+  const Index S = topo.num_springs();
+  K.resize(S);
+#pragma omp parallel for schedule(static) if (S >= kParallelGrain)
+  for (Index s = 0; s < S; ++s) {
+    const Vec3 d = x.row(topo.springs(s, 1)) - x.row(topo.springs(s, 0));
+    const double l = d.norm(), k = topo.stiffness[s], L = topo.rest_length[s];
+    if (l < kTinyLength) {
+      K[s] = (L == 0.0 ? k : 0.0) * Mat3::Identity();
+      continue;
+    }
+    const Vec3 e = d / l;
+    const Mat3 P = e * e.transpose();
+    double a = 1.0 - L / l;
+    if (clamp_compression && a < 0) a = 0;
+    K[s] = k * (a * (Mat3::Identity() - P) + P);
+  }
+}
+
+void drag_velocity_jacobians(const ClothTopology& topo, const DragParams& drag, double rho,
+                             const MatX3& x, const MatX3& v, const MatX3& u,
+                             std::vector<Mat3>& Dv, std::vector<Mat3>& Jw) {
+  const Index n = topo.num_vertices();
+  const double c = 0.5 * drag.coefficient * rho;
+  Dv.resize(n);
+  Jw.clear();
+  // d(|a| a)/da = |a| I + a a^T / |a|
+  auto dnorm = [](const Vec3& a) -> Mat3 {
+    const double l = a.norm();
+    if (l == 0) return Mat3::Zero();
+    return l * Mat3::Identity() + a * a.transpose() / l;
+  };
+  if (drag.model == "paper") {
+    for (Index i = 0; i < n; ++i) Dv[i] = c * topo.area[i] * dnorm(v.row(i));
+  } else if (drag.model == "relative") {
+    for (Index i = 0; i < n; ++i) Dv[i] = c * topo.area[i] * dnorm(Vec3(u.row(i)) - Vec3(v.row(i)));
+  } else {
+    for (Index i = 0; i < n; ++i) Dv[i].setZero();
+    const double ct = 0.5 * drag.tangential_coefficient * rho;
+    const Index T = topo.triangles.rows();
+    Jw.resize(T);
+    for (Index t = 0; t < T; ++t) {
+      Vec3 w, nn;
+      double A;
+      triangle_frame(topo, t, x, v, u, w, nn, A);
+      const double wn = w.dot(nn);
+      const Mat3 N = nn * nn.transpose(), P = Mat3::Identity() - N;
+      const Vec3 wt = P * w;
+      const double lt = wt.norm();
+      Mat3 J = c * 2.0 * std::abs(wn) * N;
+      if (lt > 0) J += ct * (lt * P + wt * wt.transpose() / lt);
+      Jw[t] = A * J;
+    }
+  }
+}
+
+void apply_position_jacobian(const ClothTopology& topo, const std::vector<Mat3>& K, const MatX3& p,
+                             MatX3& out) {
+  const Index n = topo.num_vertices();
+  out.resize(n, 3);
+#pragma omp parallel for schedule(static) if (n >= kParallelGrain)
+  for (Index i = 0; i < n; ++i) {
+    Vec3 acc = Vec3::Zero();
+    const Vec3 pi = p.row(i);
+    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k)
+      acc += K[topo.adj_spring[k]] * (Vec3(p.row(topo.adj_other[k])) - pi);
+    out.row(i) = acc;
+  }
+}
+
+void apply_velocity_jacobian(const ClothTopology& topo, const std::vector<Mat3>& Dv,
+                             const std::vector<Mat3>& Jw, const MatX3& p, MatX3& out) {
+  const Index n = topo.num_vertices();
+  out.resize(n, 3);
+#pragma omp parallel for schedule(static) if (n >= kParallelGrain)
+  for (Index i = 0; i < n; ++i) {
+    const Vec3 pi = p.row(i);
+    Vec3 acc = Vec3::Zero();
+    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k)
+      acc += topo.damping[topo.adj_spring[k]] * (Vec3(p.row(topo.adj_other[k])) - pi);
+    if (!Dv.empty()) acc -= Dv[i] * pi;
+    if (!Jw.empty())
+      for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k) {
+        const int32_t t = topo.tri_adj[k];
+        const Vec3 sum = p.row(topo.triangles(t, 0)) + p.row(topo.triangles(t, 1)) + p.row(topo.triangles(t, 2));
+        acc -= Jw[t] * sum / 9.0;
+      }
+    out.row(i) = acc;
+  }
+}
+
+double stable_step_estimate(const ClothTopology& topo, const DragParams& drag, double rho,
+                            bool has_drag, const MatX3& x, const MatX3& v, const MatX3& u) {
+  // Gershgorin on M^-1/2 K M^-1/2 and M^-1/2 C M^-1/2, row i: sum over incident springs of
+  // k (1/m_i + 1/sqrt(m_i m_j)). The spring's stiffness along and across its axis is bounded by
+  // k max(1, |1 - L/l|).
+  const Index n = topo.num_vertices();
+  double lam = 0, gam = 0;
+  for (Index i = 0; i < n; ++i) {
+    if (topo.inv_mass[i] == 0) continue;
+    const double mi = topo.mass[i];
+    double ki = 0, ci = 0;
+    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k) {
+      const int32_t s = topo.adj_spring[k], j = topo.adj_other[k];
+      const double l = (x.row(j) - x.row(i)).norm(), L = topo.rest_length[s];
+      const double stiff = topo.stiffness[s] * std::max(1.0, l > kTinyLength ? std::abs(1 - L / l) : 1.0);
+      const double w = 1.0 / mi + 1.0 / std::sqrt(mi * topo.mass[j]);
+      ki += stiff * w;
+      ci += topo.damping[s] * w;
+    }
+    if (has_drag) {
+      // |d drag / d v| <= 2 x 1/2 C rho S |a|, a = v ("paper") or u - v; "triangle" takes a
+      // factor 2 of margin for the coupling of a vertex to its neighbours through triangles.
+      const Vec3 a = drag.model == "paper" ? Vec3(v.row(i)) : Vec3(u.row(i) - v.row(i));
+      const double cd = drag.model == "triangle"
+                            ? 2.0 * std::max(drag.coefficient, drag.tangential_coefficient)
+                            : drag.coefficient;
+      ci += cd * rho * topo.area[i] * a.norm() / mi;
+    }
+    lam = std::max(lam, ki);
+    gam = std::max(gam, 0.5 * ci);
+  }
+  if (lam == 0 && gam == 0) return std::numeric_limits<double>::infinity();
+  return 2.0 / (gam + std::sqrt(gam * gam + lam));
+}
+
+ClothEnergy cloth_energy(const ClothTopology& topo, const Vec3& g, const MatX3& x, const MatX3& v) {
+  ClothEnergy e;
+  for (Index i = 0; i < topo.num_vertices(); ++i) {
+    e.kinetic += 0.5 * topo.mass[i] * v.row(i).squaredNorm();
+    e.gravity -= topo.mass[i] * g.dot(Vec3(x.row(i)));
+  }
+  for (Index s = 0; s < topo.num_springs(); ++s) {
+    const double l = (x.row(topo.springs(s, 1)) - x.row(topo.springs(s, 0))).norm();
+    e.spring += 0.5 * topo.stiffness[s] * (l - topo.rest_length[s]) * (l - topo.rest_length[s]);
+  }
+  return e;
+}
+
+double max_strain(const ClothTopology& topo, const MatX3& x, Index* worst) {
+  double m = 0;
+  Index w = -1;
+  for (Index s = 0; s < topo.num_springs(); ++s) {
+    const double L = topo.rest_length[s];
+    if (L <= 0) continue;
+    const double e = ((x.row(topo.springs(s, 1)) - x.row(topo.springs(s, 0))).norm() - L) / L;
+    if (!(e <= m)) {  // also catches NaN
+      m = e;
+      w = s;
+    }
+  }
+  if (worst) *worst = w;
+  return m;
+}
+
+}  // namespace flagsim

@@ -1,0 +1,243 @@
+#include "cloth/integrators.h"
+
+#include <cmath>
+
+#include "common/parallel.h"
+
+#include "common/timer.h"
+
+namespace flagsim {
+
+IntegratorScratch::IntegratorScratch(const ClothTopology& topo) {
+  const Index n = topo.num_vertices();
+  for (MatX3* m : {&f, &x0, &v0, &dv, &r, &z, &p, &q, &b, &tmp}) m->setZero(n, 3);
+  K.resize(topo.num_springs());
+  Dv.resize(n);
+  Jw.reserve(topo.triangles.rows());
+  Pinv.resize(n);
+}
+
+void compute_forces(const ClothTopology& topo, const ForceSet& fs, const MatX3& x, const MatX3& v,
+                    const MatX3& u, MatX3& f, ForceTimings* t) {
+  static thread_local ForceTimings unused;
+  ForceTimings& tm = t ? *t : unused;
+  f.setZero();
+  if (fs.gravity) {
+    ScopedTimer timer(tm.gravity);
+    add_gravity(topo, fs.g, f);
+  }
+  if (fs.drag) {
+    ScopedTimer timer(tm.drag);
+    add_drag(topo, fs.drag_params, fs.rho, x, v, u, f);
+  }
+  if (fs.springs) {
+    ScopedTimer timer(tm.springs);
+    add_spring_forces(topo, x, v, f);
+  }
+}
+
+namespace {
+
+// Zero the rows of pinned vertices (Baraff-Witkin's filter S for fully constrained vertices).
+inline void filter_pinned(const ClothTopology& topo, MatX3& a) {
+  for (Index i = 0; i < a.rows(); ++i)
+    if (topo.inv_mass[i] == 0.0) a.row(i).setZero();
+}
+
+IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
+                              const IntegratorParams& ip, double h, const MatX3& u, MatX3& x,
+                              MatX3& v, IntegratorScratch& s, IntegratorStats& stats,
+                              ForceTimings* t) {
+  long n = 1;
+  if (ip.adaptive) {
+    const double hs = stable_step_estimate(topo, fs.drag_params, fs.rho, fs.drag, x, v, u);
+    stats.stable_step = hs;
+    const double need = std::ceil(h / (ip.safety * hs));
+    if (need > ip.max_substeps) return IntegrateStatus::kTooManySubsteps;
+    n = std::max(1L, static_cast<long>(need));
+  }
+  const double hs = h / double(n);
+  for (long k = 0; k < n; ++k) {
+    compute_forces(topo, fs, x, v, u, s.f, t);
+    // symplectic Euler: v <- v + h M^-1 f(x, v); x <- x + h v
+    const Index N = topo.num_vertices();
+#pragma omp parallel for schedule(static) if (N >= kParallelGrain)
+    for (Index i = 0; i < N; ++i) {
+      v.row(i) += (hs * topo.inv_mass[i]) * s.f.row(i);
+      x.row(i) += hs * v.row(i);
+    }
+  }
+  stats.substeps = n;
+  return IntegrateStatus::kOk;
+}
+
+// out = A p with A = M - h df/dv - h^2 df/dx; pinned rows filtered.
+void apply_system(const ClothTopology& topo, double h, IntegratorScratch& s, const MatX3& p,
+                  MatX3& out) {
+  apply_position_jacobian(topo, s.K, p, s.tmp);
+  apply_velocity_jacobian(topo, s.Dv, s.Jw, p, out);
+  const Index N = topo.num_vertices();
+#pragma omp parallel for schedule(static) if (N >= kParallelGrain)
+  for (Index i = 0; i < N; ++i) {
+    if (topo.inv_mass[i] == 0.0) {
+      out.row(i).setZero();
+      continue;
+    }
+    out.row(i) = topo.mass[i] * p.row(i) - h * out.row(i) - (h * h) * s.tmp.row(i);
+  }
+}
+
+// One linearised backward Euler step (Baraff-Witkin eq. 16):
+// (M - h df/dv - h^2 df/dx) dv = h (f0 + h df/dx v0), then v += dv, x += h v.
+IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
+                              const IntegratorParams& ip, double h, const MatX3& u, MatX3& x,
+                              MatX3& v, IntegratorScratch& s, IntegratorStats& stats,
+                              ForceTimings* t) {
+  const Index N = topo.num_vertices();
+  compute_forces(topo, fs, x, v, u, s.f, t);
+  if (fs.springs) {
+    spring_position_jacobians(topo, x, /*clamp_compression=*/true, s.K);
+  } else {
+    for (auto& k : s.K) k.setZero();
+  }
+  if (fs.drag) {
+    drag_velocity_jacobians(topo, fs.drag_params, fs.rho, x, v, u, s.Dv, s.Jw);
+  } else {
+    for (auto& d : s.Dv) d.setZero();
+    s.Jw.clear();
+  }
+  // b = h (f0 + h K v0)
+  apply_position_jacobian(topo, s.K, v, s.tmp);
+  s.b = h * (s.f + h * s.tmp);
+  filter_pinned(topo, s.b);
+
+  // Block-Jacobi preconditioner: inverse of A's 3x3 diagonal blocks.
+  if (!fs.springs) {
+    for (auto& k : s.K) k.setZero();
+  }
+#pragma omp parallel for schedule(static) if (N >= kParallelGrain)
+  for (Index i = 0; i < N; ++i) {
+    Mat3 D = topo.mass[i] * Mat3::Identity() + h * s.Dv[i];
+    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k) {
+      const int32_t sp = topo.adj_spring[k];
+      D += h * topo.damping[sp] * Mat3::Identity() + (h * h) * s.K[sp];
+    }
+    if (!s.Jw.empty())
+      for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k)
+        D += (h / 9.0) * s.Jw[topo.tri_adj[k]];
+    s.Pinv[i] = D.inverse();
+  }
+
+  // PCG warm-started from the previous step's dv.
+  filter_pinned(topo, s.dv);
+  apply_system(topo, h, s, s.dv, s.q);
+  s.r = s.b - s.q;
+  const double bnorm = s.b.norm();
+  if (bnorm == 0.0) {
+    s.dv.setZero();
+  } else {
+    const double tol = ip.cg_tolerance * bnorm;
+    auto precondition = [&](const MatX3& r, MatX3& z) {
+      for (Index i = 0; i < N; ++i) z.row(i) = (s.Pinv[i] * r.row(i).transpose()).transpose();
+      filter_pinned(topo, z);
+    };
+    precondition(s.r, s.z);
+    s.p = s.z;
+    double rz = (s.r.array() * s.z.array()).sum();
+    int it = 0;
+    bool converged = s.r.norm() <= tol;
+    for (; !converged && it < ip.cg_max_iterations; ++it) {
+      apply_system(topo, h, s, s.p, s.q);
+      const double pq = (s.p.array() * s.q.array()).sum();
+      if (!(pq > 0)) break;  // not SPD along p (or NaN): give up, the caller halves h
+      const double alpha = rz / pq;
+      s.dv += alpha * s.p;
+      s.r -= alpha * s.q;
+      if (s.r.norm() <= tol) {
+        converged = true;
+        ++it;
+        break;
+      }
+      precondition(s.r, s.z);
+      const double rz_new = (s.r.array() * s.z.array()).sum();
+      s.p = s.z + (rz_new / rz) * s.p;
+      rz = rz_new;
+    }
+    stats.cg_iterations += it;
+    if (!converged) return IntegrateStatus::kCgFailed;
+  }
+#pragma omp parallel for schedule(static) if (N >= kParallelGrain)
+  for (Index i = 0; i < N; ++i) {
+    v.row(i) += s.dv.row(i);
+    x.row(i) += h * v.row(i);
+  }
+  return IntegrateStatus::kOk;
+}
+
+// Implicit step of h; if CG fails, restart from the same state with two steps of h/2, and so on
+// down to ip.max_halvings levels.
+IntegrateStatus implicit_step(const ClothTopology& topo, const ForceSet& fs,
+                              const IntegratorParams& ip, double h, const MatX3& u, MatX3& x,
+                              MatX3& v, IntegratorScratch& s, IntegratorStats& stats,
+                              ForceTimings* t) {
+  for (int level = 0; level <= ip.max_halvings; ++level) {
+    const long pieces = 1L << level;
+    const double hp = h / double(pieces);
+    s.x0 = x;
+    s.v0 = v;
+    bool ok = true;
+    for (long k = 0; k < pieces && ok; ++k)
+      ok = implicit_once(topo, fs, ip, hp, u, x, v, s, stats, t) == IntegrateStatus::kOk;
+    if (ok) return IntegrateStatus::kOk;
+    x = s.x0;
+    v = s.v0;
+    s.dv.setZero();
+    ++stats.halvings;
+  }
+  return IntegrateStatus::kCgFailed;
+}
+
+}  // namespace
+
+IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const IntegratorParams& ip,
+                          double h, const MatX3& u, MatX3& x, MatX3& v, IntegratorScratch& s,
+                          IntegratorStats& stats, ForceTimings* t) {
+  stats = IntegratorStats{};
+  const double hs = h / double(ip.substeps);
+  long explicit_substeps = 0;
+  for (int k = 0; k < ip.substeps; ++k) {
+    IntegrateStatus st;
+    if (ip.method == "explicit") {
+      st = explicit_step(topo, fs, ip, hs, u, x, v, s, stats, t);
+      explicit_substeps += stats.substeps;
+    } else if (ip.method == "implicit") {
+      st = implicit_step(topo, fs, ip, hs, u, x, v, s, stats, t);
+    } else {
+      throw std::logic_error("integrate: unknown method '" + ip.method + "' (validate() lets none through)");
+    }
+    if (st != IntegrateStatus::kOk) return st;
+  }
+  if (ip.method == "explicit") stats.substeps = explicit_substeps;
+  return IntegrateStatus::kOk;
+}
+
+void limit_strain(const ClothTopology& topo, double limit, int iterations, double h, MatX3& x,
+                  MatX3& v) {
+  // Gauss-Seidel over springs in index order: deterministic.
+  for (int it = 0; it < iterations; ++it)
+    for (Index s = 0; s < topo.num_springs(); ++s) {
+      const int a = topo.springs(s, 0), b = topo.springs(s, 1);
+      const double wa = topo.inv_mass[a], wb = topo.inv_mass[b];
+      if (wa + wb == 0) continue;
+      const Vec3 d = x.row(b) - x.row(a);
+      const double l = d.norm(), lmax = (1.0 + limit) * topo.rest_length[s];
+      if (l <= lmax || l == 0) continue;
+      const Vec3 corr = (l - lmax) / l * d / (wa + wb);
+      x.row(a) += wa * corr.transpose();
+      x.row(b) -= wb * corr.transpose();
+      v.row(a) += (wa / h) * corr.transpose();
+      v.row(b) -= (wb / h) * corr.transpose();
+    }
+}
+
+}  // namespace flagsim

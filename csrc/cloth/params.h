@@ -1,0 +1,56 @@
+// Parameters of the mass-spring flag (paper §3), its drag (eq. 3) and its integrator.
+#pragma once
+#include <string>
+#include <vector>
+
+#include "common/types.h"
+
+namespace flagsim {
+
+/// A rows x cols grid of masses over a width x height rectangle (paper: 8 x 11 masses).
+/// Vertex i = r * cols + c; r = 0 is the top row, c = 0 the pole-side column. The rest flag
+/// lies in the x-y plane through `origin` (its top pole-side corner), +x away from the pole.
+struct FlagParams {
+  int rows = 8;
+  int cols = 11;
+  double width = 0.81;                ///< m, along +x
+  double height = 0.54;               ///< m, along -y from origin
+  Vec3 origin{0.055, 0.0, 0.0};       ///< m, top pole-side corner
+  double areal_density = 0.15;        ///< kg/m^2 (cotton bunting ~0.1-0.2)
+  double stretch_stiffness = 100.0;   ///< N/m, structural springs (k_s, eq. 4)
+  double shear_stiffness = 20.0;      ///< N/m, diagonal springs
+  double bend_stiffness = 5.0;        ///< N/m, skip-one springs
+  double damping = 0.02;              ///< N s/m, k_d of eq. 4, every spring
+  std::string pin = "pole";           ///< "pole" | "grommets" | "top" | "none"
+  std::vector<int> pinned_vertices;   ///< explicit pins; when non-empty, replaces `pin`
+  void validate(const std::string& prefix = "flag") const;
+};
+
+/// Air drag on the flag. "paper": eq. 3, D = 1/2 C_D rho S (|u|u - |v|v) per mass;
+/// "relative": 1/2 C_D rho S |u-v|(u-v) per mass; "triangle": per triangle, flat-plate
+/// pressure C_D on the normal part and skin friction C_T on the tangential part of the relative
+/// velocity, two-sided (the normal force's component across the flow is the lift).
+struct DragParams {
+  std::string model = "paper";        ///< "paper" | "relative" | "triangle"
+  double coefficient = 1.0;           ///< C_D
+  double tangential_coefficient = 0.05;  ///< C_T, "triangle" only
+  void validate(const std::string& prefix = "drag") const;
+};
+
+struct IntegratorParams {
+  std::string method = "implicit";   ///< "explicit" (symplectic Euler) | "implicit" (Baraff-Witkin)
+  int substeps = 1;                   ///< fixed substeps per step (each of dt / substeps)
+  bool adaptive = true;               ///< explicit: substep below the stable step estimate
+  double safety = 0.9;                ///< fraction of the stable step used when substepping
+  int max_substeps = 1000000;         ///< explicit: per step; more is a DivergenceError
+  double cg_tolerance = 1e-8;         ///< implicit: relative residual of the CG solve
+  int cg_max_iterations = 500;        ///< implicit: per solve; on failure the step is halved
+  int max_halvings = 10;              ///< implicit: step halvings before DivergenceError("cg")
+  double max_strain = 10.0;           ///< a spring stretched beyond (1 + max_strain) x rest
+                                      ///< length raises DivergenceError("strain")
+  double strain_limit = 0.0;          ///< > 0: Provot 1995 strain limiting to (1 + strain_limit)
+  int strain_limit_iterations = 4;
+  void validate(const std::string& prefix = "integrator") const;
+};
+
+}  // namespace flagsim

@@ -1,0 +1,138 @@
+#include "cloth/topology.h"
+
+#include <algorithm>
+#include <array>
+
+namespace flagsim {
+
+namespace {
+
+void add_spring(ClothTopology& t, std::vector<std::array<int32_t, 2>>& s, int a, int b,
+                SpringKind kind) {
+  s.push_back({a, b});
+  t.spring_kind.push_back(kind);
+}
+
+}  // namespace
+
+ClothTopology build_flag_topology(const FlagParams& p) {
+  ClothTopology t;
+  const int R = p.rows, C = p.cols, N = R * C;
+  t.rows = R;
+  t.cols = C;
+  const double dx = p.width / (C - 1), dy = p.height / (R - 1);
+  auto id = [C](int r, int c) { return r * C + c; };
+
+  t.rest_positions.resize(N, 3);
+  t.uv.resize(N, 2);
+  for (int r = 0; r < R; ++r)
+    for (int c = 0; c < C; ++c) {
+      t.rest_positions.row(id(r, c)) = p.origin + Vec3(c * dx, -r * dy, 0.0);
+      t.uv.row(id(r, c)) << double(c) / (C - 1), 1.0 - double(r) / (R - 1);
+    }
+
+  // Two triangles per quad, both counter-clockwise seen from +z: (a, c, d) and (a, d, b) with
+  // a = (r, c), b = (r, c+1), c = (r+1, c), d = (r+1, c+1).
+  t.triangles.resize(2 * (R - 1) * (C - 1), 3);
+  Index k = 0;
+  for (int r = 0; r + 1 < R; ++r)
+    for (int c = 0; c + 1 < C; ++c) {
+      const int a = id(r, c), b = id(r, c + 1), cc = id(r + 1, c), d = id(r + 1, c + 1);
+      t.triangles.row(k++) << a, cc, d;
+      t.triangles.row(k++) << a, d, b;
+    }
+
+  std::vector<std::array<int32_t, 2>> s;
+  for (int r = 0; r < R; ++r)
+    for (int c = 0; c < C; ++c) {
+      if (c + 1 < C) add_spring(t, s, id(r, c), id(r, c + 1), SpringKind::kStructural);
+      if (r + 1 < R) add_spring(t, s, id(r, c), id(r + 1, c), SpringKind::kStructural);
+      if (r + 1 < R && c + 1 < C) {
+        add_spring(t, s, id(r, c), id(r + 1, c + 1), SpringKind::kShear);
+        add_spring(t, s, id(r, c + 1), id(r + 1, c), SpringKind::kShear);
+      }
+      if (c + 2 < C) add_spring(t, s, id(r, c), id(r, c + 2), SpringKind::kBend);
+      if (r + 2 < R) add_spring(t, s, id(r, c), id(r + 2, c), SpringKind::kBend);
+    }
+  const Index S = static_cast<Index>(s.size());
+  t.springs.resize(S, 2);
+  t.rest_length.resize(S);
+  t.stiffness.resize(S);
+  t.damping.setConstant(S, p.damping);
+  for (Index j = 0; j < S; ++j) {
+    t.springs.row(j) << s[j][0], s[j][1];
+    t.rest_length[j] = (t.rest_positions.row(s[j][1]) - t.rest_positions.row(s[j][0])).norm();
+    switch (t.spring_kind[j]) {
+      case SpringKind::kStructural: t.stiffness[j] = p.stretch_stiffness; break;
+      case SpringKind::kShear: t.stiffness[j] = p.shear_stiffness; break;
+      case SpringKind::kBend: t.stiffness[j] = p.bend_stiffness; break;
+    }
+  }
+
+  // Lumped area: a third of every adjacent triangle's rest area; mass = areal density x area.
+  t.area.setZero(N);
+  for (Index f = 0; f < t.triangles.rows(); ++f) {
+    const Vec3 e1 = t.rest_positions.row(t.triangles(f, 1)) - t.rest_positions.row(t.triangles(f, 0));
+    const Vec3 e2 = t.rest_positions.row(t.triangles(f, 2)) - t.rest_positions.row(t.triangles(f, 0));
+    const double a3 = 0.5 * e1.cross(e2).norm() / 3.0;
+    for (int q = 0; q < 3; ++q) t.area[t.triangles(f, q)] += a3;
+  }
+  t.mass = p.areal_density * t.area;
+  t.inv_mass = t.mass.cwiseInverse();
+  if (!p.pinned_vertices.empty()) {
+    for (int i : p.pinned_vertices) t.inv_mass[i] = 0.0;
+  } else if (p.pin == "pole") {
+    for (int r = 0; r < R; ++r) t.inv_mass[id(r, 0)] = 0.0;
+  } else if (p.pin == "grommets") {
+    t.inv_mass[id(0, 0)] = 0.0;
+    t.inv_mass[id(R - 1, 0)] = 0.0;
+  } else if (p.pin == "top") {
+    for (int c = 0; c < C; ++c) t.inv_mass[id(0, c)] = 0.0;
+  }
+
+  // Vertex -> spring adjacency (CSR), springs in index order for each vertex.
+  t.adj_offset.assign(N + 1, 0);
+  for (Index j = 0; j < S; ++j) {
+    ++t.adj_offset[t.springs(j, 0) + 1];
+    ++t.adj_offset[t.springs(j, 1) + 1];
+  }
+  for (int i = 0; i < N; ++i) t.adj_offset[i + 1] += t.adj_offset[i];
+  t.adj_spring.resize(2 * S);
+  t.adj_other.resize(2 * S);
+  std::vector<int32_t> fill(t.adj_offset.begin(), t.adj_offset.end() - 1);
+  for (Index j = 0; j < S; ++j) {
+    const int a = t.springs(j, 0), b = t.springs(j, 1);
+    t.adj_spring[fill[a]] = int32_t(j);
+    t.adj_other[fill[a]++] = b;
+    t.adj_spring[fill[b]] = int32_t(j);
+    t.adj_other[fill[b]++] = a;
+  }
+  t.tri_adj_offset.assign(N + 1, 0);
+  for (Index f = 0; f < t.triangles.rows(); ++f)
+    for (int q = 0; q < 3; ++q) ++t.tri_adj_offset[t.triangles(f, q) + 1];
+  for (int i = 0; i < N; ++i) t.tri_adj_offset[i + 1] += t.tri_adj_offset[i];
+  t.tri_adj.resize(3 * t.triangles.rows());
+  fill.assign(t.tri_adj_offset.begin(), t.tri_adj_offset.end() - 1);
+  for (Index f = 0; f < t.triangles.rows(); ++f)
+    for (int q = 0; q < 3; ++q) t.tri_adj[fill[t.triangles(f, q)]++] = int32_t(f);
+  return t;
+}
+
+void compute_vertex_normals(const ClothTopology& topo, const MatX3& x, MatX3& n) {
+  n.setZero(x.rows(), 3);
+  for (Index f = 0; f < topo.triangles.rows(); ++f) {
+    const int a = topo.triangles(f, 0), b = topo.triangles(f, 1), c = topo.triangles(f, 2);
+    const Vec3 e1 = x.row(b) - x.row(a), e2 = x.row(c) - x.row(a);
+    const Vec3 an = e1.cross(e2);  // |an| = 2 x area: area weighting for free
+    n.row(a) += an;
+    n.row(b) += an;
+    n.row(c) += an;
+  }
+  for (Index i = 0; i < n.rows(); ++i) {
+    const double len = n.row(i).norm();
+    if (len > 0) n.row(i) /= len;
+    else n.row(i) << 0, 0, 1;
+  }
+}
+
+}  // namespace flagsim

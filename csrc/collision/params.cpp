@@ -1,0 +1,18 @@
+#include "collision/params.h"
+
+#include "common/errors.h"
+
+namespace flagsim {
+
+void SelfCollisionParams::validate(const std::string& p) const {
+  check_positive(p + ".thickness", thickness);
+  check_nonnegative(p + ".friction", friction);
+}
+
+void PoleParams::validate(const std::string& p) const {
+  check_positive(p + ".radius", radius);
+  check_positive(p + ".height", height);
+  check_finite_vec(p + ".base", base);
+}
+
+}  // namespace flagsim

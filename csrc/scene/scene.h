@@ -1,0 +1,50 @@
+// A scene: everything a Simulation needs, as plain validated structs (SI units).
+#pragma once
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "cloth/params.h"
+#include "collision/params.h"
+#include "flapping/params.h"
+#include "fluid/params.h"
+
+namespace flagsim {
+
+/// The air the flag feels. model "none": no air at all (no drag stage); "uniform": the wind
+/// schedule everywhere, analytic (no grid is built); "grid": Stable Fluids on the grid described
+/// by the FluidParams fields, with `wind` as its mean flow (periodic) or inflow (tunnel).
+struct AirParams : FluidParams {
+  std::string model = "uniform";  ///< "none" | "uniform" | "grid"
+  AirParams() { wind = WindSchedule(Vec3(2.0, 0.0, 0.0)); }
+  void validate(const std::string& prefix = "air") const;
+};
+
+struct Scene {
+  std::string name = "custom";
+  FlagParams flag;
+  AirParams air;
+  DragParams drag;
+  IntegratorParams integrator;
+  FlappingParams flapping;
+  SelfCollisionParams self_collision;
+  PoleParams pole;
+  Vec3 gravity{0.0, -9.81, 0.0};  ///< m/s^2
+  double dt = 0.01;               ///< s, one Simulation step
+
+  /// Throws InvalidArgument naming the first bad parameter ("flag.rows should be >= 2, got 1").
+  void validate() const;
+
+  /// Paper §5: flag of 8 x 11 masses, 0.54 m tall, dt = 0.01 s, air about 2 m/s along +x on a
+  /// 16^3 Stable Fluids grid, made non-uniform by a fan region upstream of the flag.
+  static Scene paper();
+  /// A banner hanging from its top edge in a horizontal wind along +z (equilibrium-angle check).
+  static Scene banner();
+};
+
+/// Built-in scenes: (name, one-line description), in display order.
+std::vector<std::pair<std::string, std::string>> builtin_scenes();
+/// The built-in scene `name`; InvalidArgument listing the known names otherwise.
+Scene builtin_scene(const std::string& name);
+
+}  // namespace flagsim

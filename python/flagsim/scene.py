@@ -1,0 +1,183 @@
+"""Scene construction from built-ins and TOML files, and generic helpers over parameter structs.
+
+A TOML scene mirrors the Scene's sections; every key is optional and unknown keys are errors::
+
+    base = "paper"            # start from a built-in scene (default: the plain Scene())
+    name = "my flag"
+    dt = 0.005
+    gravity = [0.0, -9.81, 0.0]
+
+    [flag]
+    rows = 16
+    cols = 24
+
+    [air]
+    model = "uniform"
+    wind = [[0.0, [2.0, 0.0, 0.0]], [2.0, [8.0, 0.0, 1.0]]]   # keyframes (time, velocity)
+
+    [integrator]
+    method = "implicit"
+"""
+from __future__ import annotations
+
+import os
+from typing import Any
+
+from . import _core
+
+try:  # Python 3.11+
+    import tomllib as _toml
+except ModuleNotFoundError:  # pragma: no cover - Python 3.10
+    import tomli as _toml  # type: ignore[no-redef]
+
+Scene = _core.Scene
+
+# Fields that hold lists of parameter structs: (owner type, field) -> item type. Areas register
+# theirs here (e.g. air.fans), so TOML arrays of tables map onto them.
+LIST_ITEM_TYPES: dict[tuple[type, str], type] = {(_core.AirParams, "fans"): _core.FanParams}
+
+
+def fields(obj_or_type: Any) -> list[str]:
+    """Public field names of a bound parameter struct, in definition order."""
+    cls = obj_or_type if isinstance(obj_or_type, type) else type(obj_or_type)
+    return [k for k, v in vars(cls).items() if isinstance(v, property) and not k.startswith("_")]
+
+
+def _is_struct(value: Any) -> bool:
+    return type(value).__module__.startswith("flagsim") and bool(fields(value))
+
+
+def to_dict(obj: Any) -> dict[str, Any]:
+    """Nested plain-Python dict of a Scene or parameter struct (tuples become lists)."""
+    out: dict[str, Any] = {}
+    for k in fields(obj):
+        out[k] = _plain(getattr(obj, k))
+    return out
+
+
+def _plain(v: Any) -> Any:
+    if _is_struct(v):
+        return to_dict(v)
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    return v
+
+
+def _type_name(v: Any) -> str:
+    if isinstance(v, bool):
+        return "a boolean"
+    if isinstance(v, int):
+        return "an integer"
+    if isinstance(v, float):
+        return "a number"
+    if isinstance(v, str):
+        return "a string"
+    if isinstance(v, (list, tuple)):
+        return "a list"
+    return type(v).__name__
+
+
+def apply_dict(obj: Any, data: dict[str, Any], section: str) -> None:
+    """Set the fields of `obj` from `data`, recursing into sub-structs.
+
+    Unknown keys raise ValueError naming the key and its section; bad values raise the
+    ValueError of the field's own validation (which names section.key).
+    """
+    known = fields(obj)
+    where = f"section [{section}]" if section else "the top level"
+    for key, value in data.items():
+        name = f"{section}.{key}" if section else key
+        if key not in known:
+            raise ValueError(
+                f"unknown key '{key}' in {where}; known keys: {', '.join(known)}")
+        current = getattr(obj, key)
+        if _is_struct(current):
+            if not isinstance(value, dict):
+                raise ValueError(f"{name} should be a table, got {value!r}")
+            apply_dict(current, value, name)
+            continue
+        item_type = LIST_ITEM_TYPES.get((type(obj), key))
+        if item_type is not None:
+            if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+                raise ValueError(f"{name} should be an array of tables, got {value!r}")
+            items = []
+            for i, v in enumerate(value):
+                item = item_type()
+                apply_dict(item, v, f"{name}[{i}]")
+                items.append(item)
+            value = items
+        try:
+            setattr(obj, key, value)
+        except TypeError:
+            raise ValueError(f"{name} should be {_type_name(current)}, got {value!r}") from None
+
+
+def builtins() -> dict[str, str]:
+    """Built-in scenes: {name: one-line description}."""
+    return dict(_core.Scene._builtins())
+
+
+def named(name: str) -> Scene:
+    """The built-in scene `name` (ValueError listing the known names otherwise)."""
+    return _core.Scene._named(name)
+
+
+def from_dict(data: dict[str, Any], source: str = "scene") -> Scene:
+    """A Scene from a dict shaped like the TOML file (optional `base` names a built-in)."""
+    data = dict(data)
+    base = data.pop("base", None)
+    if base is not None and not isinstance(base, str):
+        raise ValueError(f"base should be a built-in scene name, got {base!r}")
+    scene = named(base) if base else Scene()
+    try:
+        apply_dict(scene, data, "")
+    except ValueError as e:
+        raise ValueError(f"{source}: {e}") from None
+    return scene
+
+
+def load(path: str | os.PathLike[str]) -> Scene:
+    """Read a TOML scene file. Unknown keys and bad values raise ValueError naming the key."""
+    path = os.fspath(path)
+    try:
+        with open(path, "rb") as f:
+            data = _toml.load(f)
+    except FileNotFoundError:
+        raise ValueError(f"scene file not found: {path}") from None
+    except _toml.TOMLDecodeError as e:
+        raise ValueError(f"{path}: not valid TOML: {e}") from None
+    scene = from_dict(data, source=path)
+    if "name" not in data:
+        scene.name = os.path.splitext(os.path.basename(path))[0]
+    return scene
+
+
+def resolve(spec: str | os.PathLike[str]) -> Scene:
+    """A built-in scene name or a path to a TOML file."""
+    s = os.fspath(spec)
+    if s in builtins():
+        return named(s)
+    if s.endswith(".toml") or os.path.sep in s or os.path.exists(s):
+        return load(s)
+    return named(s)  # raises, listing the built-in names
+
+
+def _repr(obj: Any) -> str:
+    inner = ", ".join(f"{k}={getattr(obj, k)!r}" for k in fields(obj))
+    return f"{type(obj).__name__}({inner})"
+
+
+def _install() -> None:
+    """Attach the Python-side helpers to the compiled classes."""
+    Scene.load = staticmethod(load)
+    Scene.builtins = staticmethod(builtins)
+    Scene.named = staticmethod(named)
+    Scene.from_dict = staticmethod(from_dict)
+    Scene.to_dict = to_dict
+    Scene.__reduce__ = lambda self: (from_dict, (to_dict(self),))
+    for cls in (Scene, _core.FlagParams, _core.AirParams, _core.DragParams, _core.IntegratorParams,
+                _core.FanParams):
+        cls.__repr__ = _repr
+
+
+_install()

@@ -1,0 +1,149 @@
+// Forces and their Jacobians against finite differences; topology invariants.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "cloth/forces.h"
+#include "cloth/topology.h"
+
+namespace flagsim {
+namespace {
+
+ClothTopology small_flag() {
+  FlagParams p;
+  p.rows = 4;
+  p.cols = 5;
+  p.stretch_stiffness = 120;
+  p.shear_stiffness = 30;
+  p.bend_stiffness = 7;
+  p.damping = 0.05;
+  return build_flag_topology(p);
+}
+
+MatX3 random_rows(Index n, double scale, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> d(-scale, scale);
+  MatX3 m(n, 3);
+  for (Index i = 0; i < n; ++i)
+    for (int k = 0; k < 3; ++k) m(i, k) = d(rng);
+  return m;
+}
+
+TEST(Topology, MassAndAreaAddUpAndPinsHaveZeroInverseMass) {
+  FlagParams p;
+  const ClothTopology t = build_flag_topology(p);
+  EXPECT_NEAR(t.area.sum(), p.width * p.height, 1e-12);
+  EXPECT_NEAR(t.mass.sum(), p.areal_density * p.width * p.height, 1e-12);
+  for (int r = 0; r < p.rows; ++r) EXPECT_TRUE(t.pinned(r * p.cols));
+  EXPECT_FALSE(t.pinned(1));
+  // structural + shear + bend counts of an R x C grid
+  const int R = p.rows, C = p.cols;
+  EXPECT_EQ(t.num_springs(), R * (C - 1) + (R - 1) * C + 2 * (R - 1) * (C - 1) + R * (C - 2) + (R - 2) * C);
+  // every rest triangle faces +z
+  MatX3 n;
+  compute_vertex_normals(t, t.rest_positions, n);
+  for (Index i = 0; i < n.rows(); ++i) EXPECT_NEAR(n(i, 2), 1.0, 1e-12);
+}
+
+TEST(Forces, SpringAndDampingForcesConserveMomentum) {
+  const ClothTopology t = small_flag();
+  const MatX3 x = t.rest_positions + random_rows(t.num_vertices(), 0.01, 1);
+  const MatX3 v = random_rows(t.num_vertices(), 0.3, 2);
+  MatX3 f = MatX3::Zero(t.num_vertices(), 3);
+  add_spring_forces(t, x, v, f);
+  // internal forces: no net force (momentum conservation)
+  EXPECT_LT(f.colwise().sum().norm(), 1e-12);
+}
+
+TEST(Forces, PositionJacobianMatchesCentralDifferences) {
+  const ClothTopology t = small_flag();
+  const Index n = t.num_vertices();
+  // A stretched and compressed state, so both signs of (1 - L/l) occur.
+  const MatX3 x = t.rest_positions * 1.05 + random_rows(n, 0.02, 3);
+  const MatX3 v = MatX3::Zero(n, 3);
+  const MatX3 p = random_rows(n, 1.0, 4);
+  std::vector<Mat3> K;
+  spring_position_jacobians(t, x, /*clamp_compression=*/false, K);
+  MatX3 jp;
+  apply_position_jacobian(t, K, p, jp);
+  const double eps = 1e-6;
+  MatX3 fp = MatX3::Zero(n, 3), fm = MatX3::Zero(n, 3);
+  MatX3 zero_damping_v = v;
+  add_spring_forces(t, x + eps * p, zero_damping_v, fp);
+  add_spring_forces(t, x - eps * p, zero_damping_v, fm);
+  const MatX3 fd = (fp - fm) / (2 * eps);
+  EXPECT_LT((fd - jp).norm() / fd.norm(), 1e-7);
+}
+
+class DragJacobian : public ::testing::TestWithParam<const char*> {};
+
+TEST_P(DragJacobian, VelocityJacobianMatchesCentralDifferences) {
+  const ClothTopology t = small_flag();
+  const Index n = t.num_vertices();
+  DragParams drag;
+  drag.model = GetParam();
+  drag.tangential_coefficient = 0.3;
+  const double rho = 1.2;
+  const MatX3 x = t.rest_positions + random_rows(n, 0.03, 5);
+  const MatX3 v = random_rows(n, 2.0, 6);
+  MatX3 u = random_rows(n, 1.0, 7);
+  u.col(0).array() += 5.0;
+  const MatX3 p = random_rows(n, 1.0, 8);
+  std::vector<Mat3> Dv, Jw;
+  drag_velocity_jacobians(t, drag, rho, x, v, u, Dv, Jw);
+  MatX3 jp;
+  apply_velocity_jacobian(t, Dv, Jw, p, jp);
+  auto forces = [&](const MatX3& vv) {
+    MatX3 f = MatX3::Zero(n, 3);
+    add_drag(t, drag, rho, x, vv, u, f);
+    add_spring_forces(t, x, vv, f);  // damping k_d (v2 - v1) is in here
+    return f;
+  };
+  const double eps = 1e-6;
+  const MatX3 fd = (forces(v + eps * p) - forces(v - eps * p)) / (2 * eps);
+  EXPECT_LT((fd - jp).norm() / fd.norm(), 1e-7) << drag.model;
+}
+
+INSTANTIATE_TEST_SUITE_P(Models, DragJacobian, ::testing::Values("paper", "relative", "triangle"));
+
+TEST(Forces, PaperDragIsEquation3) {
+  const ClothTopology t = small_flag();
+  const Index n = t.num_vertices();
+  DragParams drag;  // paper, C_D = 1
+  const MatX3 x = t.rest_positions;
+  MatX3 u(n, 3), v(n, 3);
+  u.rowwise() = Vec3(3, 0, 4).transpose();  // |u| = 5
+  v.rowwise() = Vec3(0, 1, 0).transpose();  // |v| = 1
+  MatX3 f = MatX3::Zero(n, 3);
+  add_drag(t, drag, 1.2, x, v, u, f);
+  for (Index i = 0; i < n; ++i) {
+    const Vec3 want = 0.5 * 1.0 * 1.2 * t.area[i] * (5.0 * Vec3(3, 0, 4) - 1.0 * Vec3(0, 1, 0));
+    EXPECT_LT((Vec3(f.row(i)) - want).norm(), 1e-15);
+  }
+}
+
+TEST(Forces, TriangleDragIsTwoSidedAndVanishesEdgeOn) {
+  const ClothTopology t = small_flag();
+  const Index n = t.num_vertices();
+  DragParams drag;
+  drag.model = "triangle";
+  drag.tangential_coefficient = 0.0;
+  const MatX3 v = MatX3::Zero(n, 3);
+  MatX3 u(n, 3);
+  MatX3 f = MatX3::Zero(n, 3);
+  u.rowwise() = Vec3(4, 0, 0).transpose();  // in the flag's plane: no normal pressure
+  add_drag(t, drag, 1.2, t.rest_positions, v, u, f);
+  EXPECT_LT(f.norm(), 1e-15);
+  u.rowwise() = Vec3(0, 0, 4).transpose();
+  add_drag(t, drag, 1.2, t.rest_positions, v, u, f);
+  const Vec3 total = f.colwise().sum();
+  // flat plate: 1/2 rho C_D A |u|^2 along the flow, A = flag area
+  EXPECT_NEAR(total.z(), 0.5 * 1.2 * t.area.sum() * 16.0, 1e-12);
+  MatX3 g = MatX3::Zero(n, 3);
+  u.rowwise() = Vec3(0, 0, -4).transpose();
+  add_drag(t, drag, 1.2, t.rest_positions, v, u, g);
+  EXPECT_NEAR(g.colwise().sum().z(), -total.z(), 1e-12);
+}
+
+}  // namespace
+}  // namespace flagsim

@@ -1,0 +1,151 @@
+// Integrators against analytic solutions: a spring-mass pair, energy, stiff springs.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "../test_util.h"
+#include "common/errors.h"
+#include "scene/simulation.h"
+
+namespace flagsim {
+namespace {
+
+using testing::observed_orders;
+using testing::spring_pair_scene;
+
+constexpr double kPi = 3.14159265358979323846;
+
+// Free-mass oscillation from an initial stretch delta: the largest deviation from the analytic
+// -delta cos(w t) over [0, T], relative to delta; optionally the measured period (between the
+// first two upward zero crossings, linearly interpolated).
+double pair_max_error(const std::string& method, double k, double dt, double delta, double T,
+                      double* period_out = nullptr) {
+  Simulation sim(spring_pair_scene(method, k, dt));
+  const double y0 = sim.positions()(3, 1);
+  const double w = std::sqrt(k / sim.topology().mass[3]);
+  sim.positions()(3, 1) -= delta;
+  const long n = std::lround(T / dt);
+  double prev = -delta, worst = 0, first = -1;
+  for (long i = 0; i < n; ++i) {
+    sim.step();
+    const double y = sim.positions()(3, 1) - y0;
+    worst = std::max(worst, std::abs(y + delta * std::cos(w * sim.time())) / delta);
+    if (period_out && prev < 0 && y >= 0) {
+      const double tc = (i + (-prev) / (y - prev)) * dt;
+      if (first < 0) first = tc;
+      else if (*period_out == 0) *period_out = tc - first;
+    }
+    prev = y;
+  }
+  return worst;
+}
+
+class SpringPair : public ::testing::TestWithParam<const char*> {};
+
+TEST_P(SpringPair, PeriodMatchesAnalyticAndErrorFallsAtFirstOrder) {
+  const std::string method = GetParam();
+  const double k = 100.0, delta = 1e-4;
+  Simulation probe(spring_pair_scene(method, k, 1e-3));
+  const double m = probe.topology().mass[3];
+  const double T = 2 * kPi * std::sqrt(m / k);
+  // Largest error over one period; dt = T/100, T/200, T/400, T/800: both methods first order.
+  std::vector<double> err;
+  for (double div : {100.0, 200.0, 400.0, 800.0}) err.push_back(pair_max_error(method, k, T / div, delta, T));
+  const auto p = observed_orders(err);
+  for (double q : p) {
+    EXPECT_GT(q, 0.85) << method;
+    EXPECT_LT(q, 1.2) << method;
+  }
+  EXPECT_LT(err.back(), 0.03);
+  // The measured period converges to the analytic one (its error is second order in dt).
+  double period = 0;
+  pair_max_error(method, k, T / 2000, delta, 2.5 * T, &period);
+  EXPECT_NEAR(period, T, 1e-4 * T) << method;
+}
+
+INSTANTIATE_TEST_SUITE_P(Integrators, SpringPair, ::testing::Values("explicit", "implicit"));
+
+TEST(Explicit, UndampedClothEnergyStaysBoundedOver1e4Steps) {
+  Scene s;
+  s.flag.rows = 6;
+  s.flag.cols = 6;
+  s.flag.damping = 0;
+  s.air.model = "none";
+  s.gravity = Vec3::Zero();
+  s.integrator.method = "explicit";
+  s.integrator.adaptive = false;
+  Simulation probe(s);
+  MatX3 zero = MatX3::Zero(probe.topology().num_vertices(), 3);
+  const double h_stable = stable_step_estimate(probe.topology(), s.drag, 1.2, false,
+                                               probe.positions(), zero, zero);
+  s.dt = 0.1 * h_stable;
+  Simulation sim(s);
+  std::mt19937 rng(42);
+  std::uniform_real_distribution<double> d(-0.01, 0.01);
+  for (Index i = 0; i < sim.positions().rows(); ++i)
+    if (!sim.topology().pinned(i))
+      for (int c = 0; c < 3; ++c) sim.positions()(i, c) += d(rng);
+  const ClothEnergy e0 = sim.energy();
+  const double E0 = e0.kinetic + e0.spring;
+  ASSERT_GT(E0, 0);
+  // Symplectic Euler conserves a modified energy: the true one oscillates within O(h), no drift.
+  double early = 0, late = 0;
+  for (int i = 0; i < 10000; ++i) {
+    sim.step();
+    const ClothEnergy e = sim.energy();
+    const double dev = std::abs(e.kinetic + e.spring - E0) / E0;
+    (i < 1000 ? early : late) = std::max(i < 1000 ? early : late, dev);
+  }
+  EXPECT_LT(std::max(early, late), 0.05);
+  EXPECT_LT(late, 1.5 * early + 1e-3);
+}
+
+Scene stiff_paper(const std::string& method, bool adaptive) {
+  Scene s = Scene::paper();
+  s.flag.stretch_stiffness = 1e6;  // k_s for every spring: strain is then bounded everywhere
+  s.flag.shear_stiffness = 1e6;
+  s.flag.bend_stiffness = 1e6;
+  s.integrator.method = method;
+  s.integrator.adaptive = adaptive;
+  s.dt = 0.01;
+  return s;
+}
+
+TEST(Stiff, ImplicitIsStableWithKs1e6AtDt001) {
+  Simulation sim(stiff_paper("implicit", false));
+  sim.step(200);
+  EXPECT_TRUE(sim.positions().allFinite());
+  EXPECT_LT(sim.max_strain(), 0.01);
+}
+
+TEST(Stiff, ExplicitAdaptiveSubstepsAndStaysStable) {
+  Simulation sim(stiff_paper("explicit", true));
+  sim.step(10);
+  EXPECT_GT(sim.last_step_stats().substeps, 10);
+  EXPECT_TRUE(sim.positions().allFinite());
+  EXPECT_LT(sim.max_strain(), 0.01);
+}
+
+TEST(Stiff, ExplicitWithoutSubstepsRaisesDivergenceAndRestoresTheState) {
+  Simulation sim(stiff_paper("explicit", false));
+  bool thrown = false;
+  for (int i = 0; i < 100 && !thrown; ++i) {
+    const MatX3 x = sim.positions(), v = sim.velocities();
+    const long count = sim.step_count();
+    try {
+      sim.step();
+    } catch (const DivergenceError& e) {
+      thrown = true;
+      EXPECT_EQ(sim.positions(), x);
+      EXPECT_EQ(sim.velocities(), v);
+      EXPECT_EQ(sim.step_count(), count);
+      EXPECT_EQ(e.step, count);
+      EXPECT_TRUE(e.cause == "strain" || e.cause == "non-finite") << e.cause;
+    }
+  }
+  EXPECT_TRUE(thrown);
+}
+
+}  // namespace
+}  // namespace flagsim
