@@ -268,13 +268,215 @@ void advect_maccormack(const MacGrid<T>& u, double dt, const SampleBoundary& bc,
   });
 }
 
+
+// ---- periodic fast path on ghost-padded copies -------------------------------------------------
+
+template <class T>
+void PaddedComponent<T>::resize(const Shape3& s) {
+  for (int d = 0; d < 3; ++d) n[d] = s.n[d];
+  p1 = n[1] + 2 * kGhost;
+  p2 = n[2] + 2 * kGhost;
+  data.assign(std::size_t(n[0] + 2 * kGhost) * p1 * p2, T(0));
+}
+
+template <class T>
+void PaddedComponent<T>::fill(const T* src) {
+  auto wrap = [](int i, int n) { return ((i % n) + n) % n; };
+  const int n0 = n[0], n1 = n[1], n2 = n[2];
+  const long rows = long(n0 + 2 * kGhost) * (n1 + 2 * kGhost);
+#pragma omp parallel for schedule(static) if (data.size() > 32768)
+  for (long r = 0; r < rows; ++r) {
+    const int a = int(r / (n1 + 2 * kGhost)) - kGhost, b = int(r % (n1 + 2 * kGhost)) - kGhost;
+    const T* s = src + (std::size_t(wrap(a, n0)) * n1 + std::size_t(wrap(b, n1))) * n2;
+    T* d = data.data() + index(a, b, -kGhost);
+    for (int k = -kGhost; k < 0; ++k) d[k + kGhost] = s[wrap(k, n2)];
+    std::copy(s, s + n2, d + kGhost);
+    for (int k = n2; k < n2 + kGhost; ++k) d[k + kGhost] = s[wrap(k, n2)];
+  }
+}
+
+template <class T>
+void PeriodicAdvectScratch<T>::resize(const GridGeometry& g) {
+  for (int c = 0; c < 3; ++c) {
+    u[c].resize(g.face_shape(c));
+    hat[c].resize(g.face_shape(c));
+  }
+}
+
+namespace {
+
+/// Node pair of coordinate q along a padded periodic axis of n nodes: the lower node index in
+/// [-G, n + G - 2] (wrapped into [0, n) when the departure is further than the ghosts reach).
+struct PaddedAxis {
+  int i0;
+  double f;
+};
+template <int G>
+inline PaddedAxis locate_padded(double q, int n) {
+  q = q > -1e9 ? (q < 1e9 ? q : 1e9) : -1e9;  // NaN or absurd departure: stay in range
+  int i = ifloor(q);
+  const double f = q - i;
+  if (i < -G || i > n + G - 2) {
+    i %= n;
+    if (i < 0) i += n;
+  }
+  return {i, f};
+}
+
+/// Trilinear sampling of a padded component at g (node units); the same arithmetic (and so the
+/// same bits) as Interpolator on the unpadded array.
+template <class T>
+struct PaddedSampler {
+  const T* q;
+  int n0, n1, n2;
+  std::size_t sx, sy;
+  explicit PaddedSampler(const PaddedComponent<T>& p)
+      : q(p.data.data()), n0(p.n[0]), n1(p.n[1]), n2(p.n[2]), sx(std::size_t(p.p1) * p.p2), sy(std::size_t(p.p2)) {}
+
+  struct Corner {
+    std::size_t base;
+    double fx, fy, fz;
+  };
+  inline Corner corner(const PaddedComponent<T>& p, double g0, double g1, double g2) const {
+    constexpr int G = PaddedComponent<T>::kGhost;
+    const PaddedAxis x = locate_padded<G>(g0, n0), y = locate_padded<G>(g1, n1), z = locate_padded<G>(g2, n2);
+    return {p.index(x.i0, y.i0, z.i0), x.f, y.f, z.f};
+  }
+  /// corner() for a departure within one cell of node (i, j, k) on every axis (|d| <= 1, so the
+  /// lower node is in [i - 2, i + 1], inside the ghosts): no clamping, no range checks.
+  inline Corner near_corner(std::size_t node, int i, int j, int k, double g0, double g1, double g2) const {
+    const int x = ifloor(g0), y = ifloor(g1), z = ifloor(g2);
+    return {node + std::ptrdiff_t(x - i) * std::ptrdiff_t(sx) + std::ptrdiff_t(y - j) * std::ptrdiff_t(sy) + (z - k),
+            g0 - x, g1 - y, g2 - z};
+  }
+  inline Corner any_corner(const PaddedComponent<T>& p, std::size_t node, int i, int j, int k, double d0,
+                           double d1, double d2, double g0, double g1, double g2) const {
+    if (std::fabs(d0) <= 1 && std::fabs(d1) <= 1 && std::fabs(d2) <= 1)  // false for NaN
+      return near_corner(node, i, j, k, g0, g1, g2);
+    return corner(p, g0, g1, g2);
+  }
+  inline T value(const Corner& c) const {
+    const T* b = q + c.base;
+    const T c00 = lerp(b[0], b[1], c.fz);
+    const T c01 = lerp(b[sy], b[sy + 1], c.fz);
+    const T c10 = lerp(b[sx], b[sx + 1], c.fz);
+    const T c11 = lerp(b[sx + sy], b[sx + sy + 1], c.fz);
+    return lerp(lerp(c00, c01, c.fy), lerp(c10, c11, c.fy), c.fx);
+  }
+  inline void extrema(const Corner& c, T& lo, T& hi) const {
+    const T* b = q + c.base;
+    const T v[8] = {b[0], b[1], b[sy], b[sy + 1], b[sx], b[sx + 1], b[sx + sy], b[sx + sy + 1]};
+    lo = hi = v[0];
+    for (int a = 1; a < 8; ++a) {
+      lo = std::min(lo, v[a]);
+      hi = std::max(hi, v[a]);
+    }
+  }
+};
+
+/// Velocity at node (i, j, k) of component C from padded u^n (see RowVelocity: same sums, same
+/// order). idx: the node's padded index (identical for all components of a periodic grid).
+template <int C, class T>
+inline void padded_velocity(const std::array<PaddedComponent<T>, 3>& u, std::size_t idx,
+                            const std::ptrdiff_t stride[3], double vel[3]) {
+  vel[C] = u[C].data[idx];
+  for (int e = 0; e < 3; ++e) {
+    if (e == C) continue;
+    const T* q = u[e].data.data() + idx;
+    const std::ptrdiff_t dc = stride[C], de = stride[e];
+    double sum = 0;
+    sum += q[-dc];
+    sum += q[de - dc];
+    sum += q[0];
+    sum += q[de];
+    vel[e] = 0.25 * sum;
+  }
+}
+
+/// Semi-Lagrangian pass of component C: out (unpadded) from padded u^n.
+template <int C, class T>
+void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, double s, T* out) {
+  const PaddedSampler<T> q(sc.u[C]);
+  const PaddedComponent<T>& p = sc.u[C];
+  const std::ptrdiff_t stride[3] = {std::ptrdiff_t(p.p1) * p.p2, std::ptrdiff_t(p.p2), 1};
+  constexpr double o0 = C == 0 ? 0.0 : 0.5, o1 = C == 1 ? 0.0 : 0.5, o2 = C == 2 ? 0.0 : 0.5;
+  const int n1 = geo.ny, n2 = geo.nz;
+  const long rows = long(geo.nx) * n1;
+#pragma omp parallel for schedule(static) if (rows * n2 > 16384)
+  for (long r = 0; r < rows; ++r) {
+    const int i = int(r / n1), j = int(r % n1);
+    std::size_t idx = p.index(i, j, 0);
+    T* dst = out + std::size_t(r) * n2;
+    for (int k = 0; k < n2; ++k, ++idx) {
+      double vel[3];
+      padded_velocity<C>(sc.u, idx, stride, vel);
+      const double d0 = s * vel[0], d1 = s * vel[1], d2 = s * vel[2];
+      const double px = i + o0 - d0, py = j + o1 - d1, pz = k + o2 - d2;
+      dst[k] = q.value(q.any_corner(p, idx, i, j, k, d0, d1, d2, px - o0, py - o1, pz - o2));
+    }
+  }
+}
+
+/// MacCormack correction and limiter of component C (Selle et al. 2008 eq. 9, §4) into out.
+template <int C, class T>
+void padded_mc(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, double s, const T* h, T* out) {
+  const PaddedComponent<T>& p = sc.u[C];
+  const PaddedSampler<T> q(p), qhat(sc.hat[C]);
+  const std::ptrdiff_t stride[3] = {std::ptrdiff_t(p.p1) * p.p2, std::ptrdiff_t(p.p2), 1};
+  constexpr double o0 = C == 0 ? 0.0 : 0.5, o1 = C == 1 ? 0.0 : 0.5, o2 = C == 2 ? 0.0 : 0.5;
+  const int n1 = geo.ny, n2 = geo.nz;
+  const long rows = long(geo.nx) * n1;
+#pragma omp parallel for schedule(static) if (rows * n2 > 16384)
+  for (long r = 0; r < rows; ++r) {
+    const int i = int(r / n1), j = int(r % n1);
+    std::size_t idx = p.index(i, j, 0);
+    const std::size_t row = std::size_t(r) * n2;
+    for (int k = 0; k < n2; ++k, ++idx) {
+      double vel[3];
+      padded_velocity<C>(sc.u, idx, stride, vel);
+      const double x0 = i + o0, y0 = j + o1, z0 = k + o2;
+      const double d0 = s * vel[0], d1 = s * vel[1], d2 = s * vel[2];
+      const double bx = x0 - d0, by = y0 - d1, bz = z0 - d2;
+      const double fx = x0 + d0, fy = y0 + d1, fz = z0 + d2;
+      const T bar = qhat.value(qhat.any_corner(sc.hat[C], idx, i, j, k, d0, d1, d2, fx - o0, fy - o1, fz - o2));
+      const T own = p.data[idx];
+      const T corrected = T(h[row + k] + 0.5 * (own - bar));
+      T lo, hi;
+      q.extrema(q.any_corner(p, idx, i, j, k, d0, d1, d2, bx - o0, by - o1, bz - o2), lo, hi);
+      out[row + k] = std::min(hi, std::max(lo, corrected));
+    }
+  }
+}
+
+}  // namespace
+
+template <class T>
+void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, PeriodicAdvectScratch<T>& scratch,
+                     MacGrid<T>& hat) {
+  const double s = dt / u.geo.h;
+  for (int c = 0; c < 3; ++c) scratch.u[c].fill(u.comp[c].data());
+  // Semi-Lagrangian (into hat for MacCormack, else straight into u: only padded copies are read).
+  MacGrid<T>& sl = maccormack ? hat : u;
+  padded_sl<0>(scratch, u.geo, s, sl.comp[0].data());
+  padded_sl<1>(scratch, u.geo, s, sl.comp[1].data());
+  padded_sl<2>(scratch, u.geo, s, sl.comp[2].data());
+  if (!maccormack) return;
+  for (int c = 0; c < 3; ++c) scratch.hat[c].fill(hat.comp[c].data());
+  padded_mc<0>(scratch, u.geo, s, hat.comp[0].data(), u.comp[0].data());
+  padded_mc<1>(scratch, u.geo, s, hat.comp[1].data(), u.comp[1].data());
+  padded_mc<2>(scratch, u.geo, s, hat.comp[2].data(), u.comp[2].data());
+}
+
 #define FLAGSIM_INSTANTIATE_ADVECT(T)                                                             \
   template T sample_component<T>(const MacGrid<T>&, int, const double[3]);                       \
   template long sample_velocity<T>(const MacGrid<T>&, const double*, long, double*);             \
   template void advect_semi_lagrangian<T>(const MacGrid<T>&, double, const SampleBoundary&,      \
                                           MacGrid<T>&);                                          \
   template void advect_maccormack<T>(const MacGrid<T>&, double, const SampleBoundary&,           \
-                                     MacGrid<T>&, MacGrid<T>&);
+                                     MacGrid<T>&, MacGrid<T>&);                                \
+  template struct PaddedComponent<T>;                                                            \
+  template struct PeriodicAdvectScratch<T>;                                                      \
+  template void advect_periodic<T>(MacGrid<T>&, double, bool, PeriodicAdvectScratch<T>&, MacGrid<T>&);
 FLAGSIM_INSTANTIATE_ADVECT(float)
 FLAGSIM_INSTANTIATE_ADVECT(double)
 

@@ -36,4 +36,36 @@ template <class T>
 void advect_maccormack(const MacGrid<T>& u, double dt, const SampleBoundary& bc, MacGrid<T>& hat,
                        MacGrid<T>& out);
 
+/// Copy of one periodic component with G ghost layers on every side filled by wrapping, so a
+/// stencil within G nodes of any node needs no index arithmetic modulo n. Allocated once.
+template <class T>
+struct PaddedComponent {
+  static constexpr int kGhost = 2;
+  int n[3] = {0, 0, 0};   ///< unpadded node counts
+  int p1 = 0, p2 = 0;     ///< padded sizes of axes 1 and 2
+  AlignedVector<T> data;  ///< (n0 + 2G) x (n1 + 2G) x (n2 + 2G)
+  void resize(const Shape3& s);
+  /// data <- src (n0 x n1 x n2, C order) with wrapped ghosts.
+  void fill(const T* src);
+  /// Index of node (i, j, k), each in [-G, n + G).
+  std::size_t index(int i, int j, int k) const {
+    return (std::size_t(i + kGhost) * p1 + std::size_t(j + kGhost)) * p2 + std::size_t(k + kGhost);
+  }
+};
+
+/// Scratch of advect_periodic: padded copies of u^n and of the MacCormack predictor.
+template <class T>
+struct PeriodicAdvectScratch {
+  std::array<PaddedComponent<T>, 3> u, hat;
+  void resize(const GridGeometry& g);
+};
+
+/// Self-advection of a periodic grid in place (u <- A(u)), semi-Lagrangian or MacCormack, the
+/// same arithmetic as advect_semi_lagrangian / advect_maccormack (identical results) but reading
+/// ghost-padded copies: departure points within a cell of their node take a wrap-free path.
+/// hat: scratch of u's geometry (MacCormack). No allocation.
+template <class T>
+void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, PeriodicAdvectScratch<T>& scratch,
+                     MacGrid<T>& hat);
+
 }  // namespace flagsim

@@ -38,6 +38,7 @@ struct TypedSolver final : Fluid::Solver {
   MicPreconditioner<T> mic;
   CgScratch<T> cg;
   std::vector<FanStencil<T>> fans;
+  PeriodicAdvectScratch<T> padded;  // periodic grids: ghost-padded u^n and MacCormack predictor
   double tol = 0;
   bool maccormack = false, use_fft = false;
 
@@ -50,8 +51,11 @@ struct TypedSolver final : Fluid::Solver {
     geo.origin = p.origin;
     geo.periodic = p.boundary == "periodic";
     u = MacGrid<T>(geo);
-    prev = MacGrid<T>(geo);
     hat = MacGrid<T>(geo);
+    if (geo.periodic)
+      padded.resize(geo);
+    else
+      prev = MacGrid<T>(geo);
     const std::size_t cells = geo.cells().size();
     phi.assign(cells, T(0));
     div.assign(cells, T(0));
@@ -88,11 +92,15 @@ struct TypedSolver final : Fluid::Solver {
     // 1. self-advection of u^n (reads prev, writes u)
     {
       ScopedTimer timer(stats.seconds_advect);
-      copy_grid(u, prev);
-      if (maccormack)
-        advect_maccormack(prev, dt, bc, hat, u);
-      else
-        advect_semi_lagrangian(prev, dt, bc, u);
+      if (geo.periodic) {
+        advect_periodic(u, dt, maccormack, padded, hat);
+      } else {
+        copy_grid(u, prev);
+        if (maccormack)
+          advect_maccormack(prev, dt, bc, hat, u);
+        else
+          advect_semi_lagrangian(prev, dt, bc, u);
+      }
     }
     // 2. external force
     {
