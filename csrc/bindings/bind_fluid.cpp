@@ -204,7 +204,7 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
            py::kw_only(), py::arg("resolution") = py::make_tuple(16, 16, 16), py::arg("cell_size") = 0.125,
            py::arg("origin") = py::make_tuple(-0.5, -1.0, -1.0), py::arg("boundary") = "periodic",
            py::arg("viscosity") = 1.5e-5, py::arg("density") = 1.2, py::arg("advection") = "semi_lagrangian",
-           py::arg("pressure") = "fft", py::arg("precision") = "double", py::arg("pcg_tolerance") = 1e-8,
+           py::arg("pressure") = FluidParams().pressure, py::arg("precision") = "double", py::arg("pcg_tolerance") = 1e-8,
            py::arg("pcg_max_iterations") = 500, py::arg("wind") = py::none(),
            py::arg("fans") = std::vector<FanParams>{},
            "resolution (nx, ny, nz) cells; cell_size m; origin m (min corner); viscosity m^2/s; "

@@ -35,7 +35,11 @@ struct FluidParams {
   Vec3 origin{-0.5, -1.0, -1.0};              ///< m, min corner of the domain
   std::string boundary = "periodic";          ///< "periodic" | "tunnel"
   std::string advection = "semi_lagrangian";  ///< "semi_lagrangian" | "maccormack"
-  std::string pressure = "fft";               ///< "fft" (periodic only) | "pcg"
+#ifdef FLAGSIM_HAVE_FFTW
+  std::string pressure = "fft";               ///< "fft" (periodic only, FFTW) | "pcg"
+#else
+  std::string pressure = "pcg";               ///< "fft" (periodic only, FFTW: not in this build) | "pcg"
+#endif
   std::string precision = "double";           ///< "double" | "float"
   double viscosity = 1.5e-5;                  ///< m^2/s, kinematic; 0 = no diffusion stage
   double density = 1.2;                       ///< kg/m^3

@@ -33,7 +33,8 @@ TEST(FluidParams, ErrorsNameTheParameter) {
             std::string::npos)
       << error_of(p);
   p = FluidParams();
-  p.boundary = "tunnel";  // with the default pressure "fft"
+  p.pressure = "fft";
+  p.boundary = "tunnel";
   EXPECT_NE(error_of(p).find("air.pressure should be \"pcg\" with boundary \"tunnel\""), std::string::npos)
       << error_of(p);
   p = FluidParams();
