@@ -94,12 +94,7 @@ void Simulation::step_once() {
   x_start_ = x_;
   v_start_ = v_;
   stage_air();
-  stage_integrate();
-  if (built_[kStrainLimit]) {
-    ScopedTimer t(seconds_[kStrainLimit]);
-    limit_strain(topo_, scene_.integrator.strain_limit, scene_.integrator.strain_limit_iterations,
-                 scene_.dt, x_, v_);
-  }
+  stage_integrate();  // includes strain limiting after every substep, timed as its own stage
   stage_check();
   advance_fluid();  // after the check: a rolled-back step leaves the air as it was
   ++step_count_;
@@ -141,14 +136,23 @@ void Simulation::stage_integrate() {
   seconds_[kGravity] += force_seconds_.gravity - before.gravity;
   seconds_[kDrag] += force_seconds_.drag - before.drag;
   seconds_[kSprings] += force_seconds_.springs - before.springs;
+  seconds_[kStrainLimit] += force_seconds_.strain_limit - before.strain_limit;
   seconds_[kIntegrate] += total - (force_seconds_.gravity - before.gravity) -
                           (force_seconds_.drag - before.drag) -
-                          (force_seconds_.springs - before.springs);
+                          (force_seconds_.springs - before.springs) -
+                          (force_seconds_.strain_limit - before.strain_limit);
   if (status == IntegrateStatus::kTooManySubsteps) {
     std::ostringstream s;
     s << "the stable step estimate " << stats_.stable_step << " s needs more than "
       << scene_.integrator.max_substeps << " substeps (integrator.max_substeps)";
     diverge("substeps", -1, s.str());
+  }
+  if (status == IntegrateStatus::kUnstableStep) {
+    std::ostringstream s;
+    s << "explicit step dt / substeps = " << scene_.dt / scene_.integrator.substeps
+      << " s exceeds the stable step estimate " << stats_.stable_step
+      << " s (integrator.adaptive = false)";
+    diverge("unstable_step", -1, s.str());
   }
   if (status == IntegrateStatus::kCgFailed) {
     std::ostringstream s;
@@ -170,7 +174,13 @@ void Simulation::stage_check() {
   if (e > scene_.integrator.max_strain) {
     std::ostringstream s;
     s << "spring strain " << e << " exceeds integrator.max_strain = " << scene_.integrator.max_strain;
-    diverge("strain", worst >= 0 ? long(topo_.springs(worst, 0)) : -1L, s.str());
+    // the worst vertex: whichever end of the worst spring moved more in this step
+    long vertex = -1;
+    if (worst >= 0) {
+      const int a = topo_.springs(worst, 0), b = topo_.springs(worst, 1);
+      vertex = (x_.row(a) - x_start_.row(a)).norm() >= (x_.row(b) - x_start_.row(b)).norm() ? a : b;
+    }
+    diverge("strain", vertex, s.str());
   }
 }
 
