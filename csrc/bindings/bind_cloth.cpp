@@ -38,6 +38,8 @@ void bind_cloth(py::module_& m) {
   py::class_<IntegratorParams> in(m, "IntegratorParams", "Time integration of the cloth.");
   in.def(py::init<>());
   def_field(in, "method", &IntegratorParams::method, "integrator", "'explicit' | 'implicit'");
+  def_field(in, "substeps", &IntegratorParams::substeps, "integrator",
+            "fixed substeps per step, each of dt / substeps (explicit adaptive may add more)");
   def_field(in, "adaptive", &IntegratorParams::adaptive, "integrator",
             "explicit: substep below the stable step estimate");
   def_field(in, "safety", &IntegratorParams::safety, "integrator",

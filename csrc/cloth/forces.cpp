@@ -118,7 +118,11 @@ void drag_velocity_jacobians(const ClothTopology& topo, const DragParams& drag, 
     return l * Mat3::Identity() + a * a.transpose() / l;
   };
   if (drag.model == "paper") {
-    for (Index i = 0; i < n; ++i) Dv[i] = c * topo.area[i] * dnorm(v.row(i));
+    // Exact: c S (|v| I + v v^T / |v|), which vanishes at rest, so a gust on a resting light flag
+    // would get dv = h F / m. Adding c S |u| I changes the step by O(h^2) (first-order
+    // consistency is kept) and bounds it: a free mass from rest gets dv -> u as h grows.
+    for (Index i = 0; i < n; ++i)
+      Dv[i] = c * topo.area[i] * (dnorm(v.row(i)) + Vec3(u.row(i)).norm() * Mat3::Identity());
   } else if (drag.model == "relative") {
     for (Index i = 0; i < n; ++i) Dv[i] = c * topo.area[i] * dnorm(Vec3(u.row(i)) - Vec3(v.row(i)));
   } else {
@@ -194,13 +198,14 @@ double stable_step_estimate(const ClothTopology& topo, const DragParams& drag, d
       ci += topo.damping[s] * w;
     }
     if (has_drag) {
-      // |d drag / d v| <= 2 x 1/2 C rho S |a|, a = v ("paper") or u - v; "triangle" takes a
-      // factor 2 of margin for the coupling of a vertex to its neighbours through triangles.
-      const Vec3 a = drag.model == "paper" ? Vec3(v.row(i)) : Vec3(u.row(i) - v.row(i));
+      // |d drag / d v| <= 2 x 1/2 C rho S |a| with a = v ("paper") or u - v; both are bounded by
+      // |u| + |v|, which also covers a mass about to be accelerated towards the air speed.
+      // "triangle" takes a factor 2 for a vertex's coupling to neighbours through triangles.
+      const double a = Vec3(u.row(i)).norm() + Vec3(v.row(i)).norm();
       const double cd = drag.model == "triangle"
                             ? 2.0 * std::max(drag.coefficient, drag.tangential_coefficient)
                             : drag.coefficient;
-      ci += cd * rho * topo.area[i] * a.norm() / mi;
+      ci += cd * rho * topo.area[i] * a / mi;
     }
     lam = std::max(lam, ki);
     gam = std::max(gam, 0.5 * ci);

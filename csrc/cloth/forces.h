@@ -30,7 +30,8 @@ void spring_position_jacobians(const ClothTopology& topo, const MatX3& x, bool c
                                std::vector<Mat3>& K);
 
 /// Velocity Jacobians of drag. Per-vertex models ("paper", "relative"): Dv[i] = -d f_i / d v_i
-/// (positive semi-definite). "triangle": Jw[t] = d F_t / d w (w = mean air - mean vertex velocity
+/// (positive semi-definite). For "paper" the stabilised form c S ((|v| + |u|) I + v v^T/|v|) is
+/// used (see forces.cpp); pass u = 0 to get the exact Jacobian. "triangle": Jw[t] = d F_t / d w (w = mean air - mean vertex velocity
 /// of triangle t), and d f_i / d v_m = -Jw[t] / 9 for i, m in t. Resizes Dv (N) and Jw (T or 0).
 void drag_velocity_jacobians(const ClothTopology& topo, const DragParams& drag, double rho,
                              const MatX3& x, const MatX3& v, const MatX3& u_air,

@@ -44,27 +44,37 @@ inline void filter_pinned(const ClothTopology& topo, MatX3& a) {
     if (topo.inv_mass[i] == 0.0) a.row(i).setZero();
 }
 
+// Symplectic Euler over h. With ip.adaptive, every substep is at most safety x the stable step
+// estimated from the state at its start (the state can stiffen within a step: a gust accelerates
+// the masses, a stretched spring stiffens), and the substep count is bounded by max_substeps.
 IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
                               const IntegratorParams& ip, double h, const MatX3& u, MatX3& x,
                               MatX3& v, IntegratorScratch& s, IntegratorStats& stats,
                               ForceTimings* t) {
-  long n = 1;
-  if (ip.adaptive) {
-    const double hs = stable_step_estimate(topo, fs.drag_params, fs.rho, fs.drag, x, v, u);
-    stats.stable_step = hs;
-    const double need = std::ceil(h / (ip.safety * hs));
-    if (need > ip.max_substeps) return IntegrateStatus::kTooManySubsteps;
-    n = std::max(1L, static_cast<long>(need));
-  }
-  const double hs = h / double(n);
-  for (long k = 0; k < n; ++k) {
+  const Index N = topo.num_vertices();
+  double done = 0;
+  long n = 0;
+  while (done < h) {
+    double hs = h - done;
+    if (ip.adaptive) {
+      const double stable = stable_step_estimate(topo, fs.drag_params, fs.rho, fs.drag, x, v, u);
+      if (n == 0) stats.stable_step = stable;
+      const double remaining_pieces = std::ceil(hs / (ip.safety * stable));
+      if (remaining_pieces + n > ip.max_substeps) return IntegrateStatus::kTooManySubsteps;
+      hs = hs / remaining_pieces;  // even pieces of what is left, each below the stable step
+    }
     compute_forces(topo, fs, x, v, u, s.f, t);
     // symplectic Euler: v <- v + h M^-1 f(x, v); x <- x + h v
-    const Index N = topo.num_vertices();
     parallel_for(N, [&](Index i) {
       v.row(i) += (hs * topo.inv_mass[i]) * s.f.row(i);
       x.row(i) += hs * v.row(i);
     });
+    if (ip.strain_limit > 0) {
+      ScopedTimer timer(t ? t->strain_limit : s.unused_timer);
+      limit_strain(topo, ip.strain_limit, ip.strain_limit_iterations, hs, x, v);
+    }
+    ++n;
+    done = (h - done <= hs) ? h : done + hs;
   }
   stats.substeps = n;
   return IntegrateStatus::kOk;
@@ -167,6 +177,10 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     v.row(i) += s.dv.row(i);
     x.row(i) += h * v.row(i);
   });
+  if (ip.strain_limit > 0) {
+    ScopedTimer timer(t ? t->strain_limit : s.unused_timer);
+    limit_strain(topo, ip.strain_limit, ip.strain_limit_iterations, h, x, v);
+  }
   return IntegrateStatus::kOk;
 }
 
@@ -199,28 +213,46 @@ IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const I
                           double h, const MatX3& u, MatX3& x, MatX3& v, IntegratorScratch& s,
                           IntegratorStats& stats, ForceTimings* t) {
   stats = IntegratorStats{};
-  if (ip.method == "explicit") return explicit_step(topo, fs, ip, h, u, x, v, s, stats, t);
-  if (ip.method == "implicit") return implicit_step(topo, fs, ip, h, u, x, v, s, stats, t);
-  throw std::logic_error("integrate: unknown method '" + ip.method + "' (validate() lets none through)");
+  const double hs = h / double(ip.substeps);
+  long explicit_substeps = 0;
+  for (int k = 0; k < ip.substeps; ++k) {
+    IntegrateStatus st;
+    if (ip.method == "explicit") {
+      st = explicit_step(topo, fs, ip, hs, u, x, v, s, stats, t);
+      explicit_substeps += stats.substeps;
+    } else if (ip.method == "implicit") {
+      st = implicit_step(topo, fs, ip, hs, u, x, v, s, stats, t);
+    } else {
+      throw std::logic_error("integrate: unknown method '" + ip.method + "' (validate() lets none through)");
+    }
+    if (st != IntegrateStatus::kOk) return st;
+  }
+  if (ip.method == "explicit") stats.substeps = explicit_substeps;
+  return IntegrateStatus::kOk;
 }
 
 void limit_strain(const ClothTopology& topo, double limit, int iterations, double h, MatX3& x,
                   MatX3& v) {
   // Gauss-Seidel over springs in index order: deterministic.
-  for (int it = 0; it < iterations; ++it)
+  for (int it = 0; it < iterations; ++it) {
+    bool violated = false;
     for (Index s = 0; s < topo.num_springs(); ++s) {
+      if (topo.spring_kind[s] == SpringKind::kBend) continue;  // bending is not stretching
       const int a = topo.springs(s, 0), b = topo.springs(s, 1);
       const double wa = topo.inv_mass[a], wb = topo.inv_mass[b];
       if (wa + wb == 0) continue;
       const Vec3 d = x.row(b) - x.row(a);
       const double l = d.norm(), lmax = (1.0 + limit) * topo.rest_length[s];
       if (l <= lmax || l == 0) continue;
+      violated = violated || l > lmax * 1.001;
       const Vec3 corr = (l - lmax) / l * d / (wa + wb);
       x.row(a) += wa * corr.transpose();
       x.row(b) -= wb * corr.transpose();
       v.row(a) += (wa / h) * corr.transpose();
       v.row(b) -= (wb / h) * corr.transpose();
     }
+    if (!violated) break;
+  }
 }
 
 }  // namespace flagsim

@@ -22,6 +22,7 @@ struct ForceSet {
 /// Seconds spent per force stage (accumulated).
 struct ForceTimings {
   double gravity = 0, drag = 0, springs = 0;
+  double strain_limit = 0;  ///< Provot projection after every substep / implicit piece
 };
 
 /// f = sum of the built forces at (x, v) with air velocity u (all N x 3).
@@ -41,6 +42,7 @@ struct IntegratorStats {
 struct IntegratorScratch {
   MatX3 f, x0, v0, dv, r, z, p, q, b, tmp;
   std::vector<Mat3> K, Dv, Jw, Pinv;
+  double unused_timer = 0;
   explicit IntegratorScratch(const ClothTopology& topo);
 };
 
@@ -49,7 +51,8 @@ IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const I
                           double h, const MatX3& u, MatX3& x, MatX3& v, IntegratorScratch& s,
                           IntegratorStats& stats, ForceTimings* timings = nullptr);
 
-/// Provot (1995) strain limiting: springs longer than (1 + limit) x rest length are shortened
+/// Provot (1995) strain limiting: structural and shear springs longer than (1 + limit) x rest
+/// length are shortened
 /// by moving their ends (mass-weighted, pinned ends fixed); velocities take the correction / h.
 void limit_strain(const ClothTopology& topo, double limit, int iterations, double h, MatX3& x,
                   MatX3& v);

@@ -36,6 +36,7 @@ void DragParams::validate(const std::string& p) const {
 void IntegratorParams::validate(const std::string& p) const {
   if (method != "explicit" && method != "implicit")
     fail_param(p + ".method", "one of 'explicit', 'implicit'", "'" + method + "'");
+  if (substeps < 1 || substeps > 1000000) fail_param(p + ".substeps", "in [1, 1000000]", substeps);
   if (!(safety > 0 && safety <= 1)) fail_param(p + ".safety", "in (0, 1]", safety);
   if (max_substeps < 1) fail_param(p + ".max_substeps", ">= 1", max_substeps);
   if (!(cg_tolerance > 0 && cg_tolerance < 1)) fail_param(p + ".cg_tolerance", "in (0, 1)", cg_tolerance);

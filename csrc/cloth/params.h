@@ -39,16 +39,18 @@ struct DragParams {
 
 struct IntegratorParams {
   std::string method = "implicit";   ///< "explicit" (symplectic Euler) | "implicit" (Baraff-Witkin)
+  int substeps = 1;                   ///< fixed substeps per step (each of dt / substeps)
   bool adaptive = true;               ///< explicit: substep below the stable step estimate
   double safety = 0.9;                ///< fraction of the stable step used when substepping
   int max_substeps = 1000000;         ///< explicit: per step; more is a DivergenceError
-  double cg_tolerance = 1e-8;         ///< implicit: relative residual of the CG solve
-  int cg_max_iterations = 500;        ///< implicit: per solve; on failure the step is halved
+  double cg_tolerance = 1e-6;         ///< implicit: relative residual of the CG solve
+  int cg_max_iterations = 1000;       ///< implicit: per solve; on failure the step is halved
   int max_halvings = 10;              ///< implicit: step halvings before DivergenceError("cg")
   double max_strain = 10.0;           ///< a spring stretched beyond (1 + max_strain) x rest
                                       ///< length raises DivergenceError("strain")
-  double strain_limit = 0.0;          ///< > 0: Provot 1995 strain limiting to (1 + strain_limit)
-  int strain_limit_iterations = 4;
+  double strain_limit = 0.1;          ///< > 0: Provot 1995 strain limiting of structural and
+                                      ///< shear springs to (1 + strain_limit) x rest; 0 = off
+  int strain_limit_iterations = 50;   ///< Gauss-Seidel sweeps at most (stops when satisfied)
   void validate(const std::string& prefix = "integrator") const;
 };
 

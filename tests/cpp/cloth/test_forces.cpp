@@ -90,7 +90,18 @@ TEST_P(DragJacobian, VelocityJacobianMatchesCentralDifferences) {
   u.col(0).array() += 5.0;
   const MatX3 p = random_rows(n, 1.0, 8);
   std::vector<Mat3> Dv, Jw;
-  drag_velocity_jacobians(t, drag, rho, x, v, u, Dv, Jw);
+  // "paper" adds a stabilising c S |u| I to its Jacobian; with u = 0 it is the exact one (and
+  // eq. 3's force depends on u only through the v-independent |u| u).
+  const MatX3 u_jac = drag.model == "paper" ? MatX3::Zero(n, 3) : u;
+  drag_velocity_jacobians(t, drag, rho, x, v, u_jac, Dv, Jw);
+  if (drag.model == "paper") {
+    std::vector<Mat3> Ds, Jws;
+    drag_velocity_jacobians(t, drag, rho, x, v, u, Ds, Jws);
+    for (Index i = 0; i < n; ++i) {
+      const Mat3 extra = 0.5 * drag.coefficient * rho * t.area[i] * Vec3(u.row(i)).norm() * Mat3::Identity();
+      EXPECT_LT((Ds[i] - Dv[i] - extra).norm(), 1e-14);
+    }
+  }
   MatX3 jp;
   apply_velocity_jacobian(t, Dv, Jw, p, jp);
   auto forces = [&](const MatX3& vv) {
