@@ -23,15 +23,30 @@ AIR_VISCOSITY = 1.5e-5  # m^2/s, air
 
 # ---- feature detection ------------------------------------------------------------------------
 
+def plain_paper_scene():
+    """Scene.paper() with only what the foundation has: analytic (uniform) wind, and
+    self-collision and flapping off where the scene has them. Features are detected against it,
+    and the cloth workloads start from it."""
+    import flagsim
+
+    s = flagsim.Scene.paper()
+    s.air.model = "uniform"
+    if hasattr(s, "self_collision"):
+        s.self_collision.enabled = False
+    if hasattr(s, "flapping"):
+        s.flapping.mode = "off"
+    return s
+
+
 def _added_stages(section: str, configure) -> tuple[bool, str]:
-    """(True, "") when configure(scene) on the paper scene builds a stage the plain one lacks."""
+    """(True, "") when configure(scene) on the plain paper scene builds a stage it lacks."""
     import flagsim
 
     if not hasattr(flagsim.Scene.paper(), section):
         return False, f"Scene has no '{section}' section in this build"
     try:
-        base = set(flagsim.Simulation(flagsim.Scene.paper()).stages)
-        scene = flagsim.Scene.paper()
+        base = set(flagsim.Simulation(plain_paper_scene()).stages)
+        scene = plain_paper_scene()
         configure(scene)
         added = set(flagsim.Simulation(scene).stages) - base
     except (AttributeError, TypeError, ValueError) as e:
@@ -73,10 +88,9 @@ def features() -> dict[str, tuple[bool, str]]:
 # ---- flagsim -----------------------------------------------------------------------------------
 
 def cloth_scene(rows: int, cols: int, integrator: str = "implicit", self_collision: bool = False):
-    """The paper scene's flag (same size, mass, pins, wind, dt) meshed with rows x cols masses."""
-    import flagsim
-
-    s = flagsim.Scene.paper()
+    """The paper scene's flag (same size, mass, pins, dt) meshed with rows x cols masses, alone:
+    in the analytic wind (no grid), no flapping."""
+    s = plain_paper_scene()
     s.name = f"cloth {rows}x{cols}"
     s.flag.rows = rows
     s.flag.cols = cols
@@ -87,7 +101,8 @@ def cloth_scene(rows: int, cols: int, integrator: str = "implicit", self_collisi
 
 
 def paper_scene(full: bool):
-    """Scene.paper() as built in; full: with grid air, self-collision and flapping switched on."""
+    """Scene.paper() as built in (whatever it switches on); full: with grid air, self-collision
+    and flapping switched on."""
     import flagsim
 
     s = flagsim.Scene.paper()
@@ -151,9 +166,20 @@ class FluidStepper:
     def step(self, n: int) -> None:
         self.fluid.step(DT, n)
 
+    def timings(self) -> dict[str, float]:
+        """Stage seconds when the Fluid reports them (stats['seconds_<stage>'], cumulative)."""
+        stats = getattr(self.fluid, "stats", None)
+        if not isinstance(stats, dict):
+            return {}
+        return {k[len("seconds_"):]: float(v) for k, v in stats.items() if k.startswith("seconds_")}
+
     def info(self) -> dict[str, Any]:
         stats = getattr(self.fluid, "stats", None)
-        return {"stats": dict(stats) if isinstance(stats, dict) else str(stats)}
+        stats = dict(stats) if isinstance(stats, dict) else {}
+        out: dict[str, Any] = {}
+        if stats.get("pressure_iterations"):
+            out["notes"] = f"{stats['pressure_iterations']} PCG iterations in the last projection"
+        return out
 
     def ok(self) -> bool:
         return all(bool(np.isfinite(np.asarray(getattr(self.fluid, c))).all()) for c in "uvw")

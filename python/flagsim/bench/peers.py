@@ -49,9 +49,9 @@ def peer_available(name: str) -> tuple[bool, str]:
 
 def cloth_spec(rows: int, cols: int) -> dict[str, Any]:
     """The paper scene's flag at rows x cols, as plain numbers every peer can read."""
-    import flagsim
+    from .engines import plain_paper_scene
 
-    s = flagsim.Scene.paper()
+    s = plain_paper_scene()
     wind = s.air.wind[0][1] if s.air.model != "none" else (0.0, 0.0, 0.0)
     return {
         "rows": rows, "cols": cols, "width": s.flag.width, "height": s.flag.height,
@@ -130,9 +130,11 @@ class PyBulletCloth(PeerStepper):
         self.client = pybullet.connect(pybullet.DIRECT)
         for n in self.SUBSTEPS:
             self._load(n)
-            self._run(20)
-            if super().ok() and structural_strain(spec, self.positions()) < 0.5:
+            if self._stable(20):
                 break
+        else:
+            self._dir.cleanup()
+            raise RuntimeError(f"PyBullet's cloth is unstable at every substep count up to {n}")
         self.substeps = n
         self._load(n)
         self._dir.cleanup()  # loaded: PyBullet keeps no reference to the file
@@ -153,6 +155,15 @@ class PyBulletCloth(PeerStepper):
             physicsClientId=self.client)
         for i in pole_pins(s):
             p.createSoftBodyAnchor(self.body, i, -1, -1, physicsClientId=self.client)
+
+    def _stable(self, steps: int) -> bool:
+        """Stays finite and within 50 % strain for `steps` steps (checked every 5)."""
+        for _ in range(0, steps, 5):
+            self._run(5)
+            x = self.positions()
+            if not (np.isfinite(x).all() and structural_strain(self.spec, x) < 0.5):
+                return False
+        return True
 
     def _run(self, n: int) -> None:
         step = self.p.stepSimulation
@@ -208,7 +219,7 @@ class MujocoCloth(PeerStepper):
         # flex order (ix * R + iy, iy from the bottom) -> flagsim order (r * C + c, r from the top)
         c, r = np.meshgrid(np.arange(C), np.arange(R))
         self.order = (c * R + (R - 1 - r)).ravel()
-        self.notes = "flex shell (elastic2d), discrete integrator, wind via <option wind density>"
+        self.notes = "flex shell (elastic2d), discrete integrator, wind from the MJCF option wind and density"
 
     def step(self, n: int) -> None:
         self.mj.mj_step(self.model, self.data, nstep=n)

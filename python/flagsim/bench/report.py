@@ -164,8 +164,12 @@ def plot(path: str, rows, title: str = "") -> list[dict[str, Any]]:
         n = [r["n"] for r in rs]
         ms = [r["ms_median"] for r in rs]
         s = loglog_slope(n, ms)
-        who = "flagsim" if engine == "flagsim" else PEER_NAMES.get(engine, engine)
-        label = f"{who} {variant}" + (f" t{threads}" if engine == "flagsim" else "")
+        if engine == "flagsim":
+            label = f"flagsim {variant} t{threads}"
+        elif engine == "fftw":
+            label = "FFTW alone: 3 r2c + 3 c2r"
+        else:
+            label = PEER_NAMES.get(engine, engine)
         label += f" (slope {s:.2f})" if s is not None else ""
         style = "-" if engine == "flagsim" else "--"
         ax.plot(n, ms, style, marker="o", ms=4, label=label)

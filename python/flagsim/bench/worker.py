@@ -4,7 +4,8 @@ SPEC is the workload as JSON; RESULT is the path the measurement is written to a
 is left to the engines, some of which print banners). A process per workload makes the peak
 memory (ru_maxrss) the workload's own and keeps one engine's state from leaking into the next.
 
-Protocol (``measure``): build (timed apart) -> ``warmup`` steps dropped -> the steps per run
+Protocol (``measure``): build (timed apart) -> ``warmup`` steps dropped (fewer when they take
+longer than ``min_time``) -> the steps per run
 doubled/extrapolated until one run lasts at least ``min_time`` -> ``repeats`` runs of that many
 steps, each giving wall and CPU seconds per step; the stage split is the difference of the
 engine's cumulative stage timers over those runs.
@@ -27,8 +28,11 @@ def rss_mb() -> float:
 
 
 def measure(stepper, *, min_time: float, repeats: int, warmup: int) -> dict[str, Any]:
-    if warmup > 0:
-        stepper.step(warmup)
+    t0 = time.perf_counter()
+    for _ in range(warmup):  # one at a time: a slow workload drops fewer steps than asked
+        stepper.step(1)
+        if time.perf_counter() - t0 > min_time:
+            break
     n = 1
     while True:
         t0 = time.perf_counter()
