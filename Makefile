@@ -52,8 +52,12 @@ test-cpp: build
 test-python: build
 	$(PY) -m pytest -q
 
+# The paper's flag rendered by POV-Ray into out/demo/flag.gif (resumes; --overwrite replaces an
+# export made with other settings).
 demo: build
 	$(PY) examples/paper_demo.py
+	$(VENV)/bin/flagsim run paper --seconds 4 --fps 25 --out out/demo --render --gif \
+	    --width 480 --height 360 --overwrite
 
 # The engines the benchmark compares with: pyproject's [bench] extra (pip install .[bench]),
 # installed here by name so the editable build is left as it is. One that fails is skipped.

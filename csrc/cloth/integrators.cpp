@@ -56,9 +56,10 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
   long n = 0;
   while (done < h) {
     double hs = h - done;
+    const double stable = stable_step_estimate(topo, fs.drag_params, fs.rho, fs.drag, x, v, u);
+    if (n == 0) stats.stable_step = stable;
+    if (!ip.adaptive && hs > stable) return IntegrateStatus::kUnstableStep;
     if (ip.adaptive) {
-      const double stable = stable_step_estimate(topo, fs.drag_params, fs.rho, fs.drag, x, v, u);
-      if (n == 0) stats.stable_step = stable;
       const double remaining_pieces = std::ceil(hs / (ip.safety * stable));
       if (remaining_pieces + n > ip.max_substeps) return IntegrateStatus::kTooManySubsteps;
       hs = hs / remaining_pieces;  // even pieces of what is left, each below the stable step
@@ -233,7 +234,21 @@ IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const I
 
 void limit_strain(const ClothTopology& topo, double limit, int iterations, double h, MatX3& x,
                   MatX3& v) {
-  // Gauss-Seidel over springs in index order: deterministic.
+  // Long-range attachments first: one exact projection per vertex onto the ball of radius
+  // (1 + limit) x rest distance around its nearest pin removes gross stretch in a single pass
+  // (Gauss-Seidel over springs alone needs O(cols^2) sweeps for that).
+  const Index N = topo.num_vertices();
+  for (Index i = 0; i < N; ++i) {
+    const int32_t a = topo.tether_anchor[i];
+    if (a < 0) continue;
+    const Vec3 d = x.row(i) - x.row(a);
+    const double l = d.norm(), lmax = (1.0 + limit) * topo.tether_length[i];
+    if (l <= lmax) continue;
+    const Vec3 corr = d * (lmax / l - 1.0);
+    x.row(i) += corr.transpose();
+    v.row(i) += corr.transpose() / h;
+  }
+  // Then Provot's local projection, Gauss-Seidel over springs in index order: deterministic.
   for (int it = 0; it < iterations; ++it) {
     bool violated = false;
     for (Index s = 0; s < topo.num_springs(); ++s) {

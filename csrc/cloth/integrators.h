@@ -29,7 +29,10 @@ struct ForceTimings {
 void compute_forces(const ClothTopology& topo, const ForceSet& fs, const MatX3& x, const MatX3& v,
                     const MatX3& u, MatX3& f, ForceTimings* timings = nullptr);
 
-enum class IntegrateStatus { kOk, kTooManySubsteps, kCgFailed };
+/// kUnstableStep: explicit without adaptive substeps was asked for a step above the stable-step
+/// estimate. It is refused rather than run, because strain limiting would turn the instability
+/// into bounded jitter that no finiteness or strain check can see.
+enum class IntegrateStatus { kOk, kTooManySubsteps, kCgFailed, kUnstableStep };
 
 struct IntegratorStats {
   long substeps = 0;       ///< explicit: substeps of the last step
@@ -51,8 +54,9 @@ IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const I
                           double h, const MatX3& u, MatX3& x, MatX3& v, IntegratorScratch& s,
                           IntegratorStats& stats, ForceTimings* timings = nullptr);
 
-/// Provot (1995) strain limiting: structural and shear springs longer than (1 + limit) x rest
-/// length are shortened
+/// Strain limiting: each vertex's distance to its nearest pin is capped at (1 + limit) x its rest
+/// distance (long-range attachments, Kim et al. 2012), then (Provot 1995) structural and shear
+/// springs longer than (1 + limit) x rest length are shortened
 /// by moving their ends (mass-weighted, pinned ends fixed); velocities take the correction / h.
 void limit_strain(const ClothTopology& topo, double limit, int iterations, double h, MatX3& x,
                   MatX3& v);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <array>
+#include <limits>
 
 namespace flagsim {
 
@@ -88,6 +89,25 @@ ClothTopology build_flag_topology(const FlagParams& p) {
     t.inv_mass[id(R - 1, 0)] = 0.0;
   } else if (p.pin == "top") {
     for (int c = 0; c < C; ++c) t.inv_mass[id(0, c)] = 0.0;
+  }
+
+  // Tethers to the nearest pin at rest (pins are few: a column or a row; O(N x pins) once).
+  std::vector<int> pins;
+  for (int i = 0; i < N; ++i)
+    if (t.inv_mass[i] == 0.0) pins.push_back(i);
+  t.tether_anchor.assign(N, -1);
+  t.tether_length.setZero(N);
+  for (int i = 0; i < N; ++i) {
+    if (t.inv_mass[i] == 0.0) continue;
+    double best = std::numeric_limits<double>::infinity();
+    for (int a : pins) {
+      const double d = (t.rest_positions.row(i) - t.rest_positions.row(a)).norm();
+      if (d < best) {
+        best = d;
+        t.tether_anchor[i] = a;
+        t.tether_length[i] = d;
+      }
+    }
   }
 
   // Vertex -> spring adjacency (CSR), springs in index order for each vertex.

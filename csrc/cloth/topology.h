@@ -32,6 +32,12 @@ struct ClothTopology {
   std::vector<int32_t> tri_adj_offset;  ///< (N + 1)
   std::vector<int32_t> tri_adj;         ///< (3 T)
 
+  // Long-range attachment (Kim, Chentanez, Mueller 2012) of each vertex to its nearest pinned
+  // vertex at rest: tether_anchor[i] (-1 for pinned vertices or when nothing is pinned) and the
+  // rest distance tether_length[i], m. Used by strain limiting.
+  std::vector<int32_t> tether_anchor;  ///< (N)
+  VecX tether_length;                  ///< (N) m
+
   Index num_vertices() const { return rest_positions.rows(); }
   Index num_springs() const { return springs.rows(); }
   bool pinned(Index i) const { return inv_mass[i] == 0.0; }

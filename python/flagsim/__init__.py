@@ -15,7 +15,9 @@ from ._core import (
     AirParams,
     DivergenceError,
     DragParams,
+    FanParams,
     FlagParams,
+    Fluid,
     IntegratorParams,
     Scene,
     Simulation,
@@ -31,7 +33,9 @@ __all__ = [
     "AirParams",
     "DivergenceError",
     "DragParams",
+    "FanParams",
     "FlagParams",
+    "Fluid",
     "IntegratorParams",
     "Scene",
     "Simulation",
@@ -41,3 +45,12 @@ __all__ = [
     "num_threads",
     "set_num_threads",
 ]
+
+
+def __getattr__(name):
+    # flagsim.povray (POV-Ray export and rendering) loads on first use: simulating needs none of it.
+    if name == "povray":
+        import importlib
+
+        return importlib.import_module(".povray", __name__)
+    raise AttributeError(f"module 'flagsim' has no attribute {name!r}")

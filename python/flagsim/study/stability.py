@@ -40,8 +40,12 @@ def matrix_cases(axes: dict[str, tuple], duration: float) -> list[dict[str, Any]
 
 
 def pathological_cases(reduced: bool) -> list[dict[str, Any]]:
+    """All pathological cases; the reduced (CI) set leaves out the 128 x 192 flag, whose explicit
+    run alone takes minutes on 2 cores (the full study and docs/stability.md include it)."""
     cases = []
     for name in PATHOLOGICAL:
+        if reduced and name == "fine_128x192":
+            continue
         for integ in INTEGRATORS:
             duration = {"long_run_1000s": 20.0 if reduced else 1000.0,
                         "fine_128x192": 0.05 if reduced else 0.5}.get(name, 0.5 if reduced else 2.0)
@@ -63,6 +67,7 @@ def build_scene(case: dict[str, Any]) -> tuple[flagsim.Scene, Any]:
     s.flag.stretch_stiffness, s.flag.shear_stiffness, s.flag.bend_stiffness = k, k / 5, k / 20
     s.flag.areal_density = float(case["density"])
     s.dt = float(case["dt"])
+    s.air.model = "uniform"  # the matrix varies the wind itself; the grid is not under test here
     w = float(case["wind"])
     direction = np.array([1.0, 0.0, 0.3]) / math.hypot(1.0, 0.3)
     s.air.wind = tuple(w * direction)
@@ -131,7 +136,7 @@ def _all_finite(sim: flagsim.Simulation, energy: float) -> bool:
 
 def cases(reduced: bool) -> list[dict[str, Any]]:
     axes = REDUCED if reduced else FULL
-    return matrix_cases(axes, 0.2 if reduced else 0.5) + pathological_cases(reduced)
+    return matrix_cases(axes, 0.05 if reduced else 0.5) + pathological_cases(reduced)
 
 
 def summarize(rows: list[dict[str, str]]) -> dict[str, dict[str, int]]:

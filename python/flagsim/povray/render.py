@@ -1,0 +1,355 @@
+"""Render an export with POV-Ray, one process per frame, through a concurrent.futures.Executor.
+
+The default executor is a local process pool (three single-threaded POV-Ray runs per core);
+anything with the Executor interface (a cluster's, a thread pool) can take its place without
+touching this code: a frame is a picklable ``FrameJob`` and ``render_frame`` a module-level
+function. A failed frame is retried once, then reported by number in ``RenderError``.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import struct
+import subprocess
+import time
+from concurrent.futures import FIRST_COMPLETED, wait
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from . import scenefiles
+from .export import read_manifest
+
+DEBIAN_PACKAGE = "povray"
+
+
+class PovrayNotFound(FileNotFoundError):
+    """The POV-Ray binary is not installed (or not on PATH)."""
+
+
+class RenderError(RuntimeError):
+    """Some frames failed to render (after a retry); ``frames`` lists their numbers."""
+
+    def __init__(self, message, frames=()):
+        super().__init__(message)
+        self.frames = list(frames)
+
+
+class IncompleteExport(ValueError):
+    """The folder is not a (complete) flagsim export."""
+
+
+def find_povray(binary=None):
+    """Path of the POV-Ray binary: ``binary``, $FLAGSIM_POVRAY or ``povray`` on PATH."""
+    name = binary or os.environ.get("FLAGSIM_POVRAY") or "povray"
+    path = shutil.which(name)
+    if path is None:
+        raise PovrayNotFound(
+            f"POV-Ray ('{name}') is not installed or not on PATH: install the Debian package "
+            f"'{DEBIAN_PACKAGE}' (sudo apt-get install {DEBIAN_PACKAGE}) or set FLAGSIM_POVRAY "
+            f"to the povray binary")
+    return path
+
+
+@dataclass
+class FrameJob:
+    frame: int
+    out_dir: str      # the export folder; POV-Ray runs there with relative paths
+    image: str        # relative path of the image to produce
+    povray: str
+    width: int
+    height: int
+    threads: int = 1
+    antialias: float = 0.3  # POV-Ray +A threshold; 0 turns antialiasing off
+    timeout: float = 600.0
+
+
+@dataclass
+class FrameResult:
+    frame: int
+    ok: bool
+    error: str = ""
+    diagnostics: list = field(default_factory=list)  # POV-Ray warnings and errors, one per line
+    seconds: float = 0.0
+
+
+def povray_diagnostics(stderr):
+    """Lines of POV-Ray's console output that are not its banner, its section rulers
+    ("==== [Parsing...] ===") or "POV-Ray finished": with statistics, render and debug streams
+    off (-GS -GR -GD), what is left are warnings and errors."""
+    lines = stderr.splitlines()
+    out = []
+    in_banner = False
+    for line in lines:
+        s = line.strip()
+        if s.startswith("Persistence of Vision(tm) Ray Tracer"):
+            in_banner = True
+            continue
+        if s.startswith("==== [") and s.endswith("="):
+            in_banner = False
+            continue
+        if in_banner or not s or s == "POV-Ray finished":
+            continue
+        out.append(s)
+    return out
+
+
+def povray_env(out_dir):
+    """POV-Ray's environment: HOME is the export, where .povray/3.7 holds its user config and
+    ini (see scenefiles.povray_home_files), and no POVINI overrides them."""
+    env = dict(os.environ)
+    env["HOME"] = str(out_dir)
+    env.pop("POVINI", None)
+    return env
+
+
+def povray_command(job):
+    cmd = [job.povray, f"+I{scenefiles.SCENE_FILE}", f"+O{job.image}",
+           f"+W{job.width}", f"+H{job.height}", "+FN", "-D", "-P", "-V",
+           "-GS", "-GR", "-GD", "+GW", "+GF", f"+WT{job.threads}",
+           f"Declare=FRAME={job.frame}"]
+    cmd += [f"+A{job.antialias}"] if job.antialias > 0 else ["-A"]
+    return cmd
+
+
+def render_frame(job):
+    """Render one frame into a temporary image, renamed into place only when POV-Ray succeeded
+    (so an image in render/ is always whole). Never raises for a POV-Ray failure: returns it."""
+    t0 = time.perf_counter()
+    out = Path(job.out_dir)
+    final = out / job.image
+    tmp_rel = str(Path(job.image).with_name(f".{Path(job.image).stem}.{os.getpid()}.tmp.png"))
+    tmp = out / tmp_rel
+    cmd = povray_command(replace(job, image=tmp_rel))
+    try:
+        proc = subprocess.run(cmd, cwd=out, env=povray_env(out), capture_output=True, text=True,
+                              errors="replace", timeout=job.timeout, check=False)
+    except (OSError, subprocess.TimeoutExpired) as e:
+        tmp.unlink(missing_ok=True)
+        return FrameResult(job.frame, False, f"{type(e).__name__}: {e}",
+                           seconds=time.perf_counter() - t0)
+    diagnostics = povray_diagnostics(proc.stderr)
+    if proc.returncode != 0 or not tmp.is_file():
+        tmp.unlink(missing_ok=True)
+        detail = "; ".join(diagnostics[-3:]) or "no output"
+        return FrameResult(job.frame, False, f"povray exited with {proc.returncode}: {detail}",
+                           diagnostics, time.perf_counter() - t0)
+    os.replace(tmp, final)
+    return FrameResult(job.frame, True, "", diagnostics, time.perf_counter() - t0)
+
+
+def png_size(path):
+    """(width, height) from a PNG header, or None if it is not a PNG."""
+    with open(path, "rb") as f:
+        head = f.read(24)
+    if len(head) < 24 or head[:8] != b"\x89PNG\r\n\x1a\n":
+        return None
+    return struct.unpack(">II", head[16:24])
+
+
+def _up_to_date(image, sources, size):
+    """Like make: the image exists, has the wanted size and is newer than what it shows."""
+    if not image.is_file() or png_size(image) != size:
+        return False
+    t = image.stat().st_mtime_ns
+    return all(t >= s.stat().st_mtime_ns for s in sources if s.exists())
+
+
+def load_export(out_dir):
+    """The manifest of a complete export in out_dir, or IncompleteExport saying what to do."""
+    out = Path(out_dir)
+    manifest = read_manifest(out)
+    if manifest is None:
+        raise IncompleteExport(f"{out} is not a flagsim export (no {out / 'export.json'}): make "
+                               f"one with  flagsim run SCENE --out {out}")
+    missing = [k for k in range(manifest["frames"])
+               if not (out / scenefiles.frame_file(k)).is_file()]
+    if not manifest.get("complete") or missing or not (out / scenefiles.SCENE_FILE).is_file():
+        what = f" (frames {_ranges(missing)} missing)" if missing else ""
+        raise IncompleteExport(f"the export in {out} is incomplete{what}: run the same "
+                               f"flagsim run command again to resume it")
+    return manifest
+
+
+def _ranges(numbers):
+    """[1, 2, 3, 7] -> '1-3, 7'."""
+    parts = []
+    for n in sorted(numbers):
+        if parts and n == parts[-1][1] + 1:
+            parts[-1][1] = n
+        else:
+            parts.append([n, n])
+    return ", ".join(f"{a}-{b}" if b > a else f"{a}" for a, b in parts)
+
+
+@dataclass
+class RenderResult:
+    images: list          # Path of every frame's image, in frame order
+    rendered: list        # frame numbers rendered by this call
+    skipped: list         # frame numbers already up to date
+    diagnostics: dict     # frame -> POV-Ray warning lines (empty when clean)
+    wall_seconds: float
+
+
+def _default_executor(jobs):
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    # spawn: the parent may run OpenMP threads, and fork after threads is unsafe.
+    return ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"))
+
+
+def render(out_dir, *, width=None, height=None, executor=None, jobs=None, retries=1,
+           antialias=0.3, progress=True, povray_binary=None, worker=render_frame, force=False):
+    """Render every frame of the export in ``out_dir`` to render/frame_NNN.png.
+
+    width, height  default: the export's (export.json)
+    executor       a concurrent.futures.Executor running ``worker(FrameJob)``; default a
+                   process pool of ``jobs`` workers (default: three per core)
+    retries        a failed frame is submitted again this many times
+    force          re-render frames whose images are up to date
+    Raises PovrayNotFound, IncompleteExport, or RenderError naming the frames that failed
+    (after every other frame has been rendered).
+    """
+    t0 = time.perf_counter()
+    out = Path(out_dir).resolve()
+    manifest = load_export(out)
+    povray = find_povray(povray_binary)
+    width = int(width or manifest["width"])
+    height = int(height or manifest["height"])
+    for name, v in (("width", width), ("height", height)):
+        if not 16 <= v <= 8192:
+            raise ValueError(f"{name} should be in [16, 8192] pixels, got {v}")
+    # The private POV-Ray config follows the binary actually used (its include folders).
+    for name, text in scenefiles.povray_home_files(povray).items():
+        (out / name).parent.mkdir(parents=True, exist_ok=True)
+        scenefiles.write_text(out / name, text)
+    (out / scenefiles.RENDER_DIR).mkdir(exist_ok=True)
+    for p in (out / scenefiles.RENDER_DIR).glob(".*.tmp.png"):  # left by an interrupted render
+        p.unlink(missing_ok=True)
+
+    n = manifest["frames"]
+    final = n - 1
+    texture = manifest.get("texture")
+    shared = [out / scenefiles.SCENE_FILE]
+    if texture:
+        shared.append(out / ("texture" + Path(texture).suffix.lower()))
+    images = [out / scenefiles.render_file(k, final) for k in range(n)]
+    todo = [k for k in range(n)
+            if force or not _up_to_date(images[k], shared + [out / scenefiles.frame_file(k)],
+                                        (width, height))]
+    skipped = [k for k in range(n) if k not in set(todo)]
+    cores = os.cpu_count() or 1
+    # POV-Ray 3.7 idles ~0.6 s per run in its polling loops (strace: 10-100 ms sleeps), longer
+    # than a small frame takes to trace: three single-threaded workers per core overlap it.
+    workers = max(1, min(jobs or 3 * cores, len(todo) or 1))
+    threads = max(1, cores // workers)
+    own_executor = executor is None and bool(todo)
+    if own_executor:
+        executor = _default_executor(workers)
+
+    def job(k):
+        return FrameJob(frame=k, out_dir=str(out), image=scenefiles.render_file(k, final),
+                        povray=povray, width=width, height=height, threads=threads,
+                        antialias=antialias)
+
+    bar = None
+    if progress and todo:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(todo), unit="frame", desc="rendering")
+    failed = {}
+    diagnostics = {}
+    rendered = []
+    pending = {}
+
+    def submit(k, attempt):
+        try:
+            pending[executor.submit(worker, job(k))] = (k, attempt)
+            return True
+        except Exception as e:  # a broken executor: the frame is failed, not dropped
+            failed[k] = f"could not be submitted: {type(e).__name__}: {e}"
+            return False
+
+    try:
+        for k in todo:
+            if not submit(k, 0) and bar is not None:
+                bar.update(1)
+        while pending:
+            done, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                k, attempt = pending.pop(fut)
+                try:
+                    res = fut.result()
+                except Exception as e:  # a worker or executor failure counts as a failed try
+                    res = FrameResult(k, False, f"{type(e).__name__}: {e}")
+                if res.diagnostics:
+                    diagnostics[k] = res.diagnostics
+                if res.ok:
+                    rendered.append(k)
+                elif attempt < retries:
+                    if submit(k, attempt + 1):
+                        continue
+                else:
+                    failed[k] = res.error
+                if bar is not None:
+                    bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+        if own_executor:
+            executor.shutdown(wait=True, cancel_futures=True)
+    if failed:
+        first = min(failed)
+        raise RenderError(f"{len(failed)} of {n} frames failed to render after "
+                          f"{retries + 1} tries: frames {_ranges(failed)} (frame {first}: "
+                          f"{failed[first]})", sorted(failed))
+    return RenderResult(images=images, rendered=sorted(rendered), skipped=skipped,
+                        diagnostics=diagnostics, wall_seconds=time.perf_counter() - t0)
+
+
+def _atomic_output(path):
+    path = Path(path)
+    return path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+
+
+def make_gif(images, path, fps):
+    """Animated GIF (looping) of the images at fps, written whole or not at all."""
+    import imageio.v3 as iio
+    import numpy as np
+
+    frames = np.stack([iio.imread(p)[..., :3] for p in images])
+    tmp = _atomic_output(path)
+    try:
+        iio.imwrite(tmp, frames, extension=".gif", duration=1000.0 / fps, loop=0)
+        os.replace(tmp, path)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+    return Path(path)
+
+
+class FfmpegNotFound(FileNotFoundError):
+    """MP4 output needs the ffmpeg binary."""
+
+
+def make_mp4(out_dir, path, fps, final_frame, ffmpeg=None):
+    """H.264 MP4 of render/frame_NNN.png with ffmpeg, written whole or not at all."""
+    exe = shutil.which(ffmpeg or "ffmpeg")
+    if exe is None:
+        raise FfmpegNotFound("MP4 output needs ffmpeg, which is not installed: install the "
+                             "Debian package 'ffmpeg' (sudo apt-get install ffmpeg), or make a "
+                             "GIF instead (--gif)")
+    out = Path(out_dir)
+    digits = len(str(final_frame))
+    tmp = _atomic_output(path)
+    cmd = [exe, "-y", "-loglevel", "error", "-framerate", f"{fps:g}", "-start_number", "0",
+           "-i", str(out / scenefiles.RENDER_DIR / f"frame_%0{digits}d.png"),
+           "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-c:v", "libx264", "-pix_fmt", "yuv420p",
+           "-f", "mp4", str(tmp)]
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+        if proc.returncode != 0:
+            raise RenderError(f"ffmpeg failed ({proc.returncode}): {proc.stderr.strip()[-500:]}")
+        os.replace(tmp, path)
+    finally:
+        Path(tmp).unlink(missing_ok=True)
+    return Path(path)

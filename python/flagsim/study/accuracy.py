@@ -1,0 +1,213 @@
+"""`flagsim study accuracy`: error against run time, with observed convergence orders.
+
+Parts (each point: settings, error, median wall time per step over repeats, steps per second):
+  pair        spring-mass pair: largest deviation from the analytic oscillation over one period
+  banner      banner in uniform wind: equilibrium-angle error, tan(theta) = D / (m g)
+  trajectory  paper flag (uniform wind) at t = 1 s: RMS vertex error against a Richardson-
+              extrapolated implicit reference (dt = 1e-4 and 2e-4)
+  air         extruded 2-D Taylor-Green vortex at t = T against the exact solution (needs Fluid)
+  coupled     paper scene in its air grid at t = 1 s against the finest grid and smallest dt
+              (needs Fluid)
+Cases run as pure functions of their settings through the study runner; each case stores its
+final state (trajectory, coupled) so errors are computed after all cases finished.
+"""
+from __future__ import annotations
+
+import math
+import os
+import time
+from typing import Any
+
+import numpy as np
+
+import flagsim
+
+COLUMNS = ["id", "part", "method", "dt", "resolution", "advection", "pressure", "tolerance",
+           "substeps", "steps", "error", "seconds_per_step", "steps_per_second", "state"]
+
+METHODS = ("implicit", "explicit_adaptive", "explicit_sub8")
+
+
+def _set_method(scene: flagsim.Scene, method: str) -> None:
+    scene.integrator.method = "implicit" if method == "implicit" else "explicit"
+    scene.integrator.adaptive = method == "explicit_adaptive"
+    scene.integrator.substeps = int(method.split("sub")[1]) if "sub" in method else 1
+
+
+# ---- scenes -------------------------------------------------------------------------------------
+
+def pair_scene(method: str, dt: float) -> flagsim.Scene:
+    s = flagsim.Scene()
+    s.flag.rows = s.flag.cols = 2
+    s.flag.width = s.flag.height = 0.1
+    s.flag.stretch_stiffness = 100.0
+    s.flag.shear_stiffness = s.flag.bend_stiffness = s.flag.damping = 0.0
+    s.flag.pinned_vertices = [0, 1, 2]
+    s.air.model = "none"
+    s.gravity = (0, 0, 0)
+    s.integrator.cg_tolerance = 1e-12
+    s.dt = dt
+    _set_method(s, method)
+    return s
+
+
+def trajectory_scene(method: str, dt: float) -> flagsim.Scene:
+    s = flagsim.Scene.paper()
+    s.air.model = "uniform"        # cloth alone: the coupled part runs the grid
+    s.air.wind = (2.0, 0.0, 0.6)  # out of the flag's plane, so it swings
+    s.integrator.cg_tolerance = 1e-10
+    s.dt = dt
+    _set_method(s, method)
+    return s
+
+
+def banner_scene(method: str, dt: float) -> flagsim.Scene:
+    s = flagsim.Scene.banner()
+    s.dt = dt
+    _set_method(s, method)
+    return s
+
+
+# ---- cases --------------------------------------------------------------------------------------
+
+def cases(quick: bool = False) -> list[dict[str, Any]]:
+    out: list[dict[str, Any]] = []
+    pair_divs = (25, 50, 100, 200) if quick else (25, 50, 100, 200, 400, 800, 1600)
+    for m in ("implicit", "explicit"):
+        for div in pair_divs:
+            out.append(dict(id=f"pair-{m}-T/{div}", part="pair", method=m, dt=div, repeats=3))
+    traj_dts = (0.02, 0.01, 0.005) if quick else (0.02, 0.01, 0.005, 0.0025, 0.00125, 0.000625)
+    for m in METHODS:
+        for dt in traj_dts:
+            out.append(dict(id=f"trajectory-{m}-{dt:g}", part="trajectory", method=m, dt=dt,
+                            repeats=1 if quick else 3))
+    ref_dts = (2e-3, 1e-3) if quick else (2e-4, 1e-4)
+    for dt in ref_dts:
+        out.append(dict(id=f"trajectory-reference-{dt:g}", part="trajectory-reference",
+                        method="implicit", dt=dt, repeats=1))
+    for m in ("implicit", "explicit_adaptive"):
+        for dt in ((0.02, 0.01) if quick else (0.04, 0.02, 0.01, 0.005)):
+            out.append(dict(id=f"banner-{m}-{dt:g}", part="banner", method=m, dt=dt, repeats=1))
+    from . import accuracy_air
+    out += accuracy_air.cases(quick)
+    return out
+
+
+def _timed_run(sim: flagsim.Simulation, steps: int) -> float:
+    t0 = time.perf_counter()
+    sim.step(steps)
+    return time.perf_counter() - t0
+
+
+def run_case(case: dict[str, Any], state_dir: str = "") -> dict[str, Any]:
+    """Pure function of the case's settings (apart from the wall times it measures)."""
+    part = case["part"]
+    if part == "pair":
+        return _run_pair(case)
+    if part in ("trajectory", "trajectory-reference"):
+        return _run_trajectory(case, state_dir)
+    if part == "banner":
+        return _run_banner(case)
+    from . import accuracy_air
+    return accuracy_air.run_case(case, state_dir)
+
+
+def _run_pair(case: dict[str, Any]) -> dict[str, Any]:
+    method, div = case["method"], int(case["dt"])
+    probe = flagsim.Simulation(pair_scene(method, 1e-3))
+    m, k = probe.node_mass[3], 100.0
+    w = math.sqrt(k / m)
+    T = 2 * math.pi / w
+    dt = T / div
+    times, err = [], 0.0
+    for _ in range(int(case.get("repeats", 1))):
+        sim = flagsim.Simulation(pair_scene(method, dt))
+        y0 = sim.positions[3, 1]
+        sim.positions[3, 1] -= 1e-4
+        err, t = 0.0, 0.0
+        for _ in range(div):
+            t += _timed_run(sim, 1)
+            exact = -1e-4 * math.cos(w * sim.time)
+            err = max(err, abs(sim.positions[3, 1] - y0 - exact) / 1e-4)
+        times.append(t / div)
+    spp = float(np.median(times))
+    return dict(dt=dt, steps=div, error=err, seconds_per_step=spp, steps_per_second=1 / spp)
+
+
+def _save_state(state_dir: str, case_id: str, x: np.ndarray) -> str:
+    from .report import save_npy
+    name = case_id.replace("/", "_") + ".npy"
+    save_npy(os.path.join(state_dir, name), x)
+    return name
+
+
+def _run_trajectory(case: dict[str, Any], state_dir: str) -> dict[str, Any]:
+    dt = float(case["dt"])
+    steps = round(1.0 / dt)
+    times = []
+    sim = None
+    for _ in range(int(case.get("repeats", 1))):
+        sim = flagsim.Simulation(trajectory_scene(case["method"], dt))
+        try:
+            times.append(_timed_run(sim, steps) / steps)
+        except flagsim.DivergenceError as e:
+            return dict(dt=dt, steps=sim.step_count, error="", seconds_per_step="",
+                        steps_per_second="", state=f"diverged: {e.cause}")
+    spp = float(np.median(times))
+    return dict(dt=dt, steps=steps, seconds_per_step=spp, steps_per_second=1 / spp,
+                state=_save_state(state_dir, case["id"], sim.positions.copy()))
+
+
+def _run_banner(case: dict[str, Any]) -> dict[str, Any]:
+    dt = float(case["dt"])
+    s = banner_scene(case["method"], dt)
+    sim = flagsim.Simulation(s)
+    steps = round(20.0 / dt)
+    spp = _timed_run(sim, steps) / steps
+    u = float(np.linalg.norm(s.air.wind[0][1]))
+    want = math.atan(0.5 * s.drag.coefficient * s.air.density * u * u / (s.flag.areal_density * 9.81))
+    x = sim.positions.reshape(s.flag.rows, s.flag.cols, 3)
+    d = x[1:] - x[:1]
+    err = float(np.abs(np.arctan2(d[..., 2], -d[..., 1]) - want).max())
+    return dict(dt=dt, steps=steps, error=err, seconds_per_step=spp, steps_per_second=1 / spp)
+
+
+# ---- analysis -----------------------------------------------------------------------------------
+
+def fill_state_errors(rows: list[dict[str, str]], state_dir: str) -> None:
+    """Errors of the cases that stored a final state, against their part's reference."""
+    refs = sorted((r for r in rows if r["part"] == "trajectory-reference"), key=lambda r: float(r["dt"]))
+    if len(refs) == 2 and all(r["state"].endswith(".npy") for r in refs):
+        fine = np.load(os.path.join(state_dir, refs[0]["state"]))
+        coarse = np.load(os.path.join(state_dir, refs[1]["state"]))
+        reference = 2 * fine - coarse  # Richardson: backward Euler is first order in dt
+        for r in rows:
+            if r["part"] == "trajectory" and r["state"].endswith(".npy"):
+                x = np.load(os.path.join(state_dir, r["state"]))
+                r["error"] = repr(float(np.sqrt(((x - reference) ** 2).sum(axis=1).mean())))
+        refs[0]["error"] = repr(float(np.sqrt(((fine - reference) ** 2).sum(axis=1).mean())))
+    from . import accuracy_air
+    accuracy_air.fill_state_errors(rows, state_dir)
+
+
+def observed_order(rows: list[dict[str, str]], part: str, method: str, key: str = "dt",
+                   **match: str) -> float:
+    """Least-squares slope of log(error) against log(key) over the part's points."""
+    pts = [(float(r[key]), float(r["error"])) for r in rows
+           if r["part"] == part and r["method"] == method and r["error"] not in ("", "nan")
+           and float(r["error"]) > 0 and all(r.get(k) == v for k, v in match.items())]
+    if len(pts) < 2:
+        return math.nan
+    h, e = np.log([p[0] for p in pts]), np.log([p[1] for p in pts])
+    return float(np.polyfit(h, e, 1)[0])
+
+
+def pareto(points: list[tuple[float, float]]) -> list[int]:
+    """Indices of the points no other point beats in both cost and error (lower is better)."""
+    order = sorted(range(len(points)), key=lambda i: (points[i][0], points[i][1]))
+    front, best = [], math.inf
+    for i in order:
+        if points[i][1] < best:
+            front.append(i)
+            best = points[i][1]
+    return front
