@@ -10,7 +10,7 @@ CTEST := $(VENV)/bin/ctest
 APT_PACKAGES := g++ make python3-venv python3-dev libeigen3-dev libfftw3-dev libgtest-dev povray
 JOBS ?= 2
 
-.PHONY: all demo test test-cpp test-python build bench study clean system-deps
+.PHONY: all demo test test-cpp test-python build bench bench-deps study clean system-deps
 
 all: build
 
@@ -59,8 +59,14 @@ demo: build
 	$(VENV)/bin/flagsim run paper --seconds 4 --fps 25 --out out/demo --render --gif \
 	    --width 480 --height 360 --overwrite
 
-bench: build
-	$(VENV)/bin/flagsim bench --out out/bench
+# The engines the benchmark compares with: pyproject's [bench] extra (pip install .[bench]),
+# installed here by name so the editable build is left as it is. One that fails is skipped.
+bench-deps: $(VENV)/.deps
+	$(PY) -m pip install -q pybullet mujoco pypbd || echo "some peers did not install: the benchmark skips them"
+
+# Regenerates docs/performance.md (run it on a quiet machine: other processes skew the figures).
+bench: build bench-deps
+	$(PY) -m flagsim.bench --peers --out out/bench --docs docs/performance.md
 
 clean:
 	rm -rf $(BUILD) out

@@ -1,7 +1,324 @@
+// flagsim.Fluid (the air solver alone) and flagsim.FanParams.
+#include <pybind11/eigen.h>
+#include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <string>
+
+#include "bindings/fields.h"
+#include "bindings/fluid_fields.h"
+#include "common/errors.h"
+#include "fluid/fluid.h"
+#include "fluid/params.h"
+#include "scene/scene.h"
 
 namespace py = pybind11;
 
 namespace flagsim::bindings {
-void bind_fluid(py::module_& m) { (void)m; }
+
+namespace {
+
+Vec3 to_vec3(const py::handle& h, const std::string& name) {
+  py::array_t<double, py::array::c_style | py::array::forcecast> a;
+  try {
+    a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(h);
+  } catch (const py::error_already_set&) {
+  }
+  if (!a || a.ndim() != 1 || a.shape(0) != 3)
+    fail_param(name, "a sequence of 3 numbers", std::string(py::str(h)));
+  return Vec3(a.at(0), a.at(1), a.at(2));
+}
+
+/// None -> empty; a 3-vector -> constant; a sequence of (time, (vx, vy, vz)) -> keyframes.
+WindSchedule to_wind(const py::handle& h) {
+  WindSchedule w;
+  if (h.is_none()) return w;
+  const char* expected = "None, a 3-vector or a sequence of (time, (vx, vy, vz))";
+  if (!py::isinstance<py::sequence>(h)) fail_param("wind", expected, std::string(py::str(h)));
+  auto seq = py::reinterpret_borrow<py::sequence>(h);
+  if (py::len(seq) == 3 && !py::isinstance<py::sequence>(seq[0])) {
+    w.keys = {{0.0, to_vec3(h, "wind")}};
+    return w;
+  }
+  for (auto item : seq) {
+    if (!py::isinstance<py::sequence>(item) || py::len(item) != 2)
+      fail_param("wind", expected, std::string(py::str(h)));
+    auto pair = py::reinterpret_borrow<py::sequence>(item);
+    const std::string key = "wind[" + std::to_string(w.keys.size()) + "]";
+    w.keys.push_back({pair[0].cast<double>(), to_vec3(pair[1], key + ".velocity")});
+  }
+  return w;
+}
+
+py::list wind_to_list(const WindSchedule& w) {
+  py::list out;
+  for (const auto& k : w.keys) out.append(py::make_tuple(k.time, py::make_tuple(k.velocity[0], k.velocity[1], k.velocity[2])));
+  return out;
+}
+
+py::array component_view(py::object self, int c) {
+  Fluid& f = self.cast<Fluid&>();
+  const Shape3 sh = f.component_shape(c);
+  const std::vector<py::ssize_t> shape = {sh.n[0], sh.n[1], sh.n[2]};
+  if (f.is_double())
+    return py::array_t<double>(shape, static_cast<double*>(f.component_data(c)), self);
+  return py::array_t<float>(shape, static_cast<float*>(f.component_data(c)), self);
+}
+
+void set_component_from(Fluid& f, int c, const py::handle& values) {
+  const Shape3 sh = f.component_shape(c);
+  auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(values);
+  const std::string name = std::string(1, "uvw"[c]);
+  if (!a || std::size_t(a.size()) != sh.size())
+    fail_param(name,
+               "an array of shape (" + std::to_string(sh.n[0]) + ", " + std::to_string(sh.n[1]) + ", " +
+                   std::to_string(sh.n[2]) + ")",
+               a ? std::to_string(a.size()) + " values" : std::string(py::str(values)));
+  f.set_component(c, a.data());
+}
+
+}  // namespace
+
+void def_fluid_fields(py::class_<AirParams>& cls, const std::string& section) {
+  cls.def_property(
+      "resolution",
+      [](const AirParams& a) { return py::make_tuple(a.resolution[0], a.resolution[1], a.resolution[2]); },
+      [section](AirParams& a, const py::object& o) {
+        std::array<long long, 3> n;
+        try {
+          n = o.cast<std::array<long long, 3>>();
+        } catch (const py::cast_error&) {
+          throw InvalidArgument(section + ".resolution should be 3 cell counts (nx, ny, nz), got " +
+                                std::string(py::str(py::repr(o))));
+        }
+        AirParams copy = a;
+        for (int d = 0; d < 3; ++d) copy.resolution[d] = (n[d] < -1000000 || n[d] > 1000000) ? -1 : int(n[d]);
+        copy.validate(section);
+        a = copy;
+      },
+      "grid cells (nx, ny, nz) ('grid')");
+  def_field<AirParams, double>(cls, "cell_size", &AirParams::cell_size, section, "m ('grid')");
+  def_vec3_field<AirParams>(cls, "origin", &AirParams::origin, section, "m, min corner of the grid ('grid')");
+  def_field<AirParams, std::string>(cls, "boundary", &AirParams::boundary, section,
+                                    "'periodic' (mean flow = wind) | 'tunnel' (inflow = wind through x-min)");
+  def_field<AirParams, std::string>(cls, "advection", &AirParams::advection, section,
+                                    "'semi_lagrangian' | 'maccormack'");
+  def_field<AirParams, std::string>(cls, "pressure", &AirParams::pressure, section,
+                                    "'fft' (periodic, FFTW) | 'pcg' (MIC(0) conjugate gradient)");
+  def_field<AirParams, std::string>(cls, "precision", &AirParams::precision, section, "'double' | 'float'");
+  def_field<AirParams, double>(cls, "pcg_tolerance", &AirParams::pcg_tolerance, section,
+                               "relative max-norm residual of the pcg solves");
+  def_field<AirParams, int>(cls, "pcg_max_iterations", &AirParams::pcg_max_iterations, section,
+                            "iteration cap of each pcg solve");
+  cls.def_property(
+      "fans", [](const AirParams& a) { return a.fans; },
+      [section](AirParams& a, const std::vector<FanParams>& fans) {
+        AirParams copy = a;
+        copy.fans = fans;
+        copy.validate(section);
+        a = copy;
+      },
+      "[FanParams, ...]: regions pushing the air ('grid'); a list copy: assign to change");
+}
+
+void bind_fluid(py::module_& m) {
+  py::class_<FanParams> fan_cls(m, "FanParams",
+                        "A region pushing the air: force density (N/m^3) along direction inside a box "
+                        "or a sphere, times a keyframed strength.");
+  fan_cls.def(py::init([](const std::string& shape, const py::object& center, const py::object& half_size,
+                       double radius, const py::object& direction, double force_density, double max_speed,
+                       const std::vector<std::pair<double, double>>& strength) {
+             FanParams f;
+             f.shape = shape;
+             f.center = to_vec3(center, "center");
+             f.half_size = to_vec3(half_size, "half_size");
+             f.radius = radius;
+             f.direction = to_vec3(direction, "direction");
+             f.force_density = force_density;
+             f.max_speed = max_speed;
+             f.strength.keys = strength;
+             f.validate("");
+             return f;
+           }),
+           py::kw_only(), py::arg("shape") = "box", py::arg("center") = py::make_tuple(0.0, 0.0, 0.0),
+           py::arg("half_size") = py::make_tuple(0.25, 0.25, 0.25), py::arg("radius") = 0.25,
+           py::arg("direction") = py::make_tuple(1.0, 0.0, 0.0), py::arg("force_density") = 20.0,
+           py::arg("max_speed") = 0.0, py::arg("strength") = std::vector<std::pair<double, double>>{});
+  py::class_<FanParams>& fan = fan_cls;
+  def_field<FanParams, std::string>(fan, "shape", &FanParams::shape, "fan", "'box' | 'sphere'");
+  def_vec3_field<FanParams>(fan, "center", &FanParams::center, "fan", "m");
+  def_vec3_field<FanParams>(fan, "half_size", &FanParams::half_size, "fan", "m, box half extents");
+  def_field<FanParams, double>(fan, "radius", &FanParams::radius, "fan", "m, sphere radius");
+  def_vec3_field<FanParams>(fan, "direction", &FanParams::direction, "fan", "normalised on use");
+  def_field<FanParams, double>(fan, "force_density", &FanParams::force_density, "fan", "N/m^3");
+  def_field<FanParams, double>(fan, "max_speed", &FanParams::max_speed, "fan",
+                               "m/s: the force fades to 0 as the air reaches max_speed along direction; 0 = constant");
+  fan
+      .def_property(
+          "strength", [](const FanParams& f) { return f.strength.keys; },
+          [](FanParams& f, const std::vector<std::pair<double, double>>& k) {
+            FanParams copy = f;
+            copy.strength.keys = k;
+            copy.validate("fan");
+            f = copy;
+          },
+          "(time s, factor) keyframes; empty = always 1")
+      .def("validate", &FanParams::validate, py::arg("prefix") = "");
+
+  py::class_<Fluid>(m, "Fluid", R"doc(
+Stable Fluids (Stam 1999) on a staggered MAC grid: the air solver alone.
+
+Component arrays (views, m/s): u (x-faces), v (y-faces), w (z-faces). Periodic grids store
+nx x ny x nz of each; tunnel grids one more face along the component's own axis.
+Pressure: "fft" (FFTW, periodic only; divergence at round-off) or "pcg" (MIC(0)-preconditioned
+CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip walls.
+)doc")
+      .def(py::init([](const py::object& resolution, double cell_size, const py::object& origin,
+                       const std::string& boundary, double viscosity, double density,
+                       const std::string& advection, const std::string& pressure, const std::string& precision,
+                       double pcg_tolerance, int pcg_max_iterations, const py::object& wind,
+                       const std::vector<FanParams>& fans) {
+             FluidParams p;
+             auto res = py::array_t<long long, py::array::c_style | py::array::forcecast>::ensure(resolution);
+             if (!res || res.ndim() != 1 || res.shape(0) != 3)
+               fail_param("resolution", "3 cell counts (nx, ny, nz)", std::string(py::str(resolution)));
+             for (int d = 0; d < 3; ++d) {
+               const long long n = res.at(d);
+               p.resolution[d] = (n < -1000000 || n > 1000000) ? -1 : int(n);
+             }
+             p.cell_size = cell_size;
+             p.origin = to_vec3(origin, "origin");
+             p.boundary = boundary;
+             p.viscosity = viscosity;
+             p.density = density;
+             p.advection = advection;
+             p.pressure = pressure;
+             p.precision = precision;
+             p.pcg_tolerance = pcg_tolerance;
+             p.pcg_max_iterations = pcg_max_iterations;
+             p.wind = to_wind(wind);
+             p.fans = fans;
+             return std::make_unique<Fluid>(p);
+           }),
+           py::kw_only(), py::arg("resolution") = py::make_tuple(16, 16, 16), py::arg("cell_size") = 0.125,
+           py::arg("origin") = py::make_tuple(-0.5, -1.0, -1.0), py::arg("boundary") = "periodic",
+           py::arg("viscosity") = 1.5e-5, py::arg("density") = 1.2, py::arg("advection") = "semi_lagrangian",
+           py::arg("pressure") = FluidParams().pressure, py::arg("precision") = "double", py::arg("pcg_tolerance") = 1e-8,
+           py::arg("pcg_max_iterations") = 500, py::arg("wind") = py::none(),
+           py::arg("fans") = std::vector<FanParams>{},
+           "resolution (nx, ny, nz) cells; cell_size m; origin m (min corner); viscosity m^2/s; "
+           "density kg/m^3; wind: None, a 3-vector (m/s) or [(time s, (vx, vy, vz)), ...]: the "
+           "periodic mean flow or the tunnel inflow; fans: [FanParams, ...].")
+      .def(
+          "step",
+          [](Fluid& f, double dt, int n) {
+            check_positive("dt", dt);
+            if (n < 0) fail_param("n", ">= 0", n);
+            py::gil_scoped_release release;
+            for (int i = 0; i < n; ++i) f.step(dt);
+          },
+          py::arg("dt"), py::arg("n") = 1, "Advance the air n steps of dt seconds (GIL released).")
+      .def_property_readonly("time", &Fluid::time, "Simulated time, s.")
+      .def(
+          "set_velocity",
+          [](Fluid& f, const py::function& fn) {
+            for (int c = 0; c < 3; ++c) {
+              const MatX3 x = f.face_positions(c);
+              py::array pts = py::cast(x);
+              auto val = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(fn(pts));
+              if (!val || val.ndim() != 2 || val.shape(0) != x.rows() || val.shape(1) != 3)
+                fail_param("fn(points)", "an (M, 3) array for M = " + std::to_string(x.rows()) + " points",
+                           val ? "shape (" + std::to_string(val.shape(0)) + ", " +
+                                     (val.ndim() > 1 ? std::to_string(val.shape(1)) : std::string("")) + ")"
+                               : std::string("not an array"));
+              std::vector<double> col(std::size_t(x.rows()));
+              for (py::ssize_t r = 0; r < x.rows(); ++r) col[std::size_t(r)] = val.at(r, c);
+              f.set_component(c, col.data());
+            }
+          },
+          py::arg("fn"),
+          "Set the velocity from fn(points (M, 3) m) -> (M, 3) m/s, evaluated at the u, v and w "
+          "face positions (component c of fn's value goes to the c-faces).")
+      .def(
+          "sample",
+          [](const Fluid& f, const py::object& points) {
+            auto p = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(points);
+            if (!p || p.ndim() != 2 || p.shape(1) != 3)
+              fail_param("points", "an (M, 3) array", p ? "ndim " + std::to_string(p.ndim()) : "not an array");
+            py::array_t<double> out({p.shape(0), py::ssize_t(3)});
+            const double* src = p.data();
+            double* dst = out.mutable_data();
+            const long m = long(p.shape(0));
+            {
+              py::gil_scoped_release release;
+              f.sample(src, m, dst);
+            }
+            return out;
+          },
+          py::arg("points"),
+          "Trilinear air velocity (M, 3) m/s at points (M, 3) m. Points outside the domain take the "
+          "nearest boundary value and are counted in stats['samples_outside'].")
+      .def(
+          "divergence",
+          [](const Fluid& f) {
+            const GridGeometry& g = f.geometry();
+            py::array_t<double> out({g.nx, g.ny, g.nz});
+            f.divergence(out.mutable_data());
+            return out;
+          },
+          "Cell divergence (nx, ny, nz) of the current field, 1/s (after a step: after its projection).")
+      .def("max_divergence", &Fluid::max_divergence, "max |divergence|, 1/s.")
+      .def_property(
+          "u", [](py::object self) { return component_view(self, 0); },
+          [](Fluid& f, const py::object& a) { set_component_from(f, 0, a); }, "x-face velocities (view), m/s")
+      .def_property(
+          "v", [](py::object self) { return component_view(self, 1); },
+          [](Fluid& f, const py::object& a) { set_component_from(f, 1, a); }, "y-face velocities (view), m/s")
+      .def_property(
+          "w", [](py::object self) { return component_view(self, 2); },
+          [](Fluid& f, const py::object& a) { set_component_from(f, 2, a); }, "z-face velocities (view), m/s")
+      .def(
+          "face_positions", [](const Fluid& f, int c) {
+            if (c < 0 || c > 2) fail_param("component", "0, 1 or 2", c);
+            return f.face_positions(c);
+          },
+          py::arg("component"), "World positions (size, 3) of the u (0), v (1) or w (2) nodes, m.")
+      .def_property_readonly("resolution", [](const Fluid& f) {
+        const GridGeometry& g = f.geometry();
+        return py::make_tuple(g.nx, g.ny, g.nz);
+      })
+      .def_property_readonly("cell_size", [](const Fluid& f) { return f.geometry().h; })
+      .def_property_readonly("origin", [](const Fluid& f) { return f.geometry().origin; })
+      .def_property_readonly("boundary", [](const Fluid& f) { return f.params().boundary; })
+      .def_property_readonly("advection", [](const Fluid& f) { return f.params().advection; })
+      .def_property_readonly("pressure", [](const Fluid& f) { return f.params().pressure; })
+      .def_property_readonly("precision", [](const Fluid& f) { return f.params().precision; })
+      .def_property_readonly("viscosity", [](const Fluid& f) { return f.params().viscosity; })
+      .def_property_readonly("density", [](const Fluid& f) { return f.params().density; })
+      .def_property_readonly("wind", [](const Fluid& f) { return wind_to_list(f.params().wind); })
+      .def_property_readonly("stats", [](const Fluid& f) {
+        const FluidStats& s = f.stats();
+        py::dict d;
+        d["steps"] = s.steps;
+        d["pressure_iterations"] = s.pressure_iterations;
+        d["pressure_residual"] = s.pressure_residual;
+        d["pressure_converged"] = s.pressure_converged;
+        d["diffusion_iterations"] = s.diffusion_iterations;
+        d["samples_outside"] = s.samples_outside;
+        d["seconds_advect"] = s.seconds_advect;
+        d["seconds_forces"] = s.seconds_forces;
+        d["seconds_project"] = s.seconds_project;
+        return d;
+      })
+      .def("__repr__", [](const Fluid& f) {
+        const GridGeometry& g = f.geometry();
+        const FluidParams& p = f.params();
+        return "Fluid(resolution=(" + std::to_string(g.nx) + ", " + std::to_string(g.ny) + ", " +
+               std::to_string(g.nz) + "), cell_size=" + detail::to_text(g.h) + ", boundary='" + p.boundary +
+               "', advection='" + p.advection + "', pressure='" + p.pressure + "', precision='" + p.precision +
+               "', time=" + detail::to_text(f.time()) + ")";
+      });
+}
+
 }  // namespace flagsim::bindings

@@ -4,6 +4,7 @@
 #include <pybind11/stl.h>
 
 #include "bindings/fields.h"
+#include "bindings/fluid_fields.h"
 #include "common/errors.h"
 #include "scene/scene.h"
 #include "scene/simulation.h"
@@ -99,6 +100,7 @@ void bind_scene(py::module_& m) {
   def_field<AirParams, double>(air, "density", &AirParams::density, "air", "kg/m^3");
   def_field<AirParams, double>(air, "viscosity", &AirParams::viscosity, "air",
                                "m^2/s, kinematic ('grid'; 0 = no diffusion)");
+  def_fluid_fields(air, "air");
 
   py::class_<Scene> scene(m, "Scene", R"doc(Everything a Simulation needs, in SI units.
 
@@ -245,9 +247,14 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
         d["cg_iterations"] = st.cg_iterations;
         d["halvings"] = st.halvings;
         d["stable_step"] = st.stable_step;
+        d["air_samples_outside"] = s.air_outside_last_step();
         return d;
       },
       "integrator statistics of the last step");
+  sim.def_property_readonly(
+      "fluid", [](Simulation& s) { return s.fluid(); }, py::return_value_policy::reference_internal,
+      "the air grid (flagsim.Fluid) when the scene uses one (air.model 'grid'), else None; "
+      "stats['samples_outside'] counts masses that sampled it from outside its domain");
   sim.def(
       "air_velocity",
       [](const Simulation& s, const py::array_t<double, py::array::c_style | py::array::forcecast>& pts) {

@@ -21,14 +21,12 @@ inline Vec3 spring_force(const Vec3& d, double k, double L) {
 
 void add_gravity(const ClothTopology& topo, const Vec3& g, MatX3& f) {
   const Index n = topo.num_vertices();
-#pragma omp parallel for schedule(static) if (n >= kParallelGrain)
-  for (Index i = 0; i < n; ++i) f.row(i) += topo.mass[i] * g.transpose();
+  parallel_for(n, [&](Index i) { f.row(i) += topo.mass[i] * g.transpose(); });
 }
 
 void add_spring_forces(const ClothTopology& topo, const MatX3& x, const MatX3& v, MatX3& f) {
   const Index n = topo.num_vertices();
-#pragma omp parallel for schedule(static) if (n >= kParallelGrain)
-  for (Index i = 0; i < n; ++i) {
+  parallel_for(n, [&](Index i) {
     Vec3 fi = Vec3::Zero();
     const Vec3 xi = x.row(i), vi = v.row(i);
     for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k) {
@@ -37,7 +35,7 @@ void add_spring_forces(const ClothTopology& topo, const MatX3& x, const MatX3& v
       fi += topo.damping[s] * (Vec3(v.row(j)) - vi);
     }
     f.row(i) += fi;
-  }
+  });
 }
 
 namespace {
@@ -61,21 +59,18 @@ void add_drag(const ClothTopology& topo, const DragParams& drag, double rho, con
   const double c = 0.5 * drag.coefficient * rho;
   if (drag.model == "paper") {
     // eq. 3: D = 1/2 C_D rho S (|u| u - |v| v)
-#pragma omp parallel for schedule(static) if (n >= kParallelGrain)
-    for (Index i = 0; i < n; ++i) {
+    parallel_for(n, [&](Index i) {
       const Vec3 ui = u.row(i), vi = v.row(i);
       f.row(i) += c * topo.area[i] * (ui.norm() * ui - vi.norm() * vi);
-    }
+    });
   } else if (drag.model == "relative") {
-#pragma omp parallel for schedule(static) if (n >= kParallelGrain)
-    for (Index i = 0; i < n; ++i) {
+    parallel_for(n, [&](Index i) {
       const Vec3 w = Vec3(u.row(i)) - Vec3(v.row(i));
       f.row(i) += c * topo.area[i] * w.norm() * w;
-    }
+    });
   } else {  // "triangle": flat plate, F = 1/2 rho A (C_D |w.n| (w.n) n + C_T |w_t| w_t)
     const double ct = 0.5 * drag.tangential_coefficient * rho;
-#pragma omp parallel for schedule(static) if (n >= kParallelGrain)
-    for (Index i = 0; i < n; ++i) {
+    parallel_for(n, [&](Index i) {
       Vec3 fi = Vec3::Zero();
       for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k) {
         Vec3 w, nn;
@@ -86,7 +81,7 @@ void add_drag(const ClothTopology& topo, const DragParams& drag, double rho, con
         fi += (A / 3.0) * (c * std::abs(wn) * wn * nn + ct * wt.norm() * wt);
       }
       f.row(i) += fi;
-    }
+    });
   }
 }
 
@@ -94,20 +89,19 @@ void spring_position_jacobians(const ClothTopology& topo, const MatX3& x, bool c
                                std::vector<Mat3>& K) {
   const Index S = topo.num_springs();
   K.resize(S);
-#pragma omp parallel for schedule(static) if (S >= kParallelGrain)
-  for (Index s = 0; s < S; ++s) {
+  parallel_for(S, [&](Index s) {
     const Vec3 d = x.row(topo.springs(s, 1)) - x.row(topo.springs(s, 0));
     const double l = d.norm(), k = topo.stiffness[s], L = topo.rest_length[s];
     if (l < kTinyLength) {
       K[s] = (L == 0.0 ? k : 0.0) * Mat3::Identity();
-      continue;
+      return;
     }
     const Vec3 e = d / l;
     const Mat3 P = e * e.transpose();
     double a = 1.0 - L / l;
     if (clamp_compression && a < 0) a = 0;
     K[s] = k * (a * (Mat3::Identity() - P) + P);
-  }
+  });
 }
 
 void drag_velocity_jacobians(const ClothTopology& topo, const DragParams& drag, double rho,
@@ -155,22 +149,20 @@ void apply_position_jacobian(const ClothTopology& topo, const std::vector<Mat3>&
                              MatX3& out) {
   const Index n = topo.num_vertices();
   out.resize(n, 3);
-#pragma omp parallel for schedule(static) if (n >= kParallelGrain)
-  for (Index i = 0; i < n; ++i) {
+  parallel_for(n, [&](Index i) {
     Vec3 acc = Vec3::Zero();
     const Vec3 pi = p.row(i);
     for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k)
       acc += K[topo.adj_spring[k]] * (Vec3(p.row(topo.adj_other[k])) - pi);
     out.row(i) = acc;
-  }
+  });
 }
 
 void apply_velocity_jacobian(const ClothTopology& topo, const std::vector<Mat3>& Dv,
                              const std::vector<Mat3>& Jw, const MatX3& p, MatX3& out) {
   const Index n = topo.num_vertices();
   out.resize(n, 3);
-#pragma omp parallel for schedule(static) if (n >= kParallelGrain)
-  for (Index i = 0; i < n; ++i) {
+  parallel_for(n, [&](Index i) {
     const Vec3 pi = p.row(i);
     Vec3 acc = Vec3::Zero();
     for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k)
@@ -183,7 +175,7 @@ void apply_velocity_jacobian(const ClothTopology& topo, const std::vector<Mat3>&
         acc -= Jw[t] * sum / 9.0;
       }
     out.row(i) = acc;
-  }
+  });
 }
 
 double stable_step_estimate(const ClothTopology& topo, const DragParams& drag, double rho,

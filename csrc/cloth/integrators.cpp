@@ -66,11 +66,10 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
     }
     compute_forces(topo, fs, x, v, u, s.f, t);
     // symplectic Euler: v <- v + h M^-1 f(x, v); x <- x + h v
-#pragma omp parallel for schedule(static) if (N >= kParallelGrain)
-    for (Index i = 0; i < N; ++i) {
+    parallel_for(N, [&](Index i) {
       v.row(i) += (hs * topo.inv_mass[i]) * s.f.row(i);
       x.row(i) += hs * v.row(i);
-    }
+    });
     if (ip.strain_limit > 0) {
       ScopedTimer timer(t ? t->strain_limit : s.unused_timer);
       limit_strain(topo, ip.strain_limit, ip.strain_limit_iterations, hs, x, v);
@@ -88,14 +87,13 @@ void apply_system(const ClothTopology& topo, double h, IntegratorScratch& s, con
   apply_position_jacobian(topo, s.K, p, s.tmp);
   apply_velocity_jacobian(topo, s.Dv, s.Jw, p, out);
   const Index N = topo.num_vertices();
-#pragma omp parallel for schedule(static) if (N >= kParallelGrain)
-  for (Index i = 0; i < N; ++i) {
+  parallel_for(N, [&](Index i) {
     if (topo.inv_mass[i] == 0.0) {
       out.row(i).setZero();
-      continue;
+      return;
     }
     out.row(i) = topo.mass[i] * p.row(i) - h * out.row(i) - (h * h) * s.tmp.row(i);
-  }
+  });
 }
 
 // One linearised backward Euler step (Baraff-Witkin eq. 16):
@@ -126,8 +124,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   if (!fs.springs) {
     for (auto& k : s.K) k.setZero();
   }
-#pragma omp parallel for schedule(static) if (N >= kParallelGrain)
-  for (Index i = 0; i < N; ++i) {
+  parallel_for(N, [&](Index i) {
     Mat3 D = topo.mass[i] * Mat3::Identity() + h * s.Dv[i];
     for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k) {
       const int32_t sp = topo.adj_spring[k];
@@ -137,7 +134,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
       for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k)
         D += (h / 9.0) * s.Jw[topo.tri_adj[k]];
     s.Pinv[i] = D.inverse();
-  }
+  });
 
   // PCG warm-started from the previous step's dv.
   filter_pinned(topo, s.dv);
@@ -177,11 +174,10 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     stats.cg_iterations += it;
     if (!converged) return IntegrateStatus::kCgFailed;
   }
-#pragma omp parallel for schedule(static) if (N >= kParallelGrain)
-  for (Index i = 0; i < N; ++i) {
+  parallel_for(N, [&](Index i) {
     v.row(i) += s.dv.row(i);
     x.row(i) += h * v.row(i);
-  }
+  });
   if (ip.strain_limit > 0) {
     ScopedTimer timer(t ? t->strain_limit : s.unused_timer);
     limit_strain(topo, ip.strain_limit, ip.strain_limit_iterations, h, x, v);

@@ -9,6 +9,22 @@ namespace flagsim {
 /// more than the loop (and a loaded machine makes spinning threads far worse).
 constexpr Index kParallelGrain = 4096;
 
+/// body(i) for every i in [0, n): split over the OpenMP team when n >= kParallelGrain, else a
+/// plain loop on the calling thread. Use this instead of `#pragma omp parallel for if (small)`:
+/// libgomp builds a one-thread team for a region whose if clause is false, and that team is
+/// heap-allocated and freed on every call (no allocation may happen inside a step).
+template <class Body>
+inline void parallel_for(Index n, const Body& body) {
+#ifdef _OPENMP
+  if (n >= kParallelGrain) {
+#pragma omp parallel for schedule(static)
+    for (Index i = 0; i < n; ++i) body(i);
+    return;
+  }
+#endif
+  for (Index i = 0; i < n; ++i) body(i);
+}
+
 /// Number of threads flagsim's loops use (default: OpenMP's default, usually all cores).
 int num_threads();
 /// Set the thread count for flagsim's loops; n >= 1. Throws InvalidArgument otherwise.

@@ -1,22 +1,83 @@
 #include "fluid/params.h"
 
+#include <cmath>
+
 #include "common/errors.h"
 
 namespace flagsim {
 
-void FanParams::validate(const std::string& p) const {
-  if (shape != "box" && shape != "sphere") fail_param(p + ".shape", "one of 'box', 'sphere'", "'" + shape + "'");
-  check_finite_vec(p + ".center", center);
-  check_finite_vec(p + ".half_size", half_size);
-  check_positive(p + ".radius", radius);
-  check_finite_vec(p + ".direction", direction);
-  check_finite(p + ".force_density", force_density);
-  strength.validate(p + ".strength");
+namespace {
+
+std::string join(const std::string& prefix, const std::string& field) {
+  return prefix.empty() ? field : prefix + "." + field;
 }
 
-void FluidParams::validate(const std::string& p) const {
-  throw InvalidArgument(p + ".model 'grid' is not available yet (the air solver is being built)");
-  (void)p;
+std::string quoted(const std::string& s) { return "\"" + s + "\""; }
+
+void check_choice(const std::string& name, const std::string& got,
+                  std::initializer_list<const char*> choices) {
+  std::string expected;
+  for (const char* c : choices) {
+    if (got == c) return;
+    expected += (expected.empty() ? "one of " : ", ") + quoted(c);
+  }
+  fail_param(name, expected, quoted(got));
+}
+
+}  // namespace
+
+void FanParams::validate(const std::string& prefix) const {
+  check_choice(join(prefix, "shape"), shape, {"box", "sphere"});
+  check_finite_vec(join(prefix, "center"), center);
+  for (int d = 0; d < 3; ++d)
+    if (!(std::isfinite(half_size[d]) && half_size[d] > 0))
+      fail_param(join(prefix, "half_size"), "finite and > 0 in every component",
+                 detail::to_text(half_size.transpose()));
+  check_positive(join(prefix, "radius"), radius);
+  check_finite_vec(join(prefix, "direction"), direction);
+  if (!(direction.norm() > 0)) fail_param(join(prefix, "direction"), "a non-zero vector", "(0 0 0)");
+  check_finite(join(prefix, "force_density"), force_density);
+  check_nonnegative(join(prefix, "max_speed"), max_speed);
+  strength.validate(join(prefix, "strength"));
+}
+
+void FluidParams::validate(const std::string& prefix) const {
+  const std::string res = join(prefix, "resolution");
+  long long cells = 1;
+  for (int d = 0; d < 3; ++d) {
+    if (resolution[d] < 1 || resolution[d] > 4096)
+      fail_param(res, "3 cell counts in [1, 4096]",
+                 std::to_string(resolution[0]) + " x " + std::to_string(resolution[1]) + " x " +
+                     std::to_string(resolution[2]));
+    cells *= resolution[d];
+  }
+  if (cells > (1LL << 28)) fail_param(res, "at most 2^28 cells in all", cells);
+  check_positive(join(prefix, "cell_size"), cell_size);
+  check_finite_vec(join(prefix, "origin"), origin);
+  check_choice(join(prefix, "boundary"), boundary, {"periodic", "tunnel"});
+  check_choice(join(prefix, "advection"), advection, {"semi_lagrangian", "maccormack"});
+  check_choice(join(prefix, "pressure"), pressure, {"fft", "pcg"});
+  check_choice(join(prefix, "precision"), precision, {"double", "float"});
+  check_nonnegative(join(prefix, "viscosity"), viscosity);
+  check_positive(join(prefix, "density"), density);
+  if (!(std::isfinite(pcg_tolerance) && pcg_tolerance > 0 && pcg_tolerance < 1))
+    fail_param(join(prefix, "pcg_tolerance"), "in (0, 1)", pcg_tolerance);
+  if (pcg_max_iterations < 1) fail_param(join(prefix, "pcg_max_iterations"), ">= 1", pcg_max_iterations);
+  wind.validate(join(prefix, "wind"));
+  for (size_t i = 0; i < fans.size(); ++i) fans[i].validate(join(prefix, "fans[" + std::to_string(i) + "]"));
+}
+
+void FluidParams::validate_combination(const std::string& prefix) const {
+  if (pressure == "fft" && boundary != "periodic")
+    fail_param(join(prefix, "pressure"),
+               "\"pcg\" with boundary " + quoted(boundary) + " (fft needs a periodic domain)",
+               quoted(pressure));
+#ifndef FLAGSIM_HAVE_FFTW
+  if (pressure == "fft")
+    throw MissingFeature(join(prefix, "pressure") +
+                         " should be \"pcg\": this flagsim was built without FFTW "
+                         "(FLAGSIM_WITH_FFTW=OFF), got \"fft\"");
+#endif
 }
 
 }  // namespace flagsim

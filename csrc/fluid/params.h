@@ -17,25 +17,42 @@ struct FanParams {
   double radius = 0.25;                 ///< m (shape "sphere")
   Vec3 direction{1, 0, 0};              ///< normalised on use
   double force_density = 20.0;          ///< N/m^3
+  /// m/s, fan curve: along each axis the force fades linearly to 0 as the air reaches
+  /// max_speed * direction (a fan pushes no faster than it blows); 0 = constant force.
+  double max_speed = 0.0;
   ScalarSchedule strength;              ///< (time s, factor) keyframes; empty = always 1
+  /// Throws InvalidArgument naming "<prefix>.<field>" (e.g. "air.fans[0].radius").
   void validate(const std::string& prefix) const;
 };
 
+/// Stable Fluids (Stam 1999) on a staggered MAC grid; see csrc/fluid/fluid.h for the layout.
+/// Periodic boundary: the mean flow (k = 0 mode) follows `wind` when it has keys (gusts are its
+/// keyframes) and is left free otherwise. Tunnel: inflow `wind` through the x-min face,
+/// zero-pressure outflow at x-max, free-slip walls on the y and z faces.
 struct FluidParams {
   std::array<int, 3> resolution{16, 16, 16};  ///< cells nx, ny, nz
   double cell_size = 0.125;                   ///< m
   Vec3 origin{-0.5, -1.0, -1.0};              ///< m, min corner of the domain
   std::string boundary = "periodic";          ///< "periodic" | "tunnel"
   std::string advection = "semi_lagrangian";  ///< "semi_lagrangian" | "maccormack"
-  std::string pressure = "fft";               ///< "fft" (periodic only) | "pcg"
+#ifdef FLAGSIM_HAVE_FFTW
+  std::string pressure = "fft";               ///< "fft" (periodic only, FFTW) | "pcg"
+#else
+  std::string pressure = "pcg";               ///< "fft" (periodic only, FFTW: not in this build) | "pcg"
+#endif
   std::string precision = "double";           ///< "double" | "float"
   double viscosity = 1.5e-5;                  ///< m^2/s, kinematic; 0 = no diffusion stage
   double density = 1.2;                       ///< kg/m^3
   double pcg_tolerance = 1e-8;                ///< relative residual
-  int pcg_max_iterations = 500;
+  int pcg_max_iterations = 500;               ///< per solve (pressure and each diffusion solve)
   WindSchedule wind;        ///< periodic: mean flow (k = 0 mode); tunnel: inflow velocity
   std::vector<FanParams> fans;
+  /// Each field on its own: throws InvalidArgument naming "<prefix>.<field>" ("resolution" when
+  /// prefix is empty). Field setters run this, so fields can be set in any order.
   void validate(const std::string& prefix) const;
+  /// The fields together: pressure "fft" needs boundary "periodic", and FFTW in this build
+  /// (MissingFeature otherwise). Run by Scene::validate and by Fluid's constructor.
+  void validate_combination(const std::string& prefix) const;
 };
 
 }  // namespace flagsim

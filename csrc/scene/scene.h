@@ -35,7 +35,8 @@ struct Scene {
   /// Throws InvalidArgument naming the first bad parameter ("flag.rows should be >= 2, got 1").
   void validate() const;
 
-  /// Paper §5: flag of 8 x 11 masses, 0.54 m tall, dt = 0.01 s, air about 2 m/s along +x.
+  /// Paper §5: flag of 8 x 11 masses, 0.54 m tall, dt = 0.01 s, air about 2 m/s along +x on a
+  /// 16^3 Stable Fluids grid, made non-uniform by a fan region upstream of the flag.
   static Scene paper();
   /// A banner hanging from its top edge in a horizontal wind along +z (equilibrium-angle check).
   static Scene banner();

@@ -11,6 +11,7 @@ namespace flagsim {
 const char* Simulation::stage_name(Stage s) {
   switch (s) {
     case kWind: return "wind";
+    case kFluid: return "fluid";
     case kGravity: return "gravity";
     case kDrag: return "drag";
     case kSprings: return "springs";
@@ -50,6 +51,8 @@ Simulation::Simulation(const Scene& scene)
   forces_.drag_params = scene_.drag;
   forces_.rho = scene_.air.density;
   built_[kWind] = forces_.drag && scene_.air.model == "uniform";
+  built_[kFluid] = forces_.drag && scene_.air.model == "grid";
+  if (built_[kFluid]) build_fluid();
   built_[kGravity] = forces_.gravity;
   built_[kDrag] = forces_.drag;
   built_[kSprings] = forces_.springs;
@@ -60,6 +63,23 @@ Simulation::Simulation(const Scene& scene)
     if (built_[s]) stage_names_.emplace_back(stage_name(Stage(s)));
   n_.resize(N, 3);
   update_normals();
+}
+
+// The air grid (paper §2): one-way coupling, so it only needs the flag to start inside it.
+void Simulation::build_fluid() {
+  const AirParams& a = scene_.air;
+  const Vec3 lo = a.origin, hi = a.origin + a.cell_size * Vec3(a.resolution[0], a.resolution[1], a.resolution[2]);
+  for (Index i = 0; i < x_.rows(); ++i) {
+    const Vec3 p = x_.row(i).transpose();
+    if ((p.array() < lo.array()).any() || (p.array() > hi.array()).any()) {
+      std::ostringstream s;
+      s << "flag.origin should place the flag inside the air grid [" << lo.x() << ", " << hi.x() << "] x ["
+        << lo.y() << ", " << hi.y() << "] x [" << lo.z() << ", " << hi.z() << "] m (air.origin, air.resolution, "
+        << "air.cell_size), got vertex " << i << " at (" << p.x() << ", " << p.y() << ", " << p.z() << ")";
+      throw InvalidArgument(s.str());
+    }
+  }
+  fluid_ = std::make_unique<Fluid>(static_cast<const FluidParams&>(a), "air");
 }
 
 void Simulation::update_normals() { compute_vertex_normals(topo_, x_, n_); }
@@ -76,16 +96,31 @@ void Simulation::step_once() {
   stage_air();
   stage_integrate();  // includes strain limiting after every substep, timed as its own stage
   stage_check();
+  advance_fluid();  // after the check: a rolled-back step leaves the air as it was
   ++step_count_;
   time_ = double(step_count_) * scene_.dt;  // no drift from summing dt
   update_normals();
 }
 
+// Air at every mass for this step's start time: the wind schedule (analytic), or the grid
+// sampled trilinearly (the grid then advances in advance_fluid). The flag never pushes the air.
 void Simulation::stage_air() {
-  if (!built_[kWind]) return;
-  ScopedTimer t(seconds_[kWind]);
-  const Vec3 w = scene_.air.wind.at(time_);
-  u_.rowwise() = w.transpose();
+  if (built_[kWind]) {
+    ScopedTimer t(seconds_[kWind]);
+    const Vec3 w = scene_.air.wind.at(time_);
+    u_.rowwise() = w.transpose();
+  }
+  if (built_[kFluid]) {
+    ScopedTimer t(seconds_[kFluid]);
+    air_outside_last_ = fluid_->sample(x_, u_);
+    air_outside_total_ += air_outside_last_;
+  }
+}
+
+void Simulation::advance_fluid() {
+  if (!built_[kFluid]) return;
+  ScopedTimer t(seconds_[kFluid]);
+  fluid_->step(scene_.dt);
 }
 
 void Simulation::stage_integrate() {
@@ -175,6 +210,10 @@ void Simulation::air_velocity(const MatX3& points, MatX3& out) const {
   out.resize(points.rows(), 3);
   if (scene_.air.model == "none") {
     out.setZero();
+    return;
+  }
+  if (fluid_) {
+    fluid_->sample(points, out);
     return;
   }
   out.rowwise() = scene_.air.wind.at(time_).transpose();

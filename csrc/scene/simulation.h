@@ -1,6 +1,7 @@
 // The pipeline: a Scene built into the stages it needs, stepped as the paper's method reads.
 #pragma once
 #include <array>
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
@@ -8,6 +9,7 @@
 #include "cloth/forces.h"
 #include "cloth/integrators.h"
 #include "cloth/topology.h"
+#include "fluid/fluid.h"
 #include "scene/scene.h"
 
 namespace flagsim {
@@ -48,15 +50,25 @@ class Simulation {
   /// Air velocity at world points (M x 3) at the current time into out (M x 3).
   void air_velocity(const MatX3& points, MatX3& out) const;
 
+  /// The air grid (air.model "grid" with drag built), or nullptr: the air is analytic or absent.
+  Fluid* fluid() { return fluid_.get(); }
+  const Fluid* fluid() const { return fluid_.get(); }
+  /// Masses that sampled the air grid from outside its domain (nearest boundary value used):
+  /// in the last step, and since construction.
+  long air_outside_last_step() const { return air_outside_last_; }
+  long air_outside_total() const { return air_outside_total_; }
+
   /// Recompute normals after positions were edited from outside.
   void update_normals();
 
  private:
-  enum Stage { kWind, kGravity, kDrag, kSprings, kIntegrate, kStrainLimit, kCheck, kNumStages };
+  enum Stage { kWind, kFluid, kGravity, kDrag, kSprings, kIntegrate, kStrainLimit, kCheck, kNumStages };
   static const char* stage_name(Stage s);
 
   void step_once();
   void stage_air();
+  void advance_fluid();
+  void build_fluid();
   void stage_integrate();
   void stage_check();
   [[noreturn]] void diverge(const std::string& cause, long vertex, const std::string& detail);
@@ -74,6 +86,8 @@ class Simulation {
   std::array<double, kNumStages> seconds_{};
   ForceTimings force_seconds_;
   std::vector<std::string> stage_names_;
+  std::unique_ptr<Fluid> fluid_;  // the air grid, when the scene needs one
+  long air_outside_last_ = 0, air_outside_total_ = 0;
 };
 
 }  // namespace flagsim

@@ -34,7 +34,7 @@ Scene = _core.Scene
 
 # Fields that hold lists of parameter structs: (owner type, field) -> item type. Areas register
 # theirs here (e.g. air.fans), so TOML arrays of tables map onto them.
-LIST_ITEM_TYPES: dict[tuple[type, str], type] = {}
+LIST_ITEM_TYPES: dict[tuple[type, str], type] = {(_core.AirParams, "fans"): _core.FanParams}
 
 
 def fields(obj_or_type: Any) -> list[str]:
@@ -176,7 +176,8 @@ def _install() -> None:
     Scene.to_dict = to_dict
     Scene.__reduce__ = lambda self: (from_dict, (to_dict(self),))
     for cls in (Scene, _core.FlagParams, _core.AirParams, _core.DragParams, _core.IntegratorParams,
-                _core.FlappingParams, _core.SelfCollisionParams, _core.PoleParams):
+                _core.FanParams, _core.FlappingParams, _core.SelfCollisionParams,
+                _core.PoleParams):
         cls.__repr__ = _repr
 
 

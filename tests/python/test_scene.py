@@ -64,6 +64,7 @@ def test_wind_accepts_constant_or_keyframes_and_reads_back_keyframes():
 
 def test_wind_keyframes_are_interpolated_in_time():
     s = flagsim.Scene.paper()
+    s.air.model = "uniform"
     s.air.wind = [(0.0, (0.0, 0.0, 0.0)), (1.0, (4.0, 0.0, 0.0))]
     sim = flagsim.Simulation(s)
     sim.step(25)

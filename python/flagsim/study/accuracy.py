@@ -23,7 +23,7 @@ import numpy as np
 import flagsim
 
 COLUMNS = ["id", "part", "method", "dt", "resolution", "advection", "pressure", "tolerance",
-           "substeps", "steps", "error", "seconds_per_step", "steps_per_second", "state"]
+           "refinement", "steps", "error", "seconds_per_step", "steps_per_second", "state"]
 
 METHODS = ("implicit", "explicit_adaptive", "explicit_sub8")
 

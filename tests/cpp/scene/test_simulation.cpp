@@ -52,14 +52,15 @@ TEST(Simulation, BuildsOnlyTheStagesTheSceneNeeds) {
   {
     Simulation sim(s);
     const auto& st = sim.stages();
-    for (const char* name : {"wind", "gravity", "drag", "springs", "integrate", "check"})
+    for (const char* name : {"fluid", "gravity", "drag", "springs", "integrate", "check"})
       EXPECT_NE(std::find(st.begin(), st.end(), name), st.end()) << name;
+    EXPECT_EQ(std::find(st.begin(), st.end(), "wind"), st.end());  // the paper's air is a grid
   }
   s.gravity = Vec3::Zero();
   s.air.model = "none";
   Simulation sim(s);
   const auto& st = sim.stages();
-  for (const char* name : {"wind", "gravity", "drag"})
+  for (const char* name : {"wind", "fluid", "gravity", "drag"})
     EXPECT_EQ(std::find(st.begin(), st.end(), name), st.end()) << name;
   sim.step(10);
   for (const auto& [name, secs] : sim.timings()) EXPECT_GE(secs, 0.0) << name;

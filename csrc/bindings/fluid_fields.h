@@ -1,0 +1,16 @@
+// Binds the FluidParams fields of a parameter struct deriving from FluidParams (AirParams) as
+// validated Python properties: section.resolution, .cell_size, .origin, .boundary, .advection,
+// .pressure, .precision, .pcg_tolerance, .pcg_max_iterations, .fans. (wind, density and viscosity
+// are bound by the owner.) Defined in bind_fluid.cpp.
+#pragma once
+#include <pybind11/pybind11.h>
+
+#include <string>
+
+namespace flagsim {
+struct AirParams;
+}
+
+namespace flagsim::bindings {
+void def_fluid_fields(pybind11::class_<AirParams>& cls, const std::string& section);
+}  // namespace flagsim::bindings

@@ -1,0 +1,483 @@
+#include "fluid/advect.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace flagsim {
+
+namespace {
+
+/// floor for |q| < 2^31 without a libm call (std::floor is one unless SSE4.1 is enabled).
+inline int ifloor(double q) {
+  const int i = int(q);
+  return i - (q < i);
+}
+
+/// Grid-node pair (i0, i1) and weight f of coordinate q (node units) along an axis of n nodes.
+struct Axis {
+  int i0, i1;
+  double f;
+};
+
+inline Axis locate(double q, int n, bool periodic) {
+  if (periodic) {
+    q = q > -1e9 ? (q < 1e9 ? q : 1e9) : -1e9;  // NaN or absurd departure: stay in range
+    int i = ifloor(q);
+    const double f = q - i;
+    if (unsigned(i) >= unsigned(n)) {
+      i %= n;
+      if (i < 0) i += n;
+    }
+    return {i, i + 1 == n ? 0 : i + 1, f};
+  }
+  if (!(q > 0)) return {0, 0, 0.0};  // also catches NaN
+  if (q >= n - 1) return {n - 1, n - 1, 0.0};
+  const int i0 = int(q);
+  return {i0, i0 + 1, q - i0};
+}
+
+template <class T>
+inline T lerp(T a, T b, double f) {
+  return T(a + f * (b - a));
+}
+
+/// Trilinear interpolation of one component array (shape sh, staggering offset off) at a point p
+/// in cell units. Uses a + f (b - a) so that a uniform field is reproduced exactly.
+template <class T>
+struct Interpolator {
+  const T* q;
+  int n0, n1, n2;
+  double o0, o1, o2;
+  bool periodic;
+
+  Interpolator(const MacGrid<T>& g, int c)
+      : q(g.comp[c].data()),
+        n0(g.shape[c].n[0]),
+        n1(g.shape[c].n[1]),
+        n2(g.shape[c].n[2]),
+        o0(GridGeometry::offset(c, 0)),
+        o1(GridGeometry::offset(c, 1)),
+        o2(GridGeometry::offset(c, 2)),
+        periodic(g.geo.periodic) {}
+
+  struct Corners {
+    std::size_t r00, r01, r10, r11;
+    int k0, k1;
+    double fx, fy, fz;
+  };
+
+  inline Corners corners(double px, double py, double pz) const {
+    const Axis x = locate(px - o0, n0, periodic);
+    const Axis y = locate(py - o1, n1, periodic);
+    const Axis z = locate(pz - o2, n2, periodic);
+    return {(std::size_t(x.i0) * n1 + y.i0) * n2, (std::size_t(x.i0) * n1 + y.i1) * n2,
+            (std::size_t(x.i1) * n1 + y.i0) * n2, (std::size_t(x.i1) * n1 + y.i1) * n2,
+            z.i0, z.i1, x.f, y.f, z.f};
+  }
+
+  inline T operator()(const Corners& c) const {
+    const T c00 = lerp(q[c.r00 + c.k0], q[c.r00 + c.k1], c.fz);
+    const T c01 = lerp(q[c.r01 + c.k0], q[c.r01 + c.k1], c.fz);
+    const T c10 = lerp(q[c.r10 + c.k0], q[c.r10 + c.k1], c.fz);
+    const T c11 = lerp(q[c.r11 + c.k0], q[c.r11 + c.k1], c.fz);
+    return lerp(lerp(c00, c01, c.fy), lerp(c10, c11, c.fy), c.fx);
+  }
+  inline T operator()(double px, double py, double pz) const { return (*this)(corners(px, py, pz)); }
+
+  /// Extrema of the 8 nodes of an interpolation (Selle et al. 2008 §4 limiter).
+  inline void extrema(const Corners& c, T& lo, T& hi) const {
+    const T v[8] = {q[c.r00 + c.k0], q[c.r00 + c.k1], q[c.r01 + c.k0], q[c.r01 + c.k1],
+                    q[c.r10 + c.k0], q[c.r10 + c.k1], q[c.r11 + c.k0], q[c.r11 + c.k1]};
+    lo = hi = v[0];
+    for (int a = 1; a < 8; ++a) {
+      lo = std::min(lo, v[a]);
+      hi = std::max(hi, v[a]);
+    }
+  }
+};
+
+/// Node index along an axis of n nodes: wrapped (periodic) or clamped to [0, n-1].
+inline int node(int i, int n, bool periodic) {
+  if (periodic) return i < 0 ? i + n : (i >= n ? i - n : i);
+  return i < 0 ? 0 : (i >= n ? n - 1 : i);
+}
+
+/// Velocity at the nodes of one row (i, j, k = 0..n2-1) of component c: its own value, and for
+/// each other component e the mean of the 4 e-nodes around the node (= trilinear interpolation
+/// there: all weights 1/2). Along c the e-nodes sit half a cell either side, along e on the
+/// faces either side. Each of the 4 nodes is a row pointer plus a k shift of -1, 0 or +1.
+template <class T>
+struct RowVelocity {
+  const T* own;
+  const T* rows[2][4];
+  int shift[2][4];
+  int comp[2];
+  int n2e[2];
+  bool periodic;
+
+  RowVelocity(const MacGrid<T>& g, int c, int i, int j) {
+    periodic = g.geo.periodic;
+    own = g.comp[c].data() + g.shape[c].index(i, j, 0);
+    int slot = 0;
+    for (int e = 0; e < 3; ++e) {
+      if (e == c) continue;
+      const Shape3& sh = g.shape[e];
+      comp[slot] = e;
+      n2e[slot] = sh.n[2];
+      int q = 0;
+      for (int a = 0; a < 2; ++a)    // along c: ijk[c] - 1 + a
+        for (int b = 0; b < 2; ++b) {  // along e: ijk[e] + b
+          int idx[3] = {i, j, 0};
+          int dk = 0;
+          if (c == 2) dk += a - 1; else idx[c] = node(idx[c] - 1 + a, sh.n[c], periodic);
+          if (e == 2) dk += b; else idx[e] = node(idx[e] + b, sh.n[e], periodic);
+          rows[slot][q] = g.comp[e].data() + sh.index(idx[0], idx[1], 0);
+          shift[slot][q] = dk;
+          ++q;
+        }
+      ++slot;
+    }
+  }
+
+  /// Range [1, k_end) of k where every k + shift lies inside the e-rows (no wrap or clamp).
+  int interior_end() const { return std::min(n2e[0], n2e[1]) - 1; }
+
+  inline void at(int k, double vel[3]) const {
+    for (int s = 0; s < 2; ++s) {
+      const int n = n2e[s];
+      double sum = 0;
+      for (int q = 0; q < 4; ++q) {
+        const int kk = node(k + shift[s][q], n, periodic);
+        sum += rows[s][q][kk];
+      }
+      vel[comp[s]] = 0.25 * sum;
+    }
+  }
+  inline void at_interior(int k, double vel[3]) const {
+    for (int s = 0; s < 2; ++s) {
+      double sum = 0;
+      for (int q = 0; q < 4; ++q) sum += rows[s][q][k + shift[s][q]];
+      vel[comp[s]] = 0.25 * sum;
+    }
+  }
+  inline void velocity(int k, int k_end, double vel[3]) const {
+    if (k >= 1 && k < k_end)
+      at_interior(k, vel);
+    else
+      at(k, vel);
+  }
+};
+
+inline bool upstream_of_inflow(const GridGeometry& geo, double px) { return !geo.periodic && px < 0; }
+
+/// Runs row(c, i, j, index of (i, j, 0)) over every row of every component, in parallel.
+template <class T, class F>
+void for_each_row(const MacGrid<T>& g, F&& row) {
+  for (int c = 0; c < 3; ++c) {
+    const Shape3 sh = g.shape[c];
+    const long rows = long(sh.n[0]) * sh.n[1];
+#pragma omp parallel for schedule(static) if (sh.size() > 16384)
+    for (long r = 0; r < rows; ++r) row(c, int(r / sh.n[1]), int(r % sh.n[1]), std::size_t(r) * sh.n[2]);
+  }
+}
+
+}  // namespace
+
+template <class T>
+T sample_component(const MacGrid<T>& g, int c, const double p[3]) {
+  return Interpolator<T>(g, c)(p[0], p[1], p[2]);
+}
+
+template <class T>
+long sample_velocity(const MacGrid<T>& g, const double* points, long m, double* out) {
+  const GridGeometry& geo = g.geo;
+  const double inv_h = 1.0 / geo.h;
+  const double n[3] = {double(geo.nx), double(geo.ny), double(geo.nz)};
+  const Interpolator<T> iu(g, 0), iv(g, 1), iw(g, 2);
+  long outside = 0;
+#pragma omp parallel for schedule(static) reduction(+ : outside) if (m > 4096)
+  for (long r = 0; r < m; ++r) {
+    double p[3];
+    bool out_of_box = false;
+    for (int d = 0; d < 3; ++d) {
+      double q = (points[3 * r + d] - geo.origin[d]) * inv_h;
+      if (!(q >= 0 && q <= n[d])) {  // NaN counts as outside and lands on the min face
+        out_of_box = true;
+        q = q > n[d] ? n[d] : 0.0;
+      }
+      p[d] = q;
+    }
+    outside += out_of_box;
+    out[3 * r + 0] = double(iu(p[0], p[1], p[2]));
+    out[3 * r + 1] = double(iv(p[0], p[1], p[2]));
+    out[3 * r + 2] = double(iw(p[0], p[1], p[2]));
+  }
+  return outside;
+}
+
+template <class T>
+void advect_semi_lagrangian(const MacGrid<T>& u, double dt, const SampleBoundary& bc, MacGrid<T>& out) {
+  const double s = dt / u.geo.h;
+  for_each_row(u, [&](int c, int i, int j, std::size_t base) {
+    const Interpolator<T> q(u, c);
+    const RowVelocity<T> rv(u, c, i, j);
+    const double x0 = i + q.o0, y0 = j + q.o1;
+    const T inflow = T(bc.inflow[c]);
+    T* dst = out.comp[c].data() + base;
+    const int k_end = rv.interior_end();
+    for (int k = 0; k < q.n2; ++k) {
+      double vel[3];
+      vel[c] = rv.own[k];
+      rv.velocity(k, k_end, vel);
+      const double px = x0 - s * vel[0], py = y0 - s * vel[1], pz = k + q.o2 - s * vel[2];
+      dst[k] = upstream_of_inflow(u.geo, px) ? inflow : q(px, py, pz);
+    }
+  });
+}
+
+template <class T>
+void advect_maccormack(const MacGrid<T>& u, double dt, const SampleBoundary& bc, MacGrid<T>& hat,
+                       MacGrid<T>& out) {
+  advect_semi_lagrangian(u, dt, bc, hat);
+  const double s = dt / u.geo.h;
+  for_each_row(u, [&](int c, int i, int j, std::size_t base) {
+    const Interpolator<T> q(u, c), qhat(hat, c);
+    const RowVelocity<T> rv(u, c, i, j);
+    const double x0 = i + q.o0, y0 = j + q.o1;
+    const T inflow = T(bc.inflow[c]);
+    const T* h = hat.comp[c].data() + base;
+    T* dst = out.comp[c].data() + base;
+    const int k_end = rv.interior_end();
+    for (int k = 0; k < q.n2; ++k) {
+      double vel[3];
+      vel[c] = rv.own[k];
+      rv.velocity(k, k_end, vel);
+      const double z0 = k + q.o2;
+      const double bx = x0 - s * vel[0], by = y0 - s * vel[1], bz = z0 - s * vel[2];
+      if (upstream_of_inflow(u.geo, bx)) {  // inflow value: nothing to correct
+        dst[k] = h[k];
+        continue;
+      }
+      const double fx = x0 + s * vel[0], fy = y0 + s * vel[1], fz = z0 + s * vel[2];
+      const T bar = upstream_of_inflow(u.geo, fx) ? inflow : qhat(fx, fy, fz);
+      const T corrected = T(h[k] + 0.5 * (rv.own[k] - bar));
+      T lo, hi;
+      q.extrema(q.corners(bx, by, bz), lo, hi);
+      dst[k] = std::min(hi, std::max(lo, corrected));
+    }
+  });
+}
+
+
+// ---- periodic fast path on ghost-padded copies -------------------------------------------------
+
+template <class T>
+void PaddedComponent<T>::resize(const Shape3& s) {
+  for (int d = 0; d < 3; ++d) n[d] = s.n[d];
+  p1 = n[1] + 2 * kGhost;
+  p2 = n[2] + 2 * kGhost;
+  data.assign(std::size_t(n[0] + 2 * kGhost) * p1 * p2, T(0));
+}
+
+template <class T>
+void PaddedComponent<T>::fill(const T* src) {
+  auto wrap = [](int i, int n) { return ((i % n) + n) % n; };
+  const int n0 = n[0], n1 = n[1], n2 = n[2];
+  const long rows = long(n0 + 2 * kGhost) * (n1 + 2 * kGhost);
+#pragma omp parallel for schedule(static) if (data.size() > 32768)
+  for (long r = 0; r < rows; ++r) {
+    const int a = int(r / (n1 + 2 * kGhost)) - kGhost, b = int(r % (n1 + 2 * kGhost)) - kGhost;
+    const T* s = src + (std::size_t(wrap(a, n0)) * n1 + std::size_t(wrap(b, n1))) * n2;
+    T* d = data.data() + index(a, b, -kGhost);
+    for (int k = -kGhost; k < 0; ++k) d[k + kGhost] = s[wrap(k, n2)];
+    std::copy(s, s + n2, d + kGhost);
+    for (int k = n2; k < n2 + kGhost; ++k) d[k + kGhost] = s[wrap(k, n2)];
+  }
+}
+
+template <class T>
+void PeriodicAdvectScratch<T>::resize(const GridGeometry& g) {
+  for (int c = 0; c < 3; ++c) {
+    u[c].resize(g.face_shape(c));
+    hat[c].resize(g.face_shape(c));
+  }
+}
+
+namespace {
+
+/// Node pair of coordinate q along a padded periodic axis of n nodes: the lower node index in
+/// [-G, n + G - 2] (wrapped into [0, n) when the departure is further than the ghosts reach).
+struct PaddedAxis {
+  int i0;
+  double f;
+};
+template <int G>
+inline PaddedAxis locate_padded(double q, int n) {
+  q = q > -1e9 ? (q < 1e9 ? q : 1e9) : -1e9;  // NaN or absurd departure: stay in range
+  int i = ifloor(q);
+  const double f = q - i;
+  if (i < -G || i > n + G - 2) {
+    i %= n;
+    if (i < 0) i += n;
+  }
+  return {i, f};
+}
+
+/// Trilinear sampling of a padded component at g (node units); the same arithmetic (and so the
+/// same bits) as Interpolator on the unpadded array.
+template <class T>
+struct PaddedSampler {
+  const T* q;
+  int n0, n1, n2;
+  std::size_t sx, sy;
+  explicit PaddedSampler(const PaddedComponent<T>& p)
+      : q(p.data.data()), n0(p.n[0]), n1(p.n[1]), n2(p.n[2]), sx(std::size_t(p.p1) * p.p2), sy(std::size_t(p.p2)) {}
+
+  struct Corner {
+    std::size_t base;
+    double fx, fy, fz;
+  };
+  inline Corner corner(const PaddedComponent<T>& p, double g0, double g1, double g2) const {
+    constexpr int G = PaddedComponent<T>::kGhost;
+    const PaddedAxis x = locate_padded<G>(g0, n0), y = locate_padded<G>(g1, n1), z = locate_padded<G>(g2, n2);
+    return {p.index(x.i0, y.i0, z.i0), x.f, y.f, z.f};
+  }
+  /// corner() for a departure within one cell of node (i, j, k) on every axis (|d| <= 1, so the
+  /// lower node is in [i - 2, i + 1], inside the ghosts): no clamping, no range checks.
+  inline Corner near_corner(std::size_t node, int i, int j, int k, double g0, double g1, double g2) const {
+    const int x = ifloor(g0), y = ifloor(g1), z = ifloor(g2);
+    return {node + std::ptrdiff_t(x - i) * std::ptrdiff_t(sx) + std::ptrdiff_t(y - j) * std::ptrdiff_t(sy) + (z - k),
+            g0 - x, g1 - y, g2 - z};
+  }
+  inline Corner any_corner(const PaddedComponent<T>& p, std::size_t node, int i, int j, int k, double d0,
+                           double d1, double d2, double g0, double g1, double g2) const {
+    if (std::fabs(d0) <= 1 && std::fabs(d1) <= 1 && std::fabs(d2) <= 1)  // false for NaN
+      return near_corner(node, i, j, k, g0, g1, g2);
+    return corner(p, g0, g1, g2);
+  }
+  inline T value(const Corner& c) const {
+    const T* b = q + c.base;
+    const T c00 = lerp(b[0], b[1], c.fz);
+    const T c01 = lerp(b[sy], b[sy + 1], c.fz);
+    const T c10 = lerp(b[sx], b[sx + 1], c.fz);
+    const T c11 = lerp(b[sx + sy], b[sx + sy + 1], c.fz);
+    return lerp(lerp(c00, c01, c.fy), lerp(c10, c11, c.fy), c.fx);
+  }
+  inline void extrema(const Corner& c, T& lo, T& hi) const {
+    const T* b = q + c.base;
+    const T v[8] = {b[0], b[1], b[sy], b[sy + 1], b[sx], b[sx + 1], b[sx + sy], b[sx + sy + 1]};
+    lo = hi = v[0];
+    for (int a = 1; a < 8; ++a) {
+      lo = std::min(lo, v[a]);
+      hi = std::max(hi, v[a]);
+    }
+  }
+};
+
+/// Velocity at node (i, j, k) of component C from padded u^n (see RowVelocity: same sums, same
+/// order). idx: the node's padded index (identical for all components of a periodic grid).
+template <int C, class T>
+inline void padded_velocity(const std::array<PaddedComponent<T>, 3>& u, std::size_t idx,
+                            const std::ptrdiff_t stride[3], double vel[3]) {
+  vel[C] = u[C].data[idx];
+  for (int e = 0; e < 3; ++e) {
+    if (e == C) continue;
+    const T* q = u[e].data.data() + idx;
+    const std::ptrdiff_t dc = stride[C], de = stride[e];
+    double sum = 0;
+    sum += q[-dc];
+    sum += q[de - dc];
+    sum += q[0];
+    sum += q[de];
+    vel[e] = 0.25 * sum;
+  }
+}
+
+/// Semi-Lagrangian pass of component C: out (unpadded) from padded u^n.
+template <int C, class T>
+void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, double s, T* out) {
+  const PaddedSampler<T> q(sc.u[C]);
+  const PaddedComponent<T>& p = sc.u[C];
+  const std::ptrdiff_t stride[3] = {std::ptrdiff_t(p.p1) * p.p2, std::ptrdiff_t(p.p2), 1};
+  constexpr double o0 = C == 0 ? 0.0 : 0.5, o1 = C == 1 ? 0.0 : 0.5, o2 = C == 2 ? 0.0 : 0.5;
+  const int n1 = geo.ny, n2 = geo.nz;
+  const long rows = long(geo.nx) * n1;
+#pragma omp parallel for schedule(static) if (rows * n2 > 16384)
+  for (long r = 0; r < rows; ++r) {
+    const int i = int(r / n1), j = int(r % n1);
+    std::size_t idx = p.index(i, j, 0);
+    T* dst = out + std::size_t(r) * n2;
+    for (int k = 0; k < n2; ++k, ++idx) {
+      double vel[3];
+      padded_velocity<C>(sc.u, idx, stride, vel);
+      const double d0 = s * vel[0], d1 = s * vel[1], d2 = s * vel[2];
+      const double px = i + o0 - d0, py = j + o1 - d1, pz = k + o2 - d2;
+      dst[k] = q.value(q.any_corner(p, idx, i, j, k, d0, d1, d2, px - o0, py - o1, pz - o2));
+    }
+  }
+}
+
+/// MacCormack correction and limiter of component C (Selle et al. 2008 eq. 9, §4) into out.
+template <int C, class T>
+void padded_mc(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, double s, const T* h, T* out) {
+  const PaddedComponent<T>& p = sc.u[C];
+  const PaddedSampler<T> q(p), qhat(sc.hat[C]);
+  const std::ptrdiff_t stride[3] = {std::ptrdiff_t(p.p1) * p.p2, std::ptrdiff_t(p.p2), 1};
+  constexpr double o0 = C == 0 ? 0.0 : 0.5, o1 = C == 1 ? 0.0 : 0.5, o2 = C == 2 ? 0.0 : 0.5;
+  const int n1 = geo.ny, n2 = geo.nz;
+  const long rows = long(geo.nx) * n1;
+#pragma omp parallel for schedule(static) if (rows * n2 > 16384)
+  for (long r = 0; r < rows; ++r) {
+    const int i = int(r / n1), j = int(r % n1);
+    std::size_t idx = p.index(i, j, 0);
+    const std::size_t row = std::size_t(r) * n2;
+    for (int k = 0; k < n2; ++k, ++idx) {
+      double vel[3];
+      padded_velocity<C>(sc.u, idx, stride, vel);
+      const double x0 = i + o0, y0 = j + o1, z0 = k + o2;
+      const double d0 = s * vel[0], d1 = s * vel[1], d2 = s * vel[2];
+      const double bx = x0 - d0, by = y0 - d1, bz = z0 - d2;
+      const double fx = x0 + d0, fy = y0 + d1, fz = z0 + d2;
+      const T bar = qhat.value(qhat.any_corner(sc.hat[C], idx, i, j, k, d0, d1, d2, fx - o0, fy - o1, fz - o2));
+      const T own = p.data[idx];
+      const T corrected = T(h[row + k] + 0.5 * (own - bar));
+      T lo, hi;
+      q.extrema(q.any_corner(p, idx, i, j, k, d0, d1, d2, bx - o0, by - o1, bz - o2), lo, hi);
+      out[row + k] = std::min(hi, std::max(lo, corrected));
+    }
+  }
+}
+
+}  // namespace
+
+template <class T>
+void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, PeriodicAdvectScratch<T>& scratch,
+                     MacGrid<T>& hat) {
+  const double s = dt / u.geo.h;
+  for (int c = 0; c < 3; ++c) scratch.u[c].fill(u.comp[c].data());
+  // Semi-Lagrangian (into hat for MacCormack, else straight into u: only padded copies are read).
+  MacGrid<T>& sl = maccormack ? hat : u;
+  padded_sl<0>(scratch, u.geo, s, sl.comp[0].data());
+  padded_sl<1>(scratch, u.geo, s, sl.comp[1].data());
+  padded_sl<2>(scratch, u.geo, s, sl.comp[2].data());
+  if (!maccormack) return;
+  for (int c = 0; c < 3; ++c) scratch.hat[c].fill(hat.comp[c].data());
+  padded_mc<0>(scratch, u.geo, s, hat.comp[0].data(), u.comp[0].data());
+  padded_mc<1>(scratch, u.geo, s, hat.comp[1].data(), u.comp[1].data());
+  padded_mc<2>(scratch, u.geo, s, hat.comp[2].data(), u.comp[2].data());
+}
+
+#define FLAGSIM_INSTANTIATE_ADVECT(T)                                                             \
+  template T sample_component<T>(const MacGrid<T>&, int, const double[3]);                       \
+  template long sample_velocity<T>(const MacGrid<T>&, const double*, long, double*);             \
+  template void advect_semi_lagrangian<T>(const MacGrid<T>&, double, const SampleBoundary&,      \
+                                          MacGrid<T>&);                                          \
+  template void advect_maccormack<T>(const MacGrid<T>&, double, const SampleBoundary&,           \
+                                     MacGrid<T>&, MacGrid<T>&);                                \
+  template struct PaddedComponent<T>;                                                            \
+  template struct PeriodicAdvectScratch<T>;                                                      \
+  template void advect_periodic<T>(MacGrid<T>&, double, bool, PeriodicAdvectScratch<T>&, MacGrid<T>&);
+FLAGSIM_INSTANTIATE_ADVECT(float)
+FLAGSIM_INSTANTIATE_ADVECT(double)
+
+}  // namespace flagsim

@@ -1,0 +1,71 @@
+// Trilinear sampling of the staggered field and self-advection of the velocity:
+// semi-Lagrangian (Stam 1999 §2.2, linear backtrace) and MacCormack with the clamping limiter
+// (Selle, Fedkiw, Kim, Liu, Rossignac 2008, §3 and §4).
+#pragma once
+#include "fluid/grid.h"
+
+namespace flagsim {
+
+/// Boundary data for sampling. Periodic grids wrap. Bounded grids hold each component's nearest
+/// node value beyond its last node (zero-gradient: free slip on walls, outflow); in advection a
+/// departure point upstream of the inflow face (x < origin.x) takes `inflow` (m/s) instead.
+struct SampleBoundary {
+  Vec3 inflow{0, 0, 0};  ///< m/s, tunnel inflow velocity (ignored when periodic)
+};
+
+/// Trilinear value of component c at point p given in cell units, p = (x - origin) / h.
+/// Uses a + f (b - a) so that a uniform field is reproduced exactly.
+template <class T>
+T sample_component(const MacGrid<T>& g, int c, const double p[3]);
+
+/// Velocity at arbitrary world points: out.row(m) = u(points.row(m)) (m/s). Points outside the
+/// domain box are moved to the nearest point of the box (the nearest boundary value) and counted.
+/// points, out: (M x 3) m, m/s. Returns the number of points outside. No allocation.
+template <class T>
+long sample_velocity(const MacGrid<T>& g, const double* points, long m, double* out);
+
+/// Semi-Lagrangian self-advection: out = u(x - dt u(x)) at every face (Stam 1999).
+/// u, out: same geometry, distinct; dt in s.
+template <class T>
+void advect_semi_lagrangian(const MacGrid<T>& u, double dt, const SampleBoundary& bc, MacGrid<T>& out);
+
+/// MacCormack (Selle et al. 2008 eq. 9): hat = A(u), bar = A^R(hat), out = hat + (u - bar) / 2,
+/// clamped to the extrema of the 8 nodes the first backtrace interpolated from (§4). hat is
+/// scratch of u's geometry. u, hat, out distinct.
+template <class T>
+void advect_maccormack(const MacGrid<T>& u, double dt, const SampleBoundary& bc, MacGrid<T>& hat,
+                       MacGrid<T>& out);
+
+/// Copy of one periodic component with G ghost layers on every side filled by wrapping, so a
+/// stencil within G nodes of any node needs no index arithmetic modulo n. Allocated once.
+template <class T>
+struct PaddedComponent {
+  static constexpr int kGhost = 2;
+  int n[3] = {0, 0, 0};   ///< unpadded node counts
+  int p1 = 0, p2 = 0;     ///< padded sizes of axes 1 and 2
+  AlignedVector<T> data;  ///< (n0 + 2G) x (n1 + 2G) x (n2 + 2G)
+  void resize(const Shape3& s);
+  /// data <- src (n0 x n1 x n2, C order) with wrapped ghosts.
+  void fill(const T* src);
+  /// Index of node (i, j, k), each in [-G, n + G).
+  std::size_t index(int i, int j, int k) const {
+    return (std::size_t(i + kGhost) * p1 + std::size_t(j + kGhost)) * p2 + std::size_t(k + kGhost);
+  }
+};
+
+/// Scratch of advect_periodic: padded copies of u^n and of the MacCormack predictor.
+template <class T>
+struct PeriodicAdvectScratch {
+  std::array<PaddedComponent<T>, 3> u, hat;
+  void resize(const GridGeometry& g);
+};
+
+/// Self-advection of a periodic grid in place (u <- A(u)), semi-Lagrangian or MacCormack, the
+/// same arithmetic as advect_semi_lagrangian / advect_maccormack (identical results) but reading
+/// ghost-padded copies: departure points within a cell of their node take a wrap-free path.
+/// hat: scratch of u's geometry (MacCormack). No allocation.
+template <class T>
+void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, PeriodicAdvectScratch<T>& scratch,
+                     MacGrid<T>& hat);
+
+}  // namespace flagsim

@@ -1,0 +1,246 @@
+#include "fluid/fluid.h"
+
+#include <algorithm>
+#include <limits>
+
+#include "common/errors.h"
+#include "common/timer.h"
+#include "fluid/advect.h"
+#include "fluid/forces.h"
+#include "fluid/pressure.h"
+
+namespace flagsim {
+
+struct Fluid::Solver {
+  FluidParams params;
+  GridGeometry geo;
+  double time = 0;
+  mutable FluidStats stats;
+  virtual ~Solver() = default;
+  virtual void step(double dt) = 0;
+  virtual void* data(int c) = 0;
+  virtual void set_component(int c, const double* values) = 0;
+  virtual long sample(const double* points, long m, double* out) const = 0;
+  virtual void divergence(double* out) const = 0;
+  virtual double max_divergence() const = 0;
+};
+
+namespace {
+
+template <class T>
+struct TypedSolver final : Fluid::Solver {
+  MacGrid<T> u, prev, hat;          // current field; advection source; MacCormack / rhs scratch
+  AlignedVector<T> phi, div;        // nx*ny*nz: potential dt p / rho (m^2/s), divergence (1/s)
+  mutable AlignedVector<T> div_out;  // divergence() scratch
+  std::unique_ptr<FftProjector<T>> fft;
+  Laplace7 pressure_op;
+  std::array<Laplace7, 3> diffusion_op;
+  MicPreconditioner<T> mic;
+  CgScratch<T> cg;
+  std::vector<FanStencil<T>> fans;
+  PeriodicAdvectScratch<T> padded;  // periodic grids: ghost-padded u^n and MacCormack predictor
+  double tol = 0;
+  bool maccormack = false, use_fft = false;
+
+  explicit TypedSolver(const FluidParams& p) {
+    params = p;
+    geo.nx = p.resolution[0];
+    geo.ny = p.resolution[1];
+    geo.nz = p.resolution[2];
+    geo.h = p.cell_size;
+    geo.origin = p.origin;
+    geo.periodic = p.boundary == "periodic";
+    u = MacGrid<T>(geo);
+    hat = MacGrid<T>(geo);
+    if (geo.periodic)
+      padded.resize(geo);
+    else
+      prev = MacGrid<T>(geo);
+    const std::size_t cells = geo.cells().size();
+    phi.assign(cells, T(0));
+    div.assign(cells, T(0));
+    div_out.assign(cells, T(0));
+    maccormack = p.advection == "maccormack";
+    use_fft = p.pressure == "fft";
+    // float cannot reach residuals near its epsilon: floor the relative tolerance there.
+    tol = std::max(p.pcg_tolerance, 50.0 * double(std::numeric_limits<T>::epsilon()));
+    pressure_op = pressure_operator(geo);
+    for (int c = 0; c < 3; ++c) diffusion_op[c] = diffusion_operator(geo, c);
+    if (use_fft) {
+      fft = std::make_unique<FftProjector<T>>(geo);
+    } else {
+      mic.build(pressure_op);
+    }
+    std::size_t largest = cells;
+    for (int c = 0; c < 3; ++c) largest = std::max(largest, u.shape[c].size());
+    cg.resize(largest);
+    fans = build_fan_stencils<T>(geo, p.fans, p.density);
+    const Vec3 w0 = p.wind.at(0.0);
+    set_uniform(geo.periodic ? w0 : Vec3(w0.x(), 0, 0));
+  }
+
+  void set_uniform(const Vec3& v) {
+    for (int c = 0; c < 3; ++c) std::fill(u.comp[c].begin(), u.comp[c].end(), T(v[c]));
+    if (!geo.periodic) apply_tunnel_boundary(Vec3(v.x(), 0, 0), u);
+  }
+
+  void step(double dt) override {
+    const double t0 = time, t1 = time + dt;
+    const FluidParams& p = params;
+    SampleBoundary bc;
+    if (!geo.periodic) bc.inflow = p.wind.at(t0);
+    // 1. self-advection of u^n (reads prev, writes u)
+    {
+      ScopedTimer timer(stats.seconds_advect);
+      if (geo.periodic) {
+        advect_periodic(u, dt, maccormack, padded, hat);
+      } else {
+        copy_grid(u, prev);
+        if (maccormack)
+          advect_maccormack(prev, dt, bc, hat, u);
+        else
+          advect_semi_lagrangian(prev, dt, bc, u);
+      }
+    }
+    // 2. external force
+    {
+      ScopedTimer timer(stats.seconds_forces);
+      apply_fans(fans, t0, dt, u);
+    }
+    ScopedTimer timer(stats.seconds_project);
+    // 3. boundary values at the new time: tunnel faces, or the periodic mean flow
+    if (!geo.periodic) apply_tunnel_boundary(p.wind.at(t1), u);
+    const bool drive_mean = geo.periodic && !p.wind.keys.empty();
+    const Vec3 mean = drive_mean ? p.wind.at(t1) : Vec3::Zero();
+    // 4-5. diffusion and projection
+    const double nu_dt = p.viscosity * dt;
+    stats.diffusion_iterations = 0;
+    if (use_fft) {
+      if (nu_dt > 0) {
+        fft->diffuse_and_project(u, nu_dt, drive_mean ? &mean : nullptr);
+      } else {
+        if (drive_mean) set_mean_flow(mean, u);
+        fft->project(u, phi.data());
+      }
+    } else {
+      if (nu_dt > 0) diffuse_iterative(nu_dt);
+      if (drive_mean) set_mean_flow(mean, u);
+      project_pcg();
+    }
+    time = t1;
+    ++stats.steps;
+  }
+
+  /// (I - nu dt lap) u_new = u per component, CG with Jacobi (diagonally dominant system).
+  void diffuse_iterative(double nu_dt) {
+    const double beta = nu_dt / (geo.h * geo.h);
+    for (int c = 0; c < 3; ++c) {
+      std::copy(u.comp[c].begin(), u.comp[c].end(), hat.comp[c].begin());
+      const CgResult r = solve_cg(diffusion_op[c], 1.0, beta, hat.comp[c].data(), u.comp[c].data(), tol,
+                                  params.pcg_max_iterations, static_cast<const MicPreconditioner<T>*>(nullptr), cg);
+      stats.diffusion_iterations = std::max(stats.diffusion_iterations, r.iterations);
+    }
+  }
+
+  /// K phi = -h^2 div u (K = -h^2 lap), warm-started from the previous phi; u -= grad phi.
+  void project_pcg() {
+    divergence_into(div.data());
+    const double h2 = geo.h * geo.h;
+    for (std::size_t i = 0; i < div.size(); ++i) div[i] = T(-h2 * div[i]);
+    const CgResult r = solve_cg(pressure_op, 0.0, 1.0, div.data(), phi.data(), tol,
+                                params.pcg_max_iterations, &mic, cg);
+    stats.pressure_iterations = r.iterations;
+    stats.pressure_residual = r.residual;
+    stats.pressure_converged = r.converged;
+    subtract_gradient(phi.data(), u);
+  }
+
+  void divergence_into(T* out) const { flagsim::divergence(u, out); }
+
+  void* data(int c) override { return u.comp[c].data(); }
+
+  void set_component(int c, const double* values) override {
+    const std::size_t n = u.comp[c].size();
+    for (std::size_t i = 0; i < n; ++i)
+      if (!std::isfinite(values[i]))
+        fail_param(std::string("velocity.") + "uvw"[c], "finite everywhere",
+                   "a non-finite value at flat index " + std::to_string(i));
+    for (std::size_t i = 0; i < n; ++i) u.comp[c][i] = T(values[i]);
+  }
+
+  long sample(const double* points, long m, double* out) const override {
+    const long outside = sample_velocity(u, points, m, out);
+    stats.samples_outside += outside;
+    return outside;
+  }
+
+  void divergence(double* out) const override {
+    divergence_into(div_out.data());
+    std::copy(div_out.begin(), div_out.end(), out);
+  }
+
+  double max_divergence() const override {
+    divergence_into(div_out.data());
+    return parallel_max(div_out.size(), [&](std::size_t i) { return std::fabs(double(div_out[i])); });
+  }
+};
+
+template <class T>
+TypedSolver<T>& typed(Fluid::Solver& s) {
+  return static_cast<TypedSolver<T>&>(s);
+}
+
+}  // namespace
+
+Fluid::Fluid(const FluidParams& params, const std::string& prefix) {
+  params.validate(prefix);
+  params.validate_combination(prefix);
+  if (params.precision == "float")
+    s_ = std::make_unique<TypedSolver<float>>(params);
+  else
+    s_ = std::make_unique<TypedSolver<double>>(params);
+}
+
+Fluid::~Fluid() = default;
+Fluid::Fluid(Fluid&&) noexcept = default;
+Fluid& Fluid::operator=(Fluid&&) noexcept = default;
+
+void Fluid::step(double dt) {
+  check_positive("dt", dt);
+  s_->step(dt);
+}
+
+double Fluid::time() const { return s_->time; }
+const FluidParams& Fluid::params() const { return s_->params; }
+const GridGeometry& Fluid::geometry() const { return s_->geo; }
+bool Fluid::is_double() const { return s_->params.precision == "double"; }
+const FluidStats& Fluid::stats() const { return s_->stats; }
+Shape3 Fluid::component_shape(int c) const { return s_->geo.face_shape(c); }
+void* Fluid::component_data(int c) { return s_->data(c); }
+const void* Fluid::component_data(int c) const { return s_->data(c); }
+
+MatX3 Fluid::face_positions(int c) const {
+  const Shape3 sh = component_shape(c);
+  MatX3 out(Index(sh.size()), 3);
+  Index r = 0;
+  for (int i = 0; i < sh.n[0]; ++i)
+    for (int j = 0; j < sh.n[1]; ++j)
+      for (int k = 0; k < sh.n[2]; ++k) out.row(r++) = s_->geo.face_position(c, i, j, k).transpose();
+  return out;
+}
+
+void Fluid::set_component(int c, const double* values) { s_->set_component(c, values); }
+
+void Fluid::set_uniform(const Vec3& velocity) {
+  check_finite_vec("velocity", velocity);
+  if (is_double())
+    typed<double>(*s_).set_uniform(velocity);
+  else
+    typed<float>(*s_).set_uniform(velocity);
+}
+
+long Fluid::sample(const double* points, long m, double* out) const { return s_->sample(points, m, out); }
+void Fluid::divergence(double* out) const { s_->divergence(out); }
+double Fluid::max_divergence() const { return s_->max_divergence(); }
+
+}  // namespace flagsim

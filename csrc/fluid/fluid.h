@@ -1,0 +1,79 @@
+// The air solver: Stable Fluids (Stam 1999) on a staggered MAC grid. Owns the arrays and scratch
+// (allocated at construction, never resized) and sequences the kernels of advect.h, forces.h and
+// pressure.h. One step:
+//   advect (semi-Lagrangian | MacCormack) -> fans -> boundary values / mean flow ->
+//   diffuse (implicit; skipped when viscosity = 0) -> project (fft | pcg)
+// Layout of the component arrays: csrc/fluid/grid.h. Scalar type: params.precision.
+#pragma once
+#include <array>
+#include <memory>
+#include <string>
+
+#include "common/types.h"
+#include "fluid/grid.h"
+#include "fluid/params.h"
+
+namespace flagsim {
+
+/// Counters of the last step (and of sampling), for Simulation stats and tests.
+struct FluidStats {
+  long steps = 0;
+  int pressure_iterations = 0;      ///< pcg: CG iterations of the last projection; fft: 0
+  double pressure_residual = 0;     ///< pcg: max|div u| / max|div u*| after the last projection
+  bool pressure_converged = true;   ///< pcg reached its tolerance in the last projection
+  int diffusion_iterations = 0;     ///< iterative diffusion: max CG iterations over components
+  long samples_outside = 0;         ///< points sampled outside the domain box, cumulative
+  /// Cumulative wall-clock seconds per stage of step().
+  double seconds_advect = 0, seconds_forces = 0, seconds_project = 0;
+};
+
+class Fluid {
+ public:
+  /// Validates `params` (errors name "<prefix>.<field>", or the bare field when prefix is
+  /// empty), builds the grid, the FFTW plans (fft) or the MIC(0) preconditioner (pcg), the fan
+  /// stencils, and sets the velocity to the wind at t = 0 (tunnel: (wind.x, 0, 0)).
+  explicit Fluid(const FluidParams& params, const std::string& prefix = "");
+  ~Fluid();
+  Fluid(Fluid&&) noexcept;
+  Fluid& operator=(Fluid&&) noexcept;
+  Fluid(const Fluid&) = delete;
+  Fluid& operator=(const Fluid&) = delete;
+
+  /// Advances the air by dt (s, finite and > 0). No heap allocation.
+  void step(double dt);
+  double time() const;               ///< s
+  const FluidParams& params() const;
+  const GridGeometry& geometry() const;
+  bool is_double() const;            ///< params.precision == "double"
+  const FluidStats& stats() const;
+
+  /// Shape of component c (0 = u, 1 = v, 2 = w), see grid.h.
+  Shape3 component_shape(int c) const;
+  /// Raw storage of component c: float* or double* by precision (m/s), component_shape(c).size().
+  void* component_data(int c);
+  const void* component_data(int c) const;
+  /// World positions of the nodes of component c, (size x 3), m, C order of component_shape(c).
+  MatX3 face_positions(int c) const;
+  /// Copies values (component_shape(c).size(), m/s) into component c. Non-finite -> InvalidArgument.
+  void set_component(int c, const double* values);
+  /// Sets every component to a uniform velocity (m/s); tunnel wall normals stay 0.
+  void set_uniform(const Vec3& velocity);
+
+  /// Trilinear velocity at points (m x 3, m) into out (m x 3, m/s). Points outside the domain get
+  /// the nearest boundary value; returns how many were outside (also added to stats). No allocation.
+  long sample(const double* points, long m, double* out) const;
+  long sample(const MatX3& points, MatX3& out) const {
+    return sample(points.data(), long(points.rows()), out.data());
+  }
+  /// Cell divergence of the current field (nx*ny*nz, 1/s, C order) and its max |.|.
+  void divergence(double* out) const;
+  double max_divergence() const;
+
+  /// Implementation, one per scalar type (opaque to users).
+  struct Solver;
+
+ private:
+  std::unique_ptr<Solver> s_;
+};
+
+}  // namespace flagsim

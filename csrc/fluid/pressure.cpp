@@ -1,0 +1,324 @@
+#include "fluid/pressure.h"
+
+#include <cmath>
+#include <mutex>
+
+#include "common/errors.h"
+#ifdef FLAGSIM_HAVE_FFTW
+#include <fftw3.h>
+#endif
+
+namespace flagsim {
+
+template <class T>
+void divergence(const MacGrid<T>& u, T* div) {
+  const GridGeometry& g = u.geo;
+  const int nx = g.nx, ny = g.ny, nz = g.nz;
+  const bool per = g.periodic;
+  const double inv_h = 1.0 / g.h;
+  const Shape3 su = u.shape[0], sv = u.shape[1], sw = u.shape[2], sc = g.cells();
+  const T *U = u.comp[0].data(), *V = u.comp[1].data(), *W = u.comp[2].data();
+#pragma omp parallel for schedule(static) if (sc.size() > 16384)
+  for (long r = 0; r < long(nx) * ny; ++r) {
+    const int i = int(r / ny), j = int(r % ny);
+    const int ip = (per && i + 1 == nx) ? 0 : i + 1;
+    const int jp = (per && j + 1 == ny) ? 0 : j + 1;
+    const T *u0 = U + su.index(i, j, 0), *u1 = U + su.index(ip, j, 0);
+    const T *v0 = V + sv.index(i, j, 0), *v1 = V + sv.index(i, jp, 0);
+    const T* w0 = W + sw.index(i, j, 0);
+    T* d = div + sc.index(i, j, 0);
+    const int kend = per ? nz - 1 : nz;  // periodic: the last cell's top face is face 0
+    for (int k = 0; k < kend; ++k)
+      d[k] = T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[k + 1]) - w0[k])) * inv_h);
+    if (per) {
+      const int k = nz - 1;
+      d[k] = T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[0]) - w0[k])) * inv_h);
+    }
+  }
+}
+
+Laplace7 pressure_operator(const GridGeometry& geo) {
+  Laplace7 op;
+  op.shape = geo.cells();
+  if (!geo.periodic) {
+    for (int d = 0; d < 3; ++d) op.lo[d] = op.hi[d] = Side::kNeumann;
+    op.hi[0] = Side::kGhostZero;  // open outflow face, p = 0 beyond
+  }
+  return op;
+}
+
+Laplace7 diffusion_operator(const GridGeometry& geo, int c) {
+  Laplace7 op;
+  op.shape = geo.face_shape(c);
+  if (!geo.periodic) {
+    for (int d = 0; d < 3; ++d) op.lo[d] = op.hi[d] = Side::kNeumann;
+    const Laplace7 p = pressure_operator(geo);
+    // A face held by the pressure solve (Neumann for phi) is a fixed node for diffusion.
+    if (p.lo[c] == Side::kNeumann) op.lo[c] = Side::kFixed;
+    if (p.hi[c] == Side::kNeumann) op.hi[c] = Side::kFixed;
+  }
+  return op;
+}
+
+template <class T>
+void subtract_gradient(const T* phi, MacGrid<T>& u) {
+  const GridGeometry& g = u.geo;
+  const Shape3 sc = g.cells();
+  const T inv_h = T(1.0 / g.h);
+  const bool per = g.periodic;
+  const Laplace7 p = pressure_operator(g);
+  for (int c = 0; c < 3; ++c) {
+    const Shape3 sh = u.shape[c];
+    T* q = u.comp[c].data();
+    const long rows = long(sh.n[0]) * sh.n[1];
+    const int nc = sc.n[c];
+#pragma omp parallel for schedule(static) if (sh.size() > 16384)
+    for (long r = 0; r < rows; ++r) {
+      const int i = int(r / sh.n[1]), j = int(r % sh.n[1]);
+      T* dst = q + std::size_t(r) * sh.n[2];
+      const int ij[2] = {i, j};
+      if (c < 2) {
+        // Face f = ij[c] lies between cells f-1 (lo) and f (hi) of the same k-row.
+        const int f = ij[c];
+        const bool held = !per && ((f == 0 && p.lo[c] == Side::kNeumann) || (f == nc && p.hi[c] == Side::kNeumann));
+        if (held) continue;
+        int lo[2] = {i, j}, hi[2] = {i, j};
+        lo[c] = per ? (f == 0 ? nc - 1 : f - 1) : f - 1;
+        const T* ph = (per || f < nc) ? phi + sc.index(hi[0], hi[1], 0) : nullptr;  // null: ghost 0
+        const T* pl = lo[c] >= 0 ? phi + sc.index(lo[0], lo[1], 0) : nullptr;
+        for (int k = 0; k < sh.n[2]; ++k) {
+          const T a = ph ? ph[k] : T(0), b = pl ? pl[k] : T(0);
+          dst[k] -= (a - b) * inv_h;
+        }
+      } else {
+        const T* pr = phi + sc.index(i, j, 0);
+        const int n2 = sc.n[2];
+        if (per) {
+          dst[0] -= (pr[0] - pr[n2 - 1]) * inv_h;
+          for (int k = 1; k < n2; ++k) dst[k] -= (pr[k] - pr[k - 1]) * inv_h;
+        } else {
+          // k = 0 and k = n2 are walls (held); the z axis has no open side in the tunnel.
+          for (int k = 1; k < n2; ++k) dst[k] -= (pr[k] - pr[k - 1]) * inv_h;
+        }
+      }
+    }
+  }
+}
+
+template <class T>
+void apply_tunnel_boundary(const Vec3& inflow, MacGrid<T>& u) {
+  const GridGeometry& g = u.geo;
+  for (int j = 0; j < g.ny; ++j)
+    for (int k = 0; k < g.nz; ++k) u.at(0, 0, j, k) = T(inflow.x());
+  for (int i = 0; i < g.nx; ++i)
+    for (int k = 0; k < g.nz; ++k) u.at(1, i, 0, k) = u.at(1, i, g.ny, k) = T(0);
+  for (int i = 0; i < g.nx; ++i)
+    for (int j = 0; j < g.ny; ++j) u.at(2, i, j, 0) = u.at(2, i, j, g.nz) = T(0);
+}
+
+template <class T>
+void set_mean_flow(const Vec3& target, MacGrid<T>& u) {
+  for (int c = 0; c < 3; ++c) {
+    AlignedVector<T>& q = u.comp[c];
+    const std::size_t n = q.size();
+    const double mean = deterministic_sum(n, [&](std::size_t i) { return double(q[i]); }) / double(n);
+    const double shift = target[c] - mean;
+    if (shift == 0) continue;
+#pragma omp parallel for schedule(static) if (n > 16384)
+    for (long i = 0; i < long(n); ++i) q[i] = T(q[i] + shift);
+  }
+}
+
+// ---- FFT projector ------------------------------------------------------------------------------
+
+#ifdef FLAGSIM_HAVE_FFTW
+namespace {
+
+// FFTW's planner is not thread-safe (FFTW manual §5.4): plan creation and destruction serialise.
+std::mutex& fftw_planner_mutex() {
+  static std::mutex m;
+  return m;
+}
+
+template <class T>
+struct Fftw;
+template <>
+struct Fftw<double> {
+  using Plan = fftw_plan;
+  using Complex = fftw_complex;
+  static Plan r2c(int n0, int n1, int n2, double* in, Complex* out) {
+    return fftw_plan_dft_r2c_3d(n0, n1, n2, in, out, FFTW_ESTIMATE);
+  }
+  static Plan c2r(int n0, int n1, int n2, Complex* in, double* out) {
+    return fftw_plan_dft_c2r_3d(n0, n1, n2, in, out, FFTW_ESTIMATE);
+  }
+  static void exec_r2c(Plan p, double* in, Complex* out) { fftw_execute_dft_r2c(p, in, out); }
+  static void exec_c2r(Plan p, Complex* in, double* out) { fftw_execute_dft_c2r(p, in, out); }
+  static void destroy(Plan p) { fftw_destroy_plan(p); }
+};
+template <>
+struct Fftw<float> {
+  using Plan = fftwf_plan;
+  using Complex = fftwf_complex;
+  static Plan r2c(int n0, int n1, int n2, float* in, Complex* out) {
+    return fftwf_plan_dft_r2c_3d(n0, n1, n2, in, out, FFTW_ESTIMATE);
+  }
+  static Plan c2r(int n0, int n1, int n2, Complex* in, float* out) {
+    return fftwf_plan_dft_c2r_3d(n0, n1, n2, in, out, FFTW_ESTIMATE);
+  }
+  static void exec_r2c(Plan p, float* in, Complex* out) { fftwf_execute_dft_r2c(p, in, out); }
+  static void exec_c2r(Plan p, Complex* in, float* out) { fftwf_execute_dft_c2r(p, in, out); }
+  static void destroy(Plan p) { fftwf_destroy_plan(p); }
+};
+
+}  // namespace
+
+template <class T>
+struct FftProjector<T>::Impl {
+  using F = Fftw<T>;
+  using C = std::complex<T>;
+  GridGeometry geo;
+  int nzc = 0;                        // nz/2 + 1 complex entries along z
+  std::size_t n_real = 0, n_cplx = 0;
+  AlignedVector<T> div;               // nx*ny*nz
+  std::array<AlignedVector<C>, 3> hat;  // nx*ny*nzc each
+  // Per-axis Fourier symbols: a_d(m) = (e^{i theta} - 1) / h (forward difference, i.e. MAC div
+  // from faces to cells), lam_d(m) = (2 cos theta - 2) / h^2, theta = 2 pi m / n_d.
+  std::array<std::vector<std::complex<double>>, 3> a;
+  std::array<std::vector<double>, 3> lam;
+  typename F::Plan fwd = nullptr, inv = nullptr;
+
+  C* cplx(int c) { return hat[c].data(); }
+  typename F::Complex* fc(int c) { return reinterpret_cast<typename F::Complex*>(hat[c].data()); }
+};
+
+template <class T>
+FftProjector<T>::FftProjector(const GridGeometry& geo) : impl_(new Impl) {
+  Impl& m = *impl_;
+  m.geo = geo;
+  m.nzc = geo.nz / 2 + 1;
+  m.n_real = geo.cells().size();
+  m.n_cplx = std::size_t(geo.nx) * geo.ny * m.nzc;
+  m.div.assign(m.n_real, T(0));
+  for (int c = 0; c < 3; ++c) m.hat[c].assign(m.n_cplx, std::complex<T>(0));
+  const double two_pi = 6.283185307179586476925286766559;
+  for (int d = 0; d < 3; ++d) {
+    const int n = geo.n(d);
+    const int count = d == 2 ? m.nzc : n;
+    m.a[d].resize(count);
+    m.lam[d].resize(count);
+    for (int q = 0; q < count; ++q) {
+      const double th = two_pi * q / n;
+      m.a[d][q] = std::complex<double>(std::cos(th) - 1.0, std::sin(th)) / geo.h;
+      m.lam[d][q] = (2.0 * std::cos(th) - 2.0) / (geo.h * geo.h);
+    }
+  }
+  std::lock_guard<std::mutex> lock(fftw_planner_mutex());
+  m.fwd = Impl::F::r2c(geo.nx, geo.ny, geo.nz, m.div.data(), m.fc(0));
+  m.inv = Impl::F::c2r(geo.nx, geo.ny, geo.nz, m.fc(0), m.div.data());
+}
+
+template <class T>
+FftProjector<T>::~FftProjector() {
+  std::lock_guard<std::mutex> lock(fftw_planner_mutex());
+  if (impl_->fwd) Impl::F::destroy(impl_->fwd);
+  if (impl_->inv) Impl::F::destroy(impl_->inv);
+}
+
+template <class T>
+void FftProjector<T>::project(MacGrid<T>& u, T* phi) {
+  Impl& m = *impl_;
+  const GridGeometry& g = m.geo;
+  divergence(u, m.div.data());
+  Impl::F::exec_r2c(m.fwd, m.div.data(), m.fc(0));
+  const double scale = 1.0 / double(m.n_real);
+  std::complex<T>* d = m.cplx(0);
+#pragma omp parallel for schedule(static) if (m.n_cplx > 16384)
+  for (long r = 0; r < long(g.nx) * g.ny; ++r) {
+    const int i = int(r / g.ny), j = int(r % g.ny);
+    const double lxy = m.lam[0][i] + m.lam[1][j];
+    std::complex<T>* row = d + std::size_t(r) * m.nzc;
+    for (int k = 0; k < m.nzc; ++k) {
+      const double l = lxy + m.lam[2][k];
+      // lap phi = div: phi_hat = div_hat / lambda; the k = 0 mode (lambda = 0) has no potential.
+      row[k] = l == 0 ? std::complex<T>(0) : std::complex<T>(row[k] * T(scale / l));
+    }
+  }
+  Impl::F::exec_c2r(m.inv, m.fc(0), phi);
+  subtract_gradient(phi, u);
+}
+
+template <class T>
+void FftProjector<T>::diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec3* mean) {
+  Impl& m = *impl_;
+  const GridGeometry& g = m.geo;
+  for (int c = 0; c < 3; ++c) Impl::F::exec_r2c(m.fwd, u.comp[c].data(), m.fc(c));
+  const double scale = 1.0 / double(m.n_real);
+  std::complex<T>* h0 = m.cplx(0);
+  std::complex<T>* h1 = m.cplx(1);
+  std::complex<T>* h2 = m.cplx(2);
+#pragma omp parallel for schedule(static) if (m.n_cplx > 16384)
+  for (long r = 0; r < long(g.nx) * g.ny; ++r) {
+    const int i = int(r / g.ny), j = int(r % g.ny);
+    const std::complex<double> ax = m.a[0][i], ay = m.a[1][j];
+    const double lxy = m.lam[0][i] + m.lam[1][j];
+    for (int k = 0; k < m.nzc; ++k) {
+      const std::size_t q = std::size_t(r) * m.nzc + k;
+      const std::complex<double> az = m.a[2][k];
+      const double l = lxy + m.lam[2][k];
+      // Backward Euler diffusion: (1 - nu dt lambda) u_hat_new = u_hat (Stam 2001 §3).
+      const double s = scale / (1.0 - nu_dt * l);
+      std::complex<double> ux = std::complex<double>(h0[q]) * s;
+      std::complex<double> uy = std::complex<double>(h1[q]) * s;
+      std::complex<double> uz = std::complex<double>(h2[q]) * s;
+      if (l != 0) {
+        // phi_hat = (a . u_hat) / lambda, u_hat -= g phi_hat with g_d = -conj(a_d) (backward
+        // difference from cells to faces), so that a . g = lambda.
+        const std::complex<double> phi = (ax * ux + ay * uy + az * uz) / l;
+        ux += std::conj(ax) * phi;
+        uy += std::conj(ay) * phi;
+        uz += std::conj(az) * phi;
+      }
+      h0[q] = std::complex<T>(ux);
+      h1[q] = std::complex<T>(uy);
+      h2[q] = std::complex<T>(uz);
+    }
+  }
+  if (mean) {
+    h0[0] = std::complex<T>(T((*mean)[0]));
+    h1[0] = std::complex<T>(T((*mean)[1]));
+    h2[0] = std::complex<T>(T((*mean)[2]));
+  }
+  for (int c = 0; c < 3; ++c) Impl::F::exec_c2r(m.inv, m.fc(c), u.comp[c].data());
+}
+
+#else  // no FFTW
+
+template <class T>
+struct FftProjector<T>::Impl {};
+
+template <class T>
+FftProjector<T>::FftProjector(const GridGeometry&) {
+  throw MissingFeature(
+      "pressure should be \"pcg\": this flagsim was built without FFTW (FLAGSIM_WITH_FFTW=OFF), "
+      "got \"fft\"");
+}
+template <class T>
+FftProjector<T>::~FftProjector() = default;
+template <class T>
+void FftProjector<T>::project(MacGrid<T>&, T*) {}
+template <class T>
+void FftProjector<T>::diffuse_and_project(MacGrid<T>&, double, const Vec3*) {}
+
+#endif
+
+#define FLAGSIM_INSTANTIATE_PRESSURE(T)                                  \
+  template void divergence<T>(const MacGrid<T>&, T*);                   \
+  template void subtract_gradient<T>(const T*, MacGrid<T>&);            \
+  template void apply_tunnel_boundary<T>(const Vec3&, MacGrid<T>&);     \
+  template void set_mean_flow<T>(const Vec3&, MacGrid<T>&);             \
+  template class FftProjector<T>;
+FLAGSIM_INSTANTIATE_PRESSURE(float)
+FLAGSIM_INSTANTIATE_PRESSURE(double)
+
+}  // namespace flagsim

@@ -1,0 +1,64 @@
+// Pressure projection and viscosity on the MAC grid (Stam 1999 §2.3-2.4; Stam 2001 for the
+// periodic FFT form; Bridson 2nd ed. ch. 5 for the bounded form).
+//
+// With phi = dt p / rho (m^2/s), projection is u <- u - grad phi where lap phi = div u, using the
+// MAC operators: div at cells, grad at faces, lap = div grad (7 points). Boundaries of the
+// bounded (tunnel) grid: the x-min (inflow) face and the y and z walls hold their normal velocity
+// (Neumann for phi), the x-max face is open with p = 0 in the ghost cell beyond (Dirichlet).
+#pragma once
+#include <complex>
+#include <memory>
+
+#include "fluid/grid.h"
+#include "fluid/poisson.h"
+
+namespace flagsim {
+
+/// Cell divergence of the face field (1/s). div: nx*ny*nz, C order.
+template <class T>
+void divergence(const MacGrid<T>& u, T* div);
+
+/// K-operator of the pressure solve for this grid (periodic, or the tunnel conditions above).
+Laplace7 pressure_operator(const GridGeometry& geo);
+
+/// Operator of the implicit diffusion of component c: periodic, or for the tunnel grid the held
+/// faces (inflow, wall normals) fixed and zero-gradient elsewhere.
+Laplace7 diffusion_operator(const GridGeometry& geo, int c);
+
+/// u <- u - grad phi on every face that is not held (phi: nx*ny*nz, m^2/s).
+template <class T>
+void subtract_gradient(const T* phi, MacGrid<T>& u);
+
+/// Tunnel boundary values: u = inflow.x on the x-min face, 0 normal velocity on the y and z walls.
+template <class T>
+void apply_tunnel_boundary(const Vec3& inflow, MacGrid<T>& u);
+
+/// Adds (target - mean) to each component of a periodic grid, so its k = 0 mode is `target`.
+template <class T>
+void set_mean_flow(const Vec3& target, MacGrid<T>& u);
+
+/// Periodic projection (and spectral implicit diffusion) with FFTW: the discrete Poisson problem
+/// is diagonal in Fourier space, eigenvalues lambda(k) = sum_d (2 cos(2 pi k_d / n_d) - 2) / h^2,
+/// so dividing by them solves it to round-off. Plans are made once at construction (FFTW_ESTIMATE:
+/// deterministic), buffers allocated once. Throws MissingFeature when built without FFTW.
+template <class T>
+class FftProjector {
+ public:
+  explicit FftProjector(const GridGeometry& geo);
+  ~FftProjector();
+  FftProjector(const FftProjector&) = delete;
+  FftProjector& operator=(const FftProjector&) = delete;
+
+  /// u <- P u (no diffusion): one r2c of div u, divide, one c2r, subtract the gradient.
+  /// phi (nx*ny*nz) receives the potential. The k = 0 mode is untouched.
+  void project(MacGrid<T>& u, T* phi);
+  /// u <- P (I - nu dt lap)^-1 u, all in Fourier space (3 r2c + 3 c2r). When mean != nullptr the
+  /// k = 0 mode is set to *mean (m/s), otherwise left as it is.
+  void diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec3* mean);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace flagsim

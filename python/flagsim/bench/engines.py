@@ -1,0 +1,325 @@
+"""What a benchmark steps: flagsim's Simulation and Fluid, the numpy Stable Fluids baseline, and
+the FFTW floor of an FFT projection. Peers (PyBullet, MuJoCo, pyPBD) are in peers.py.
+
+A stepper is built outside the timing and offers ``step(n)``; optionally ``timings()`` (seconds
+per stage, cumulative), ``info()`` (a small dict for the report) and ``ok()`` (state finite).
+Features that other issues add are detected, never assumed: ``features()`` says which exist.
+"""
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import math
+from typing import Any
+
+import numpy as np
+
+#: Air grids are a 2 m periodic box (the paper's 16^3 at 12.5 cm), whatever the resolution.
+AIR_BOX = 2.0
+#: Air and cloth step, s (the paper's).
+DT = 0.01
+AIR_VISCOSITY = 1.5e-5  # m^2/s, air
+
+
+# ---- feature detection ------------------------------------------------------------------------
+
+def plain_paper_scene():
+    """Scene.paper() with only what the foundation has: analytic (uniform) wind, and
+    self-collision and flapping off where the scene has them. Features are detected against it,
+    and the cloth workloads start from it."""
+    import flagsim
+
+    s = flagsim.Scene.paper()
+    s.air.model = "uniform"
+    if hasattr(s, "self_collision"):
+        s.self_collision.enabled = False
+    if hasattr(s, "flapping"):
+        s.flapping.mode = "off"
+    return s
+
+
+def _added_stages(section: str, configure) -> tuple[bool, str]:
+    """(True, "") when configure(scene) on the plain paper scene builds a stage it lacks."""
+    import flagsim
+
+    if not hasattr(flagsim.Scene.paper(), section):
+        return False, f"Scene has no '{section}' section in this build"
+    try:
+        base = set(flagsim.Simulation(plain_paper_scene()).stages)
+        scene = plain_paper_scene()
+        configure(scene)
+        added = set(flagsim.Simulation(scene).stages) - base
+    except (AttributeError, TypeError, ValueError) as e:
+        return False, f"rejected by this build ({e})"
+    if not added:
+        return False, "accepted by the scene but no stage is built for it yet"
+    return True, ""
+
+
+def features() -> dict[str, tuple[bool, str]]:
+    """{feature: (available, why not)} for the parts other issues add."""
+    import flagsim
+
+    out: dict[str, tuple[bool, str]] = {}
+    out["fluid"] = (True, "") if hasattr(flagsim, "Fluid") else (
+        False, "flagsim.Fluid does not exist yet (the air solver, issue 4)")
+
+    def self_collision(s):
+        s.self_collision.enabled = True
+
+    def flapping(s):
+        s.flapping.mode = "displace"
+
+    def grid_air(s):
+        s.air.model = "grid"
+
+    ok, why = _added_stages("self_collision", self_collision)
+    out["self_collision"] = (ok, "" if ok else f"self-collision (issue 5): {why}")
+    ok, why = _added_stages("flapping", flapping)
+    out["flapping"] = (ok, "" if ok else f"flapping (issue 5): {why}")
+    if out["fluid"][0]:
+        ok, why = _added_stages("air", grid_air)
+        out["grid_air"] = (ok, "" if ok else f"grid air in the Simulation (issue 4): {why}")
+    else:
+        out["grid_air"] = (False, "grid air in the Simulation needs flagsim.Fluid (issue 4)")
+    return out
+
+
+# ---- flagsim -----------------------------------------------------------------------------------
+
+def cloth_scene(rows: int, cols: int, integrator: str = "implicit", self_collision: bool = False):
+    """The paper scene's flag (same size, mass, pins, dt) meshed with rows x cols masses, alone:
+    in the analytic wind (no grid), no flapping."""
+    s = plain_paper_scene()
+    s.name = f"cloth {rows}x{cols}"
+    s.flag.rows = rows
+    s.flag.cols = cols
+    s.integrator.method = integrator
+    if self_collision:
+        s.self_collision.enabled = True
+    return s
+
+
+def paper_scene(full: bool):
+    """Scene.paper() as built in (whatever it switches on); full: with grid air, self-collision
+    and flapping switched on."""
+    import flagsim
+
+    s = flagsim.Scene.paper()
+    if full:
+        s.air.model = "grid"
+        s.self_collision.enabled = True
+        s.flapping.mode = "displace"
+    return s
+
+
+class SimulationStepper:
+    def __init__(self, scene):
+        import flagsim
+
+        self.sim = flagsim.Simulation(scene)
+
+    def step(self, n: int) -> None:
+        self.sim.step(n)
+
+    def timings(self) -> dict[str, float]:
+        return dict(self.sim.timings)
+
+    def info(self) -> dict[str, Any]:
+        return {"vertices": int(self.sim.positions.shape[0]), "stages": list(self.sim.stages),
+                "last_step": dict(self.sim.last_step_stats)}
+
+    def ok(self) -> bool:
+        return bool(np.isfinite(self.sim.positions).all())
+
+
+def smooth_periodic_field(points: np.ndarray, box: float = AIR_BOX, seed: int = 0) -> np.ndarray:
+    """A seeded smooth periodic velocity field (M, 3) m/s: 2 m/s along +x plus 6 random modes.
+
+    Benchmarks start from it rather than from uniform wind, where an iterative pressure solve
+    would have nothing to do.
+    """
+    rng = np.random.default_rng(seed)
+    u = np.zeros_like(points, dtype=float)
+    u[:, 0] = 2.0
+    for _ in range(6):
+        k = rng.integers(-3, 4, size=3)
+        if not k.any():
+            k[0] = 1
+        amp = rng.normal(size=3)
+        phase = rng.uniform(0, 2 * np.pi)
+        u += np.outer(np.sin(2 * np.pi / box * points @ k + phase), amp)
+    return u
+
+
+class FluidStepper:
+    """flagsim.Fluid alone on the periodic benchmark box."""
+
+    def __init__(self, n: int, advection: str, pressure: str, precision: str = "double"):
+        import flagsim
+
+        self.fluid = flagsim.Fluid(resolution=(n, n, n), cell_size=AIR_BOX / n, origin=(0.0, 0.0, 0.0),
+                                   boundary="periodic", advection=advection, pressure=pressure,
+                                   precision=precision, viscosity=AIR_VISCOSITY)
+        self.fluid.set_velocity(smooth_periodic_field)
+
+    def step(self, n: int) -> None:
+        self.fluid.step(DT, n)
+
+    def timings(self) -> dict[str, float]:
+        """Stage seconds when the Fluid reports them (stats['seconds_<stage>'], cumulative)."""
+        stats = getattr(self.fluid, "stats", None)
+        if not isinstance(stats, dict):
+            return {}
+        return {k[len("seconds_"):]: float(v) for k, v in stats.items() if k.startswith("seconds_")}
+
+    def info(self) -> dict[str, Any]:
+        stats = getattr(self.fluid, "stats", None)
+        stats = dict(stats) if isinstance(stats, dict) else {}
+        out: dict[str, Any] = {}
+        if stats.get("pressure_iterations"):
+            out["notes"] = f"{stats['pressure_iterations']} PCG iterations in the last projection"
+        return out
+
+    def ok(self) -> bool:
+        return all(bool(np.isfinite(np.asarray(getattr(self.fluid, c))).all()) for c in "uvw")
+
+
+class NumpyFluidStepper:
+    """The plain numpy Stable Fluids baseline (flagsim.testing.stable_fluids_numpy), same box."""
+
+    def __init__(self, n: int):
+        from flagsim.testing.stable_fluids_numpy import StableFluidsNumpy
+
+        self.fluid = StableFluidsNumpy(resolution=(n, n, n), cell_size=AIR_BOX / n,
+                                       origin=(0.0, 0.0, 0.0), viscosity=AIR_VISCOSITY)
+        self.fluid.set_velocity(smooth_periodic_field)
+
+    def step(self, n: int) -> None:
+        for _ in range(n):
+            self.fluid.step(DT)
+
+    def ok(self) -> bool:
+        return all(bool(np.isfinite(getattr(self.fluid, c)).all()) for c in "uvw")
+
+
+def numpy_baseline_available() -> tuple[bool, str]:
+    import importlib.util
+
+    try:
+        found = importlib.util.find_spec("flagsim.testing.stable_fluids_numpy") is not None
+    except ModuleNotFoundError:
+        found = False
+    if found:
+        return True, ""
+    return False, "flagsim.testing.stable_fluids_numpy does not exist yet (issue 4)"
+
+
+# ---- FFTW floor --------------------------------------------------------------------------------
+
+_FFTW_ESTIMATE = 1 << 6
+
+
+def _load_fftw():
+    for name in (ctypes.util.find_library("fftw3"), "libfftw3.so.3", "libfftw3.dylib"):
+        if not name:
+            continue
+        try:
+            return ctypes.CDLL(name)
+        except OSError:
+            continue
+    return None
+
+
+def fftw_available() -> tuple[bool, str]:
+    if _load_fftw() is None:
+        return False, "the FFTW 3 shared library (libfftw3) was not found"
+    return True, ""
+
+
+class FftwFloorStepper:
+    """One 'step' = 3 forward r2c + 3 inverse c2r double transforms of an n^3 grid, one thread,
+    FFTW_ESTIMATE plans (as flagsim's fft projection plans them): the floor of an FFT projection."""
+
+    def __init__(self, n: int):
+        lib = _load_fftw()
+        if lib is None:
+            raise RuntimeError("libfftw3 not found")
+        self.lib = lib
+        lib.fftw_plan_dft_r2c_3d.restype = ctypes.c_void_p
+        lib.fftw_plan_dft_r2c_3d.argtypes = [ctypes.c_int] * 3 + [ctypes.c_void_p, ctypes.c_void_p,
+                                                                  ctypes.c_uint]
+        lib.fftw_plan_dft_c2r_3d.restype = ctypes.c_void_p
+        lib.fftw_plan_dft_c2r_3d.argtypes = lib.fftw_plan_dft_r2c_3d.argtypes
+        lib.fftw_execute.argtypes = [ctypes.c_void_p]
+        lib.fftw_destroy_plan.argtypes = [ctypes.c_void_p]
+        self.real = [np.random.default_rng(c).standard_normal((n, n, n)) for c in range(3)]
+        self.spec = [np.zeros((n, n, n // 2 + 1), dtype=np.complex128) for _ in range(3)]
+        self.plans = []
+        for r, c in zip(self.real, self.spec):
+            keep = r.copy()  # planning may overwrite (not with ESTIMATE, but be safe)
+            self.plans.append(lib.fftw_plan_dft_r2c_3d(n, n, n, r.ctypes.data, c.ctypes.data,
+                                                       _FFTW_ESTIMATE))
+            self.plans.append(lib.fftw_plan_dft_c2r_3d(n, n, n, c.ctypes.data, r.ctypes.data,
+                                                       _FFTW_ESTIMATE))
+            r[...] = keep
+        if not all(self.plans):
+            raise RuntimeError("FFTW planning failed")
+        self.scale = 1.0 / n**3
+
+    def step(self, n: int) -> None:
+        execute = self.lib.fftw_execute
+        for _ in range(n):
+            for p in self.plans:
+                execute(p)
+            # keep the data bounded: c2r leaves n^3 x the input
+            for r in self.real:
+                r *= self.scale
+
+    def ok(self) -> bool:
+        return all(bool(np.isfinite(r).all()) for r in self.real)
+
+    def __del__(self):
+        for p in getattr(self, "plans", []):
+            if p:
+                self.lib.fftw_destroy_plan(p)
+
+
+# ---- Taylor-Green: float32 grid accuracy against double -----------------------------------------
+
+def taylor_green_errors(n: int = 32, steps: int = 50, viscosity: float = 0.05) -> dict[str, float]:
+    """Relative max error of a decaying Taylor-Green vortex after `steps` steps of DT, for the
+    double and the float grid, and their difference relative to the double result.
+
+    u = U sin(kx) cos(ky), v = -U cos(kx) sin(ky), w = 0 decays as exp(-2 nu k^2 t) (exact for
+    Navier-Stokes); k = 2 pi / box.
+    """
+    import flagsim
+
+    k = 2 * np.pi / AIR_BOX
+
+    def tg(points):
+        x, y = points[:, 0], points[:, 1]
+        u = np.zeros_like(points)
+        u[:, 0] = np.sin(k * x) * np.cos(k * y)
+        u[:, 1] = -np.cos(k * x) * np.sin(k * y)
+        return u
+
+    out: dict[str, float] = {}
+    fields = {}
+    for precision in ("double", "float"):
+        f = flagsim.Fluid(resolution=(n, n, n), cell_size=AIR_BOX / n, origin=(0.0, 0.0, 0.0),
+                          boundary="periodic", advection="semi_lagrangian", pressure="fft",
+                          precision=precision, viscosity=viscosity)
+        f.set_velocity(tg)
+        f.step(DT, steps)
+        decay = math.exp(-2 * viscosity * k * k * DT * steps)
+        exact = tg(f.face_positions(0))[:, 0] * decay
+        u = np.asarray(f.u, dtype=float).reshape(-1)
+        fields[precision] = u
+        out[f"error_{precision}"] = float(np.abs(u - exact).max() / decay)
+    out["float_vs_double"] = float(np.abs(fields["float"] - fields["double"]).max()
+                                   / np.abs(fields["double"]).max())
+    out["n"] = n
+    out["steps"] = steps
+    return out

@@ -1,0 +1,1 @@
+"""Test and benchmark utilities: reference implementations flagsim is checked against."""

@@ -1,0 +1,131 @@
+#include "fluid/fluid.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "../support/alloc_counter.h"
+#include "common/errors.h"
+
+namespace flagsim {
+
+namespace {
+
+FluidParams small(const std::string& pressure, const std::string& advection) {
+  FluidParams p;
+  p.resolution = {12, 10, 8};
+  p.cell_size = 0.1;
+  p.origin = Vec3::Zero();
+  p.pressure = pressure;
+  p.advection = advection;
+  p.viscosity = 1e-3;
+  return p;
+}
+
+void randomise(Fluid& f, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> n(0.0, 1.0);
+  for (int c = 0; c < 3; ++c) {
+    std::vector<double> v(f.component_shape(c).size());
+    for (double& x : v) x = n(rng);
+    f.set_component(c, v.data());
+  }
+}
+
+}  // namespace
+
+class FluidBackends : public ::testing::TestWithParam<std::tuple<std::string, std::string>> {};
+
+TEST_P(FluidBackends, ProjectionLeavesNoDivergence) {
+  const auto [pressure, advection] = GetParam();
+#ifndef FLAGSIM_HAVE_FFTW
+  if (pressure == "fft") GTEST_SKIP() << "built without FFTW";
+#endif
+  FluidParams p = small(pressure, advection);
+  Fluid f(p);
+  randomise(f, 7);
+  const double before = f.max_divergence();
+  ASSERT_GT(before, 10.0);
+  f.step(0.01);
+  if (pressure == "fft")
+    EXPECT_LT(f.max_divergence(), 1e-10);
+  else
+    EXPECT_LE(f.max_divergence(), p.pcg_tolerance * before * 1.01);
+}
+
+TEST_P(FluidBackends, StepAllocatesNothing) {
+  const auto [pressure, advection] = GetParam();
+#ifndef FLAGSIM_HAVE_FFTW
+  if (pressure == "fft") GTEST_SKIP() << "built without FFTW";
+#endif
+  FluidParams p = small(pressure, advection);
+  p.wind = WindSchedule(Vec3(2, 0, 0));
+  p.fans.emplace_back();
+  p.fans[0].center = Vec3(0.6, 0.5, 0.4);
+  Fluid f(p);
+  f.step(0.01);  // first step: thread pools and lazy runtime state
+  MatX3 points = MatX3::Constant(88, 3, 0.4), out(88, 3);
+  testing::CountAllocations count;
+  for (int i = 0; i < 100; ++i) {
+    f.step(0.01);
+    f.sample(points, out);
+  }
+  EXPECT_EQ(count.count(), 0);
+}
+
+INSTANTIATE_TEST_SUITE_P(Fluid, FluidBackends,
+                         ::testing::Combine(::testing::Values("fft", "pcg"),
+                                            ::testing::Values("semi_lagrangian", "maccormack")));
+
+TEST(Fluid, TunnelStepAllocatesNothingAndBalancesFlux) {
+  FluidParams p;
+  p.resolution = {16, 8, 8};
+  p.cell_size = 0.125;
+  p.origin = Vec3::Zero();
+  p.boundary = "tunnel";
+  p.pressure = "pcg";
+  p.pcg_tolerance = 1e-10;
+  p.wind = WindSchedule(Vec3(2, 0, 0));
+  p.fans.emplace_back();
+  p.fans[0].center = Vec3(0.8, 0.5, 0.5);
+  p.fans[0].force_density = 60;
+  Fluid f(p);
+  f.step(0.01);
+  {
+    testing::CountAllocations count;
+    for (int i = 0; i < 20; ++i) f.step(0.01);
+    EXPECT_EQ(count.count(), 0);
+  }
+  const Shape3 su = f.component_shape(0);
+  const double* u = static_cast<const double*>(static_cast<const Fluid&>(f).component_data(0));
+  double in = 0, out = 0;
+  for (int j = 0; j < su.n[1]; ++j)
+    for (int k = 0; k < su.n[2]; ++k) {
+      in += u[su.index(0, j, k)];
+      out += u[su.index(su.n[0] - 1, j, k)];
+    }
+  EXPECT_DOUBLE_EQ(in, 2.0 * 64);
+  EXPECT_NEAR(out, in, 1e-8 * in);
+  EXPECT_TRUE(f.stats().pressure_converged);
+  EXPECT_GT(f.stats().pressure_iterations, 0);
+}
+
+TEST(Fluid, FloatPrecisionStoresFloats) {
+  FluidParams p = small("pcg", "semi_lagrangian");
+  p.precision = "float";
+  Fluid f(p);
+  EXPECT_FALSE(f.is_double());
+  randomise(f, 3);
+  f.step(0.01);
+  EXPECT_LT(f.max_divergence(), 1e-3);
+}
+
+TEST(Fluid, RejectsBadStep) {
+  Fluid f(small("pcg", "semi_lagrangian"));
+  EXPECT_THROW(f.step(0.0), InvalidArgument);
+  EXPECT_THROW(f.step(NAN), InvalidArgument);
+  EXPECT_EQ(f.time(), 0.0);
+}
+
+}  // namespace flagsim

@@ -1,0 +1,66 @@
+#include <gtest/gtest.h>
+
+#include "common/errors.h"
+#include "fluid/fluid.h"
+#include "fluid/params.h"
+
+namespace flagsim {
+
+namespace {
+std::string error_of(const FluidParams& p, const std::string& prefix = "air") {
+  try {
+    p.validate(prefix);
+    p.validate_combination(prefix);
+  } catch (const InvalidArgument& e) {
+    return e.what();
+  }
+  return "";
+}
+}  // namespace
+
+TEST(FluidParams, DefaultsAreValid) { EXPECT_EQ(error_of(FluidParams()), ""); }
+
+TEST(FluidParams, ErrorsNameTheParameter) {
+  FluidParams p;
+  p.resolution = {16, 0, 16};
+  EXPECT_NE(error_of(p).find("air.resolution should be"), std::string::npos) << error_of(p);
+  p = FluidParams();
+  p.cell_size = -0.1;
+  EXPECT_NE(error_of(p).find("air.cell_size should be finite and > 0, got -0.1"), std::string::npos);
+  p = FluidParams();
+  p.advection = "upwind";
+  EXPECT_NE(error_of(p).find("air.advection should be one of \"semi_lagrangian\", \"maccormack\", got \"upwind\""),
+            std::string::npos)
+      << error_of(p);
+  p = FluidParams();
+  p.pressure = "fft";
+  p.boundary = "tunnel";
+  EXPECT_NE(error_of(p).find("air.pressure should be \"pcg\" with boundary \"tunnel\""), std::string::npos)
+      << error_of(p);
+  p = FluidParams();
+  p.viscosity = -1;
+  EXPECT_NE(error_of(p).find("air.viscosity"), std::string::npos);
+  p = FluidParams();
+  p.fans.emplace_back();
+  p.fans[0].radius = 0;
+  EXPECT_NE(error_of(p).find("air.fans[0].radius"), std::string::npos);
+  p.fans[0] = FanParams();
+  p.fans[0].direction = Vec3::Zero();
+  EXPECT_NE(error_of(p).find("air.fans[0].direction"), std::string::npos);
+  p = FluidParams();
+  p.precision = "half";
+  EXPECT_NE(error_of(p, "").find("precision should be"), std::string::npos);
+}
+
+TEST(FluidParams, FftWithoutFftwIsAMissingFeature) {
+  FluidParams p;
+  p.pressure = "fft";
+  EXPECT_NO_THROW(p.validate("air"));  // each field is fine on its own
+#ifdef FLAGSIM_HAVE_FFTW
+  EXPECT_NO_THROW(p.validate_combination("air"));
+#else
+  EXPECT_THROW(p.validate_combination("air"), MissingFeature);
+#endif
+}
+
+}  // namespace flagsim

@@ -1,0 +1,257 @@
+"""flagsim bench: the smoke run writes its CSV, table and plot; the protocol, the selection, the
+peers' cloth and the feature detection behave. No wall-clock figure is asserted anywhere."""
+import json
+import math
+import os
+
+import numpy as np
+import pytest
+
+import flagsim
+from flagsim import bench
+from flagsim.bench import engines, peers, report, worker, workloads
+from flagsim.bench.command import selection
+
+
+def _figures_ok(row):
+    for col in report.FIGURES:
+        v = float(row[col])
+        assert math.isfinite(v) and v > 0, (row["variant"], row["size"], col, row[col])
+    assert math.isfinite(float(row["workload_mb"])) and float(row["workload_mb"]) >= 0
+
+
+def test_smoke_run_writes_csv_table_and_plot(tmp_path, capsys):
+    out = tmp_path / "bench"
+    assert bench.main(["--smoke", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    for name in ("results.csv", "results.md", "scaling.png", "results.json"):
+        assert (out / name).is_file(), name
+
+    with open(out / "results.csv", encoding="utf-8") as f:
+        header = [line for line in f if line.startswith("#")]
+    machine = dict(line[2:].rstrip("\n").split(": ", 1) for line in header)
+    for key in ("cpu", "logical_cpus", "compiler", "cxx_flags", "git_revision", "numpy", "fftw", "openmp",
+                "load_average_start"):
+        assert machine.get(key), key
+    rows = report.read_csv(out / "results.csv")
+    assert rows and list(rows[0]) == list(report.COLUMNS)
+    groups = {r["group"] for r in rows}
+    assert {"paper", "cloth"} <= groups
+    for r in rows:
+        assert r["ok"] == "True", r
+        _figures_ok(r)
+        assert int(r["steps_per_run"]) >= 1 and int(r["runs"]) == 2
+        assert float(r["steps_per_s"]) == pytest.approx(1e3 / float(r["ms_median"]), rel=1e-4)
+        assert float(r["ms_min"]) <= float(r["ms_median"])
+    paper = [r for r in rows if r["group"] == "paper"][0]
+    assert "integrate" in paper["stage_split"] and "stages:" in paper["note"]
+
+    md = (out / "results.md").read_text(encoding="utf-8")
+    assert "## Machine" in md and "## Paper scene" in md and "## Targets (issue 8)" in md
+    assert md.count("| flagsim |") >= len([r for r in rows if r["engine"] == "flagsim"])
+    png = (out / "scaling.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000
+    data = json.loads((out / "results.json").read_text(encoding="utf-8"))
+    assert data["protocol"] == workloads.PROTOCOLS["smoke"]
+    # one progress line per workload, and a line for everything skipped
+    assert printed.count("steps/s (median") == len(rows)
+    for what, _ in data["skipped"]:
+        assert f"skip {what}:" in printed
+
+
+def test_docs_report_is_written_with_its_plot(tmp_path):
+    docs = tmp_path / "docs" / "performance.md"
+    assert bench.main(["--smoke", "--only", "cloth", "--integrators", "explicit", "--out", str(tmp_path / "o"),
+                       "--docs", str(docs)]) == 0
+    text = docs.read_text(encoding="utf-8")
+    assert text.startswith("# flagsim performance") and "Do not edit by hand" in text
+    assert "![cost against size](performance.png)" in text
+    assert (tmp_path / "docs" / "performance.png").is_file()
+
+
+def test_peers_run_the_same_cloth_or_are_skipped_with_a_line(tmp_path, capsys):
+    out = tmp_path / "peers"
+    assert bench.main(["--smoke", "--only", "peers", "--sizes", "8x11", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    rows = report.read_csv(out / "results.csv")
+    comps = report.read_csv(out / "peers.csv") if (out / "peers.csv").exists() else []
+    for name, (module, display, _) in peers.PEERS.items():
+        ran = [r for r in rows if r["engine"] == name]
+        if peers.peer_available(name)[0]:
+            assert len(ran) == 1 and ran[0]["ok"] == "True", ran
+            _figures_ok(ran[0])
+            c = [c for c in comps if c["peer"] == name]
+            assert len(c) == 1 and float(c[0]["ratio"]) > 0
+            assert float(c[0]["ratio"]) == pytest.approx(
+                float(c[0]["flagsim_steps_per_s"]) / float(c[0]["peer_steps_per_s"]), rel=1e-4)
+        else:
+            assert not ran
+            assert f"skip peer {name}: {display} is not installed" in printed
+    md = (out / "results.md").read_text(encoding="utf-8")
+    if comps:
+        assert "## Side by side with the peers" in md
+
+
+@pytest.mark.parametrize("name", list(peers.PEERS))
+def test_peer_flag_starts_where_flagsims_does(name):
+    if not peers.peer_available(name)[0]:
+        pytest.skip(f"{name} not installed")
+    sim = flagsim.Simulation(engines.cloth_scene(5, 7))
+    p = peers.make(name, 5, 7)
+    np.testing.assert_allclose(p.positions(), sim.rest_positions, atol=1e-6)
+    assert peers.structural_strain(p.spec, p.positions()) < 1e-6
+    p.step(3)
+    assert p.ok()
+    p.close()
+
+
+def test_flag_mesh_matches_flagsim_topology():
+    sim = flagsim.Simulation(engines.cloth_scene(6, 9))
+    spec = peers.cloth_spec(6, 9)
+    x, tris = peers.flag_mesh(spec)
+    np.testing.assert_allclose(x, sim.rest_positions, atol=1e-12)
+    assert sorted(map(tuple, np.sort(tris, axis=1))) == sorted(map(tuple, np.sort(sim.triangles, axis=1)))
+    np.testing.assert_array_equal(np.flatnonzero(sim.pinned), peers.pole_pins(spec))
+    assert spec["areal_density"] * spec["width"] * spec["height"] == pytest.approx(sim.node_mass.sum())
+
+
+class FakeClock:
+    """perf_counter/process_time stand-in: a step costs exactly `cost` seconds."""
+
+    def __init__(self, cost):
+        self.t, self.cost, self.steps = 0.0, cost, 0
+
+    def __call__(self):
+        return self.t
+
+    def step(self, n):
+        self.steps += n
+        self.t += n * self.cost
+
+    def timings(self):
+        return {"a": 0.25 * self.t, "b": 0.75 * self.t}
+
+
+def test_protocol_drops_warmup_grows_runs_to_min_time_and_splits_stages(monkeypatch):
+    clock = FakeClock(cost=1e-3)
+    monkeypatch.setattr(worker.time, "perf_counter", clock)
+    monkeypatch.setattr(worker.time, "process_time", clock)
+    r = worker.measure(clock, min_time=0.5, repeats=3, warmup=7)
+    n = r["steps_per_run"]
+    assert n * clock.cost >= 0.5 and r["runs"] == 3
+    assert r["wall_s"] == pytest.approx([1e-3] * 3) and r["cpu_s"] == pytest.approx([1e-3] * 3)
+    assert r["stages_s"] == pytest.approx({"a": 0.25e-3, "b": 0.75e-3})
+    assert clock.steps > 7 + 3 * n  # warm-up and calibration steps are not in the runs
+
+
+def test_loglog_slope_and_stage_split():
+    n = [100, 1000, 10000]
+    assert report.loglog_slope(n, [2 * k**1.5 for k in n]) == pytest.approx(1.5)
+    assert report.loglog_slope([64], [1.0]) is None
+    assert report.stage_split({"integrate": 3.0, "springs": 1.0, "check": 0.0}) == "integrate 75%, springs 25%"
+
+
+def _features(**available):
+    names = ("fluid", "self_collision", "flapping", "grid_air")
+    return {k: (available.get(k, False), "" if available.get(k, False) else f"no {k} here") for k in names}
+
+
+def test_workloads_needing_missing_parts_are_skipped_with_the_reason():
+    sel = workloads.Selection(mode="full", groups=("paper", "cloth", "air"))
+    work, skipped = workloads.catalogue(sel, _features(), baselines={"fftw": (True, "")})
+    assert not any(w.group == "air" and w.engine == "flagsim" for w in work)
+    assert not any("self-collision" in w.variant or w.variant == "full" for w in work)
+    why = dict(skipped)
+    assert "no fluid here" in why["air alone (flagsim.Fluid)"]
+    assert "no self_collision here" in why["cloth with self-collision"]
+    assert "no grid_air here" in why["paper scene, full pipeline (grid air + self-collision + flapping)"]
+
+    everything = _features(fluid=True, self_collision=True, flapping=True, grid_air=True)
+    work, skipped = workloads.catalogue(sel, everything, baselines={"fftw": (True, "")})
+    assert not skipped
+    names = {w.name for w in work}
+    # the issue's grid: every integrator x self-collision x size x thread count ...
+    for integ in workloads.INTEGRATORS:
+        for sc in ("", "+self-collision"):
+            for r, c in workloads.CLOTH_SIZES:
+                for t in workloads.THREADS:
+                    assert f"cloth/flagsim/{integ}{sc}/{r}x{c}/t{t}" in names
+    # ... and every advection x pressure x size x thread count, the float grid and the FFTW floor
+    for adv in ("sl", "maccormack"):
+        for pres in workloads.PRESSURE:
+            for n in workloads.AIR_SIZES:
+                for t in workloads.THREADS:
+                    assert f"air/flagsim/{adv}/{pres}/{n}^3/t{t}" in names
+    assert {f"air/flagsim/sl/fft/float/{n}^3/t1" for n in workloads.AIR_SIZES} <= names
+    assert {f"air/fftw/3r2c+3c2r/{n}^3/t1" for n in workloads.AIR_SIZES} <= names
+    assert {"paper/flagsim/full/8x11/t1", "paper/flagsim/full/8x11/t2"} <= names
+    assert len(names) == len(work)
+
+
+def test_quick_selection_is_smaller_and_flags_narrow_it():
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    bench.configure(parser)
+    everything = _features(fluid=True, self_collision=True, flapping=True, grid_air=True)
+
+    def names(argv):
+        sel, proto = selection(parser.parse_args(argv))
+        return [w.name for w in workloads.catalogue(sel, everything)[0]], proto
+
+    full, quick = names([])[0], names(["--quick"])[0]
+    assert 0 < len(quick) < len(full) / 2
+    work, proto = names(["--only", "cloth", "--sizes", "8x11,64", "--threads", "2", "--integrators",
+                         "explicit", "--no-self-collision", "--min-time", "0.3"])
+    assert work == ["cloth/flagsim/explicit/8x11/t2"]
+    assert proto["min_time"] == 0.3
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--sizes", "8by11"], "--sizes should list ROWSxCOLS"),
+    (["--threads", "0"], "--threads should be"),
+    (["--only", "cloth,wind"], "--only should be a comma-separated list among paper, cloth, air, peers"),
+    (["--pressure", "jacobi"], "--pressure should be"),
+    (["--repeats", "0"], "--repeats should be >= 1, got 0"),
+])
+def test_bad_selections_exit_2_with_a_message(argv, message, capsys, tmp_path):
+    assert bench.main(argv + ["--out", str(tmp_path)]) == 2
+    assert message in capsys.readouterr().err
+    assert not os.listdir(tmp_path)
+
+
+def test_list_runs_nothing(capsys, tmp_path):
+    assert bench.main(["--list", "--smoke", "--out", str(tmp_path / "x")]) == 0
+    out = capsys.readouterr().out
+    assert "paper/flagsim/builtin/8x11/t1" in out and "workloads," in out
+    assert not (tmp_path / "x").exists()
+
+
+def test_build_info_describes_the_compiled_module():
+    info = flagsim._core.build_info()
+    assert info["compiler"] and info["build_type"] and isinstance(info["cxx_flags"], str)
+    assert info["openmp"] == flagsim.has_openmp() and info["fftw"] == flagsim.has_fftw()
+    if info["fftw"]:
+        assert info["fftw_version"].startswith("fftw-3")
+    assert info["eigen"].count(".") == 2
+
+
+def test_fftw_floor_transforms_round_trip():
+    if not engines.fftw_available()[0]:
+        pytest.skip("libfftw3 not found")
+    s = engines.FftwFloorStepper(8)
+    before = [r.copy() for r in s.real]
+    s.step(2)  # forward + normalised inverse is the identity
+    for a, b in zip(before, s.real):
+        np.testing.assert_allclose(a, b, atol=1e-12)
+    assert s.ok()
+
+
+def test_import_flagsim_bench_loads_no_plotting_or_peers():
+    import subprocess
+    import sys
+
+    code = ("import sys, flagsim.bench; bad = [m for m in ('matplotlib', 'pybullet', 'mujoco', 'pypbd') "
+            "if m in sys.modules]; print(bad)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
