@@ -18,6 +18,7 @@
 #include <new>
 #include <vector>
 
+#include "common/parallel.h"
 #include "common/types.h"
 
 namespace flagsim {
@@ -110,13 +111,12 @@ double deterministic_sum(std::size_t n, F&& f) {
       nblocks_needed <= kMaxBlocks ? kBlock : (n + kMaxBlocks - 1) / kMaxBlocks;
   const long nb = long((n + block - 1) / block);
   double partial[kMaxBlocks];
-#pragma omp parallel for schedule(static) if (nb > 1)
-  for (long b = 0; b < nb; ++b) {
+  parallel_for_if(nb > 1, nb, [&](Index b) {
     double s = 0;
     const std::size_t end = std::min(n, std::size_t(b + 1) * block);
     for (std::size_t i = std::size_t(b) * block; i < end; ++i) s += f(i);
     partial[b] = s;
-  }
+  });
   double s = 0;
   for (long b = 0; b < nb; ++b) s += partial[b];
   return s;
@@ -125,11 +125,16 @@ double deterministic_sum(std::size_t n, F&& f) {
 /// max(0, max of f(i) over [0, n)), +inf if any f(i) is NaN; independent of the thread count.
 template <class F>
 double parallel_max(std::size_t n, F&& f) {
-  double m = 0;
-#pragma omp parallel for schedule(static) reduction(max : m) if (n > 32768)
-  for (long i = 0; i < long(n); ++i) {
+  auto fold = [&f](double m, long i) {
     const double v = f(std::size_t(i));
-    if (!(v <= m)) m = (v == v) ? v : HUGE_VAL;  // a NaN reports as +inf
+    return (v <= m) ? m : ((v == v) ? v : HUGE_VAL);  // a NaN reports as +inf
+  };
+  double m = 0;
+  if (n > 32768) {  // no `if` clause: libgomp allocates a team even when it is false
+#pragma omp parallel for schedule(static) reduction(max : m)
+    for (long i = 0; i < long(n); ++i) m = fold(m, i);
+  } else {
+    for (long i = 0; i < long(n); ++i) m = fold(m, i);
   }
   return m;
 }
