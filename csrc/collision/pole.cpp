@@ -89,35 +89,55 @@ bool inside_pole(const PoleParams& pole, const Vec3& p, double tolerance) {
          R > 0 && dx * dx + dz * dz < R * R;
 }
 
+namespace {
+
+// collide_pole() for vertex i: how far it was moved, or -1 when it was left alone.
+double collide_vertex(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
+                      const VecX& inv_mass, Index i) {
+  if (inv_mass[i] == 0) return -1;
+  const Vec3 a = x0.row(i).transpose();
+  Vec3 p = x.row(i).transpose();
+  Vec3 normal;
+  const double t = inside_pole(pole, a) ? -1.0 : entry_time(pole, a, p, normal);
+  if (t >= 0) {
+    // Entered from outside (possibly right through): stop at the entry point q and keep the
+    // rest of the motion's component tangent to the face entered, which stays outside the
+    // convex cylinder.
+    const Vec3 q = a + t * (p - a);
+    const Vec3 rest = p - q;
+    p = q + rest - std::min(rest.dot(normal), 0.0) * normal + kSkin * pole.radius * normal;
+  } else if (inside_pole(pole, p)) {
+    project_out(pole, a, p, normal);  // started inside (or grazing): nearest surface point
+  } else {
+    return -1;
+  }
+  const double moved = (p - x.row(i).transpose()).norm();
+  x.row(i) = p.transpose();
+  const double vn = v.row(i).dot(normal.transpose());
+  if (vn < 0) v.row(i) -= vn * normal.transpose();
+  return moved;
+}
+
+}  // namespace
+
 Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
                    const VecX& inv_mass, double* max_move) {
   Index moved = 0;
   double largest = 0;
   const Index n = x.rows();
-#pragma omp parallel for schedule(static) reduction(+ : moved) reduction(max : largest) if (n >= kParallelGrain)
-  for (Index i = 0; i < n; ++i) {
-    if (inv_mass[i] == 0) continue;
-    const Vec3 a = x0.row(i).transpose();
-    Vec3 p = x.row(i).transpose();
-    Vec3 normal;
-    const double t = inside_pole(pole, a) ? -1.0 : entry_time(pole, a, p, normal);
-    if (t >= 0) {
-      // Entered from outside (possibly right through): stop at the entry point q and keep the
-      // rest of the motion's component tangent to the face entered, which stays outside the
-      // convex cylinder.
-      const Vec3 q = a + t * (p - a);
-      const Vec3 rest = p - q;
-      p = q + rest - std::min(rest.dot(normal), 0.0) * normal + kSkin * pole.radius * normal;
-    } else if (inside_pole(pole, p)) {
-      project_out(pole, a, p, normal);  // started inside (or grazing): nearest surface point
-    } else {
-      continue;
+  // Reductions branch in C++: an omp `if` clause would build a one-thread team (a heap
+  // allocation) for every small call.
+  if (n >= kParallelGrain) {
+#pragma omp parallel for schedule(static) reduction(+ : moved) reduction(max : largest)
+    for (Index i = 0; i < n; ++i) {
+      const double d = collide_vertex(pole, x0, x, v, inv_mass, i);
+      if (d >= 0) ++moved, largest = std::max(largest, d);
     }
-    largest = std::max(largest, (p - x.row(i).transpose()).norm());
-    x.row(i) = p.transpose();
-    const double vn = v.row(i).dot(normal.transpose());
-    if (vn < 0) v.row(i) -= vn * normal.transpose();
-    ++moved;
+  } else {
+    for (Index i = 0; i < n; ++i) {
+      const double d = collide_vertex(pole, x0, x, v, inv_mass, i);
+      if (d >= 0) ++moved, largest = std::max(largest, d);
+    }
   }
   if (max_move) *max_move = largest;
   return moved;

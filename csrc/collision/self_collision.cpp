@@ -34,7 +34,7 @@ inline Vec3 row(const MatX3& m, Index i) { return m.row(i).transpose(); }
 
 // Pair loops parallelise above this many pairs: a pair costs about a vertex update, and waking a
 // thread team on a loaded machine costs far more than a few thousand of them.
-constexpr std::ptrdiff_t kPairGrain = 4 * kParallelGrain;
+constexpr Index kPairGrain = 4 * kParallelGrain;
 
 }  // namespace
 
@@ -47,9 +47,11 @@ SelfCollision::SelfCollision(const MatX3i& triangles, Index num_vertices,
       vhi_(num_vertices, 3),
       tlo_(triangles.rows(), 3),
       thi_(triangles.rows(), 3),
+      x_sweep_(num_vertices, 3),
       dv_(num_vertices, 3),
       count_v_(static_cast<size_t>(num_vertices), 0),
       on_pole_(static_cast<size_t>(num_vertices), 0),
+      moved_(static_cast<size_t>(num_vertices), 0),
       frozen_(static_cast<size_t>(num_vertices), 0) {
   hash_.reserve(triangles.rows());
   const int threads = max_threads();
@@ -92,26 +94,31 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
   if (static_cast<int>(thread_pairs_.size()) < threads) thread_pairs_.resize(threads);
   for (auto& buffer : thread_pairs_) buffer.clear();
   const double reach = h + margin;
-#pragma omp parallel if (n_ >= kParallelGrain)
-  {
-    std::vector<Pair>& buffer = thread_pairs_[static_cast<size_t>(thread_id())];
-    // Static schedule: thread k gets the k-th contiguous block of vertices, so concatenating the
-    // buffers in thread order lists pairs by vertex whatever the thread count.
+  auto collect = [&](Index i, std::vector<Pair>& buffer) {
+    const Vec3 qlo = vlo_.row(i).transpose().array() - reach;
+    const Vec3 qhi = vhi_.row(i).transpose().array() + reach;
+    const size_t begin = buffer.size();
+    const auto vi = static_cast<int32_t>(i);
+    hash_.query(qlo, qhi, [&](int32_t t) {
+      const int32_t a = tris_(t, 0), b = tris_(t, 1), c = tris_(t, 2);
+      if (a == vi || b == vi || c == vi) return;  // never against its own triangles
+      if (inv_mass[i] == 0 && inv_mass[a] == 0 && inv_mass[b] == 0 && inv_mass[c] == 0) return;
+      buffer.push_back({vi, t});
+    });
+    std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(),
+              [](const Pair& p, const Pair& q) { return p.t < q.t; });
+  };
+  if (n_ >= kParallelGrain) {
+#pragma omp parallel
+    {
+      std::vector<Pair>& buffer = thread_pairs_[static_cast<size_t>(thread_id())];
+      // Static schedule: thread k gets the k-th contiguous block of vertices, so concatenating
+      // the buffers in thread order lists pairs by vertex whatever the thread count.
 #pragma omp for schedule(static)
-    for (Index i = 0; i < n_; ++i) {
-      const Vec3 qlo = vlo_.row(i).transpose().array() - reach;
-      const Vec3 qhi = vhi_.row(i).transpose().array() + reach;
-      const size_t begin = buffer.size();
-      const auto vi = static_cast<int32_t>(i);
-      hash_.query(qlo, qhi, [&](int32_t t) {
-        const int32_t a = tris_(t, 0), b = tris_(t, 1), c = tris_(t, 2);
-        if (a == vi || b == vi || c == vi) return;  // never against its own triangles
-        if (inv_mass[i] == 0 && inv_mass[a] == 0 && inv_mass[b] == 0 && inv_mass[c] == 0) return;
-        buffer.push_back({vi, t});
-      });
-      std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(),
-                [](const Pair& p, const Pair& q) { return p.t < q.t; });
+      for (Index i = 0; i < n_; ++i) collect(i, buffer);
     }
+  } else {
+    for (Index i = 0; i < n_; ++i) collect(i, thread_pairs_[0]);
   }
   pairs_.clear();
   for (const auto& buffer : thread_pairs_) pairs_.insert(pairs_.end(), buffer.begin(), buffer.end());
@@ -197,9 +204,10 @@ void SelfCollision::accumulate_impulse(const Pair& pr, const Contact& c, const M
 }
 
 bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
-                          const PoleParams* pole) {
+                          const PoleParams* pole, bool first) {
   const double h = params_.thickness;
   bool changed = false;
+  x_sweep_ = x;  // to see, at the end, which vertices this sweep moved
   if (pole) {
     // On the pole: within half the thickness of its surface (the sweeps end on the pole's
     // projection, so these are the vertices it holds).
@@ -213,15 +221,16 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
   // with its hit point and the triangle's normal at the hit time towards the side the vertex
   // started on (Bridson et al. 2002 §7.3, for the impulse); otherwise a proximity at x closer
   // than the thickness, along the closest-point direction.
-  const auto P = static_cast<std::ptrdiff_t>(pairs_.size());
-#pragma omp parallel for schedule(static) if (P >= kPairGrain)
-  for (std::ptrdiff_t k = 0; k < P; ++k) {
+  const auto P = static_cast<Index>(pairs_.size());
+  // After the first sweep only pairs with a vertex the last sweep moved can have changed.
+  parallel_for_if(P >= kPairGrain, P, [&](Index k) {
     const Pair pr = pairs_[k];
     const int32_t a = tris_(pr.t, 0), b = tris_(pr.t, 1), c = tris_(pr.t, 2);
-    const Vec3 p0 = row(x0, pr.v), a0 = row(x0, a), b0 = row(x0, b), c0 = row(x0, c);
-    const Vec3 p1 = row(x, pr.v), a1 = row(x, a), b1 = row(x, b), c1 = row(x, c);
     Contact& ct = contacts_[k];
     ct.kind = Contact::kNone;
+    if (!first && !moved_[pr.v] && !moved_[a] && !moved_[b] && !moved_[c]) return;
+    const Vec3 p0 = row(x0, pr.v), a0 = row(x0, a), b0 = row(x0, b), c0 = row(x0, c);
+    const Vec3 p1 = row(x, pr.v), a1 = row(x, a), b1 = row(x, b), c1 = row(x, c);
     double t;
     if (vertex_triangle_ccd(p0, a0, b0, c0, p1, a1, b1, c1, t, ct.bary)) {
       Vec3 n = ((1 - t) * (b0 - a0) + t * (b1 - a1)).cross((1 - t) * (c0 - a0) + t * (c1 - a1));
@@ -232,24 +241,25 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
         ct.n = (f0 > 0 || (f0 == 0 && f1 >= 0)) ? Vec3(n / len) : Vec3(-n / len);
         ct.kind = Contact::kCrossing;
       }
-      continue;
+      return;
     }
+    if (beyond_reach(p1, a1, b1, c1, h)) return;
     bool interior;
     ct.bary = closest_point_barycentric(p1, a1, b1, c1, interior);
     const Vec3 r = p1 - (ct.bary[0] * a1 + ct.bary[1] * b1 + ct.bary[2] * c1);
     const double d = r.norm();
-    if (d >= h) continue;
+    if (d >= h) return;
     if (d > 1e-9 * h) {
       ct.n = r / d;
     } else {  // on the triangle: its normal, towards the side the vertex started on
       const Vec3 n = (b1 - a1).cross(c1 - a1);
-      if (!(n.norm() > 0)) continue;
+      if (!(n.norm() > 0)) return;
       const double f0 = (b0 - a0).cross(c0 - a0).dot(p0 - a0);
       ct.n = f0 < 0 ? Vec3(-n.normalized()) : Vec3(n.normalized());
     }
     ct.C = d - h;
     ct.kind = Contact::kProximity;
-  }
+  });
   // Response, in pair order. A crossing moves the pair's four points back along their paths to
   // the time the vertex was still the thickness (or its starting distance) off the triangle's
   // plane: an inelastic stop short of the hit, which only ever undoes motion, so it cannot push
@@ -260,7 +270,7 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
   // (a vertex over a shared edge, a triangle on two pinned bumps) neither add up nor bounce it.
   dv_.setZero();
   std::fill(count_v_.begin(), count_v_.end(), 0);
-  for (std::ptrdiff_t k = 0; k < P; ++k) {
+  for (Index k = 0; k < P; ++k) {
     Contact& ct = contacts_[k];
     if (ct.kind == Contact::kNone) continue;
     const Pair pr = pairs_[k];
@@ -294,6 +304,7 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
     stats_.pole += collide_pole(*pole, x0, x, v, inv_mass, &largest);
     changed = changed || largest > 1e-2 * h;
   }
+  for (Index i = 0; i < n_; ++i) moved_[i] = x.row(i) != x_sweep_.row(i);
   return changed;
 }
 
@@ -301,14 +312,12 @@ bool SelfCollision::find_violations(const MatX3& x0, const MatX3& x, const VecX&
                                     const PoleParams* pole) {
   const double floor = 0.5 * params_.thickness;
   auto still = [&](int32_t i) { return frozen_[i] || inv_mass[i] == 0; };
-  const auto P = static_cast<std::ptrdiff_t>(pairs_.size());
-  bool any = false;
-#pragma omp parallel for schedule(static) reduction(|| : any) if (P >= kPairGrain)
-  for (std::ptrdiff_t k = 0; k < P; ++k) {
+  const auto P = static_cast<Index>(pairs_.size());
+  parallel_for_if(P >= kPairGrain, P, [&](Index k) {
     const Pair pr = pairs_[k];
     const int32_t a = tris_(pr.t, 0), b = tris_(pr.t, 1), c = tris_(pr.t, 2);
     flag_[k] = 0;
-    if (still(pr.v) && still(a) && still(b) && still(c)) continue;  // nothing left to undo
+    if (still(pr.v) && still(a) && still(b) && still(c)) return;  // nothing left to undo
     const Vec3 p = row(x, pr.v), xa = row(x, a), xb = row(x, b), xc = row(x, c);
     bool interior;
     Vec3 bary = closest_point_barycentric(p, xa, xb, xc, interior);
@@ -316,8 +325,8 @@ bool SelfCollision::find_violations(const MatX3& x0, const MatX3& x, const VecX&
     double t;
     flag_[k] = d < floor || vertex_triangle_ccd(row(x0, pr.v), row(x0, a), row(x0, b),
                                                 row(x0, c), p, xa, xb, xc, t, bary);
-    any = any || flag_[k];
-  }
+  });
+  bool any = std::find(flag_.begin(), flag_.end(), uint8_t{1}) != flag_.end();
   if (pole)
     for (Index i = 0; i < n_ && !any; ++i)
       any = !still(static_cast<int32_t>(i)) && inside_pole(*pole, row(x, i));
@@ -385,7 +394,7 @@ const SelfCollisionStats& SelfCollision::resolve(const MatX3& x0, MatX3& x, MatX
     broad_phase(x0, x, inv_mass, /*shifted=*/true);
     for (int s = 0; s < params_.iterations; ++s) {
       ++stats_.sweeps;
-      if (!sweep(x0, x, v, inv_mass, pole)) break;
+      if (!sweep(x0, x, v, inv_mass, pole, s == 0)) break;
     }
     complete = within_boxes(x0, x);  // else a push left the candidates' reach: collect again
   }

@@ -84,7 +84,8 @@ class SelfCollision {
   bool find_violations(const MatX3& x0, const MatX3& x, const VecX& inv_mass,
                        const PoleParams* pole);
   bool within_boxes(const MatX3& x0, const MatX3& x) const;
-  bool sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass, const PoleParams* pole);
+  bool sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass, const PoleParams* pole,
+             bool first);
   void freeze_fallback(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
                        const PoleParams* pole);
   bool weights(const Pair& pr, const Contact& c, const VecX& inv_mass, double w[4], double& W,
@@ -103,9 +104,11 @@ class SelfCollision {
   std::vector<Pair> pairs_;
   std::vector<uint8_t> flag_;    // per pair: crossing / violation found by the parallel pass
   std::vector<Contact> contacts_;  // per pair, in a sweep
+  MatX3 x_sweep_;                  // N x 3 positions at the start of a sweep
   MatX3 dv_;                       // N x 3 summed velocity changes of a sweep
   std::vector<int> count_v_;       // per vertex: impulses in that sum
   std::vector<uint8_t> on_pole_;   // per vertex: resting on the pole in this sweep
+  std::vector<uint8_t> moved_;     // per vertex: moved by the last sweep
   std::vector<uint8_t> frozen_;  // per vertex
   SelfCollisionStats stats_;
 };

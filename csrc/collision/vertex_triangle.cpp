@@ -43,6 +43,13 @@ Vec3 closest_point_barycentric(const Vec3& p, const Vec3& a, const Vec3& b, cons
   return {1 - v - w, v, w};
 }
 
+bool beyond_reach(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, double gap) {
+  const Vec3 m = (a + b + c) / 3;
+  const double r = std::sqrt(std::max({(a - m).squaredNorm(), (b - m).squaredNorm(),
+                                       (c - m).squaredNorm()}));
+  return (p - m).norm() > r + gap;
+}
+
 Vec3 plane_barycentric(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
   const Vec3 n = (b - a).cross(c - a);
   const double nn = n.squaredNorm();
@@ -69,17 +76,25 @@ double eval_cubic(const Eigen::Vector4d& k, double t) {
   return k[0] + t * (k[1] + t * (k[2] + t * k[3]));
 }
 
-// Bisection on [lo, hi] where f(lo) and f(hi) have opposite signs (or one is zero).
-double bisect(const Eigen::Vector4d& k, double lo, double hi, double flo) {
-  for (int it = 0; it < 60 && hi - lo > 1e-13; ++it) {
-    const double mid = 0.5 * (lo + hi);
+// Root of f on [lo, hi] where f(lo) and f(hi) have opposite signs: regula falsi with the
+// Illinois modification (Dowell & Jarratt 1971), superlinear, bracketing kept, to 1e-13 in t.
+double bracketed_root(const Eigen::Vector4d& k, double lo, double hi, double flo, double fhi) {
+  int side = 0;
+  for (int it = 0; it < 100 && hi - lo > 1e-13; ++it) {
+    double mid = (lo * fhi - hi * flo) / (fhi - flo);
+    if (!(mid > lo && mid < hi)) mid = 0.5 * (lo + hi);
     const double fm = eval_cubic(k, mid);
     if (fm == 0) return mid;
     if ((fm < 0) == (flo < 0)) {
       lo = mid;
       flo = fm;
+      if (side == -1) fhi *= 0.5;
+      side = -1;
     } else {
       hi = mid;
+      fhi = fm;
+      if (side == 1) flo *= 0.5;
+      side = 1;
     }
   }
   return 0.5 * (lo + hi);
@@ -100,6 +115,19 @@ bool inside_at(double t, const Vec3& p0, const Vec3& a0, const Vec3& b0, const V
 bool vertex_triangle_ccd(const Vec3& p0, const Vec3& a0, const Vec3& b0, const Vec3& c0,
                          const Vec3& p1, const Vec3& a1, const Vec3& b1, const Vec3& c1,
                          double& t_hit, Vec3& bary) {
+  // Quick rejection: p never enters the sphere around the triangle's centroid m that holds its
+  // corners. |corner - m| is convex in t (linear motion), so its maximum over the step is at an
+  // end; p - m moves linearly, so its closest approach has a closed form.
+  {
+    const Vec3 m0 = (a0 + b0 + c0) / 3, m1 = (a1 + b1 + c1) / 3;
+    const double r2 = std::max({(a0 - m0).squaredNorm(), (b0 - m0).squaredNorm(),
+                                (c0 - m0).squaredNorm(), (a1 - m1).squaredNorm(),
+                                (b1 - m1).squaredNorm(), (c1 - m1).squaredNorm()});
+    const Vec3 q0 = p0 - m0, dq = (p1 - m1) - q0;
+    const double dd = dq.squaredNorm();
+    const double s = dd > 0 ? std::clamp(-q0.dot(dq) / dd, 0.0, 1.0) : 0.0;
+    if ((q0 + s * dq).squaredNorm() > r2 * (1 + 1e-9)) return false;
+  }
   const Eigen::Vector4d k = coplanarity_cubic(p0, a0, b0, c0, p1, a1, b1, c1);
   // Split [0, 1] where f' = k1 + 2 k2 t + 3 k3 t^2 vanishes: f is monotone on each piece, so a
   // piece holds a root iff f changes sign over it.
@@ -135,7 +163,7 @@ bool vertex_triangle_ccd(const Vec3& p0, const Vec3& a0, const Vec3& b0, const V
     if (f_lo == 0) {
       root = lo;
     } else if (f_hi == 0 || (f_lo < 0) != (f_hi < 0)) {
-      root = f_hi == 0 ? hi : bisect(k, lo, hi, f_lo);
+      root = f_hi == 0 ? hi : bracketed_root(k, lo, hi, f_lo, f_hi);
     }
     if (root >= 0 && inside_at(root, p0, a0, b0, c0, p1, a1, b1, c1, bary)) {
       t_hit = root;

@@ -14,6 +14,10 @@ namespace flagsim {
 Vec3 closest_point_barycentric(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c,
                                bool& interior);
 
+/// True when p is provably further than `gap` from triangle abc: outside the sphere around its
+/// centroid that holds its corners, grown by gap. A cheap test before closest_point_barycentric.
+bool beyond_reach(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, double gap);
+
 /// Barycentric coordinates of the projection of p onto the plane of abc (may be outside [0,1]);
 /// zero vector for a degenerate triangle.
 Vec3 plane_barycentric(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c);
@@ -27,7 +31,7 @@ Eigen::Vector4d coplanarity_cubic(const Vec3& p0, const Vec3& a0, const Vec3& b0
 /// Continuous vertex-triangle test under linear motion over the step (t in [0, 1]): the earliest
 /// time at which p lies in the plane of abc and inside the triangle (barycentric coordinates
 /// >= -1e-9). Roots of the coplanarity cubic are bracketed between the roots of its derivative
-/// and refined by bisection to 1e-13 in t. Returns false when p never meets the triangle.
+/// and refined by the Illinois method to 1e-13 in t. Returns false when p never meets the triangle.
 /// On true, t_hit and bary (at t_hit) are written.
 bool vertex_triangle_ccd(const Vec3& p0, const Vec3& a0, const Vec3& b0, const Vec3& c0,
                          const Vec3& p1, const Vec3& a1, const Vec3& b1, const Vec3& c1,

@@ -16,12 +16,11 @@ void flapping_displacement(const Perlin1D& noise, const MatX2& xy, const VecX& L
   const Index n = xy.rows();
   if (z.size() != n) z.resize(n);
   const double shift = p.speed * t;
-#pragma omp parallel for schedule(static) if (n >= kParallelGrain)
-  for (Index i = 0; i < n; ++i) {
+  parallel_for(n, [&](Index i) {
     const double x = xy(i, 0), y = xy(i, 1);
     const double phase = x - shift - p.parabola * (1.0 - y) * y;
     z[i] = u_p * flapping_ramp(L[i], p) * noise(p.frequency * phase);
-  }
+  });
 }
 
 }  // namespace flagsim

@@ -219,17 +219,43 @@ TEST(SelfCollision, FoldedSheetThrownOntoItselfNeverCrosses) {
 }
 
 TEST(SelfCollision, ResultsDoNotDependOnTheThreadCount) {
-  MatX3 x, v;
-  MatX3i tris;
-  VecX w;
-  folded(x, v, tris, w);
-  const int threads = num_threads();
-  set_num_threads(1);
-  const KinematicRun one = run(x, v, tris, w, params(0.005, 0.2), 6);
-  set_num_threads(2);
-  const KinematicRun two = run(x, v, tris, w, params(0.005, 0.2), 6);
-  set_num_threads(threads);
-  EXPECT_EQ(one.x, two.x);  // bitwise
+  // A folded 48 x 96 sheet (4608 vertices): large enough that the broad phase and the pair loops
+  // run on the OpenMP team.
+  const int rows = 48, cols = 96;
+  const double s = 0.01;
+  MatX3 x(0, 3);
+  MatX3i tris(0, 3);
+  make_grid(rows, cols, Vec3::Zero(), Vec3(s, 0, 0), Vec3(0, s, 0), x, tris);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> jitter(-1, 1);
+  MatX3 v = MatX3::Zero(x.rows(), 3);
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c) {
+      const int i = r * cols + c;
+      if (c >= cols / 2) {
+        x.row(i) << (cols - 1 - c) * s + 0.5 * s, r * s, 0.02;
+        v.row(i) << 0.2 * jitter(rng), 0.2 * jitter(rng), -3 + 0.2 * jitter(rng);
+      }
+    }
+  const VecX w = VecX::Ones(x.rows());
+  auto run_with = [&](int threads, SelfCollisionStats& st) {
+    const int before = num_threads();
+    set_num_threads(threads);
+    SelfCollision collide(tris, x.rows(), params(0.003, 0.2));
+    MatX3 xs = x, vs = v;
+    for (int step = 0; step < 2; ++step) {
+      const MatX3 x0 = xs;
+      xs += 0.01 * vs;
+      st = collide.resolve(x0, xs, vs, w);
+    }
+    set_num_threads(before);
+    return xs;
+  };
+  SelfCollisionStats one_stats, two_stats;
+  const MatX3 one = run_with(1, one_stats), two = run_with(2, two_stats);
+  EXPECT_GE(one_stats.candidates, 4 * kParallelGrain) << "the pair loops should run in parallel";
+  EXPECT_GT(one_stats.crossings + one_stats.contacts, 0);
+  EXPECT_EQ(one, two);  // bitwise
 }
 
 TEST(SelfCollision, PoleAndSelfCollisionTogether) {
