@@ -57,7 +57,8 @@ SelfCollision::SelfCollision(const MatX3i& triangles, Index num_vertices,
   const int threads = max_threads();
   thread_pairs_.resize(static_cast<size_t>(threads));
   const size_t expected = 8 * static_cast<size_t>(num_vertices) + 64;
-  for (auto& buffer : thread_pairs_) buffer.reserve(expected / threads + 64);
+  // Thread 0 collects every pair when the broad phase runs on one thread.
+  for (auto& buffer : thread_pairs_) buffer.reserve(expected);
   pairs_.reserve(expected);
   flag_.reserve(expected);
   contacts_.reserve(expected);

@@ -14,7 +14,9 @@ void SpatialHash::reserve(Index items) {
   big_.resize(static_cast<size_t>(items));
   start_.assign(table + 1, 0);
   fill_.assign(table, 0);
-  entries_.resize(8 * static_cast<size_t>(items));
+  // A box about the cell size spans up to 2 x 2 x 2 cells, a few larger ones more: room for 27
+  // cells each keeps growth (an allocation) out of ordinary steps.
+  entries_.resize(27 * static_cast<size_t>(items));
   oversized_.reserve(static_cast<size_t>(items));
 }
 
