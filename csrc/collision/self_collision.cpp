@@ -93,6 +93,7 @@ SelfCollision::SelfCollision(const MatX3i& triangles, Index num_vertices,
   pairs_.reserve(expected + expected_edges);
   flag_.reserve(expected + expected_edges);
   contacts_.reserve(expected + expected_edges);
+  start_gap_.reserve(expected + expected_edges);
 }
 
 void SelfCollision::corners(const Pair& pr, int32_t idx[4]) const {
@@ -197,7 +198,43 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
   append(thread_edge_pairs_, pairs_);
   flag_.resize(pairs_.size());
   contacts_.resize(pairs_.size());
+  start_gap_.resize(pairs_.size());
   stats_.candidates = static_cast<Index>(pairs_.size());
+  // Each pair's distance at the start of the step: with it, a pair whose points cannot have
+  // closed that gap (see reach()) needs no test at all.
+  const auto P = static_cast<Index>(pairs_.size());
+  parallel_for_if(P >= kPairGrain, P, [&](Index k) {
+    int32_t i[4];
+    corners(pairs_[k], i);
+    const Vec3 p = row(x0, i[0]), a = row(x0, i[1]), b = row(x0, i[2]), c = row(x0, i[3]);
+    if (pairs_[k].edge_pair) {
+      const Vec2 su = closest_segment_parameters(p, a, b, c);
+      start_gap_[k] = ((p + su[0] * (a - p)) - (b + su[1] * (c - b))).norm();
+    } else {
+      bool interior;
+      const Vec3 w = closest_point_barycentric(p, a, b, c, interior);
+      start_gap_[k] = (p - (w[0] * a + w[1] * b + w[2] * c)).norm();
+    }
+  });
+}
+
+// How far the pair's two sides can have approached over the step: the largest displacement of a
+// point of one side relative to a point of the other (convex combinations of the corners, so the
+// largest over corner pairs). The distance at any time t in [0, 1] is at least start gap - t *
+// that (everything moves linearly).
+double SelfCollision::reach(const Pair& pr, const MatX3& x0, const MatX3& x) const {
+  int32_t i[4];
+  corners(pr, i);
+  Vec3 d[4];
+  for (int k = 0; k < 4; ++k) d[k] = row(x, i[k]) - row(x0, i[k]);
+  double r2 = 0;
+  if (pr.edge_pair) {
+    for (int a = 0; a < 2; ++a)
+      for (int b = 2; b < 4; ++b) r2 = std::max(r2, (d[a] - d[b]).squaredNorm());
+  } else {
+    for (int b = 1; b < 4; ++b) r2 = std::max(r2, (d[0] - d[b]).squaredNorm());
+  }
+  return std::sqrt(r2);
 }
 
 bool SelfCollision::within_boxes(const MatX3& x0, const MatX3& x) const {
@@ -243,9 +280,10 @@ void SelfCollision::detect(const Pair& pr, const MatX3& x0, const MatX3& x, Cont
   const double h = params_.thickness;
   int32_t i[4];
   corners(pr, i);
+  ct.kind = Contact::kNone;
+  if (start_gap_[&pr - pairs_.data()] - reach(pr, x0, x) >= h) return;  // never within reach
   const Vec3 p0 = row(x0, i[0]), a0 = row(x0, i[1]), b0 = row(x0, i[2]), c0 = row(x0, i[3]);
   const Vec3 p1 = row(x, i[0]), a1 = row(x, i[1]), b1 = row(x, i[2]), c1 = row(x, i[3]);
-  ct.kind = Contact::kNone;
   double t;
   if (pr.edge_pair) {
     // Edges p0a0 -> p1a1 (points 0, 1) and b0c0 -> b1c1 (points 2, 3).
@@ -452,6 +490,7 @@ bool SelfCollision::find_violations(const MatX3& x0, const MatX3& x, const VecX&
     corners(pr, i);
     flag_[k] = 0;
     if (still(i[0]) && still(i[1]) && still(i[2]) && still(i[3])) return;  // nothing to undo
+    if (start_gap_[k] - reach(pr, x0, x) >= floor) return;  // cannot have crossed or closed in
     double t;
     if (crossing(pr, x0, x, t)) {
       flag_[k] = 1;

@@ -104,6 +104,7 @@ class SelfCollision {
   void detect(const Pair& pr, const MatX3& x0, const MatX3& x, Contact& ct) const;
   bool crossing(const Pair& pr, const MatX3& x0, const MatX3& x, double& t) const;
   double separation(const Pair& pr, const MatX3& x0, const MatX3& x, double t) const;
+  double reach(const Pair& pr, const MatX3& x0, const MatX3& x) const;
   void broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv_mass, bool shifted);
   bool find_violations(const MatX3& x0, const MatX3& x, const VecX& inv_mass,
                        const PoleParams* pole);
@@ -131,6 +132,7 @@ class SelfCollision {
   std::vector<std::vector<Pair>> thread_pairs_, thread_edge_pairs_;
   std::vector<Pair> pairs_;      // vertex-triangle pairs by vertex, then edge-edge pairs by edge
   std::vector<uint8_t> flag_;    // per pair: violation found by the parallel pass
+  std::vector<double> start_gap_;  // per pair: distance at x0, m
   std::vector<Contact> contacts_;  // per pair, in a sweep
   MatX3 x_sweep_;                  // N x 3 positions at the start of a sweep
   MatX3 dv_;                       // N x 3 summed velocity changes of a sweep
