@@ -108,6 +108,17 @@ def _cheapest(rows, part, target):
     return min(ok, key=lambda r: float(r["seconds_per_step"])) if ok else None
 
 
+def _cheapest_table(rows, part, title) -> list[str]:
+    lines = [f"## {title}: cheapest setting per error target", "",
+             "| target | cheapest setting | error (m) | steps/s |", "|---|---|---:|---:|"]
+    for target in (1e-2, 1e-3, 1e-4):
+        r = _cheapest(rows, part, target)
+        lines.append(f"| {target:g} m | " + (
+            f"{_describe(r)} | {float(r['error']):.3g} | {float(r['steps_per_second']):,.0f} |"
+            if r else "none of the sweep | | |"))
+    return lines + [""]
+
+
 def _describe(r) -> str:
     bits = [r["method"]]
     if r.get("resolution"):
@@ -145,26 +156,15 @@ def write_accuracy_report(rows, path, plots, relative_to) -> None:
             lines.append(f"| coupled (dt = {dts[0]:g} s) | {m} | {-q:.2f} | grid h, against the finest grid |")
     lines.append("")
     if any(r["part"] == "coupled" for r in rows):
-        lines += ["## Coupled paper scene: cheapest setting per error target", "",
-                  "| target | cheapest setting | error (m) | steps/s |", "|---|---|---:|---:|"]
-        for target in (1e-2, 1e-3, 1e-4):
-            r = _cheapest(rows, "coupled", target)
-            lines.append(f"| {target:g} m | " + (f"{_describe(r)} | {float(r['error']):.3g} | {float(r['steps_per_second']):,.0f} |"
-                                                  if r else "none of the sweep | | |"))
+        lines += _cheapest_table(rows, "coupled", "Coupled paper scene")
         paper = [r for r in rows if r["part"] == "coupled" and r["resolution"] == "16"
                  and abs(float(r["dt"]) - 0.01) < 1e-12 and r["error"]]
         for r in paper:
-            lines.append(f"\nThe paper's own setting (16^3 grid, dt = 0.01 s, {r['method']}): "
+            lines.append(f"The paper's own setting (16^3 grid, dt = 0.01 s, {r['method']}): "
                          f"error {float(r['error']):.3g} m at {float(r['steps_per_second']):,.0f} steps/s.")
-        lines.append("")
+            lines.append("")
     if any(r["part"] == "trajectory" for r in rows):
-        lines += ["## Cloth alone (paper flag, uniform wind): cheapest setting per error target", "",
-                  "| target | cheapest setting | error (m) | steps/s |", "|---|---|---:|---:|"]
-        for target in (1e-2, 1e-3, 1e-4):
-            r = _cheapest(rows, "trajectory", target)
-            lines.append(f"| {target:g} m | " + (f"{_describe(r)} | {float(r['error']):.3g} | {float(r['steps_per_second']):,.0f} |"
-                                                  if r else "none of the sweep | | |"))
-        lines.append("")
+        lines += _cheapest_table(rows, "trajectory", "Cloth alone (paper flag, uniform wind)")
     for part, title in PART_TITLES.items():
         pr = [r for r in rows if r["part"] == part]
         if not pr:

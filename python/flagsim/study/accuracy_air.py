@@ -111,6 +111,7 @@ def coupled_scene(method: str, resolution: int, dt: float) -> flagsim.Scene:
     s.air.cell_size = size[0] / resolution
     s.air.resolution = [max(2, round(sz / s.air.cell_size)) for sz in size]
     s.dt = dt
+    s.flapping.mode = "off"  # the coupled comparison: flapping off
     s.integrator.cg_tolerance = 1e-10
     _set_method(s, method)
     return s
