@@ -26,6 +26,7 @@ def scene(n_side):
     s.flag.rows = s.flag.cols = n_side
     s.flag.width = s.flag.height = 0.01 * (n_side - 1)
     s.pole.height = s.flag.height + 2.6
+    s.flapping.mode = "off"  # the wind alone moves the flag: the same motion at every size
     s.self_collision.enabled = True
     s.self_collision.thickness = 0.003
     return s

@@ -435,9 +435,11 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
   // edge, a triangle on two pinned bumps) neither add up nor bounce it.
   dv_.setZero();
   std::fill(count_v_.begin(), count_v_.end(), 0);
+  bool responded = false;
   for (Index k = 0; k < P; ++k) {
     const Contact& ct = contacts_[k];
     if (ct.kind == Contact::kNone) continue;
+    responded = true;
     int32_t idx[4];
     corners(pairs_[k], idx);
     if (ct.kind == Contact::kCrossing) {
@@ -467,8 +469,9 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
   }
   for (Index i = 0; i < n_; ++i)
     if (count_v_[i]) v.row(i) += dv_.row(i) / count_v_[i];
-  // The caller's constraints next (contacts alone would hold a stretched cloth stretched).
-  if (constraints) (*constraints)(x, v);
+  // The caller's constraints next, when the responses moved anything (contacts alone would hold
+  // a stretched cloth stretched).
+  if (constraints && responded) (*constraints)(x, v);
   // The pole last: no sweep leaves a vertex inside it.
   if (pole) {
     double largest = 0;
