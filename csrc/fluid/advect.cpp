@@ -176,8 +176,7 @@ void for_each_row(const MacGrid<T>& g, F&& row) {
   for (int c = 0; c < 3; ++c) {
     const Shape3 sh = g.shape[c];
     const long rows = long(sh.n[0]) * sh.n[1];
-#pragma omp parallel for schedule(static) if (sh.size() > 16384)
-    for (long r = 0; r < rows; ++r) row(c, int(r / sh.n[1]), int(r % sh.n[1]), std::size_t(r) * sh.n[2]);
+    parallel_for_if(sh.size() > 16384, rows, [&](long r) { row(c, int(r / sh.n[1]), int(r % sh.n[1]), std::size_t(r) * sh.n[2]); });
   }
 }
 
@@ -194,9 +193,8 @@ long sample_velocity(const MacGrid<T>& g, const double* points, long m, double* 
   const double inv_h = 1.0 / geo.h;
   const double n[3] = {double(geo.nx), double(geo.ny), double(geo.nz)};
   const Interpolator<T> iu(g, 0), iv(g, 1), iw(g, 2);
-  long outside = 0;
-#pragma omp parallel for schedule(static) reduction(+ : outside) if (m > 4096)
-  for (long r = 0; r < m; ++r) {
+  // One point: its velocity into out, 1 when it lay outside the domain.
+  auto sample_one = [&](long r) -> long {
     double p[3];
     bool out_of_box = false;
     for (int d = 0; d < 3; ++d) {
@@ -207,10 +205,17 @@ long sample_velocity(const MacGrid<T>& g, const double* points, long m, double* 
       }
       p[d] = q;
     }
-    outside += out_of_box;
     out[3 * r + 0] = double(iu(p[0], p[1], p[2]));
     out[3 * r + 1] = double(iv(p[0], p[1], p[2]));
     out[3 * r + 2] = double(iw(p[0], p[1], p[2]));
+    return out_of_box ? 1 : 0;
+  };
+  long outside = 0;
+  if (use_team(m > 4096)) {  // see use_team: no region for one thread or few points
+#pragma omp parallel for schedule(static) reduction(+ : outside)
+    for (long r = 0; r < m; ++r) outside += sample_one(r);
+  } else {
+    for (long r = 0; r < m; ++r) outside += sample_one(r);
   }
   return outside;
 }
@@ -284,15 +289,14 @@ void PaddedComponent<T>::fill(const T* src) {
   auto wrap = [](int i, int n) { return ((i % n) + n) % n; };
   const int n0 = n[0], n1 = n[1], n2 = n[2];
   const long rows = long(n0 + 2 * kGhost) * (n1 + 2 * kGhost);
-#pragma omp parallel for schedule(static) if (data.size() > 32768)
-  for (long r = 0; r < rows; ++r) {
+  parallel_for_if(data.size() > 32768, rows, [&](long r) {
     const int a = int(r / (n1 + 2 * kGhost)) - kGhost, b = int(r % (n1 + 2 * kGhost)) - kGhost;
     const T* s = src + (std::size_t(wrap(a, n0)) * n1 + std::size_t(wrap(b, n1))) * n2;
     T* d = data.data() + index(a, b, -kGhost);
     for (int k = -kGhost; k < 0; ++k) d[k + kGhost] = s[wrap(k, n2)];
     std::copy(s, s + n2, d + kGhost);
     for (int k = n2; k < n2 + kGhost; ++k) d[k + kGhost] = s[wrap(k, n2)];
-  }
+  });
 }
 
 template <class T>
@@ -402,8 +406,7 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
   constexpr double o0 = C == 0 ? 0.0 : 0.5, o1 = C == 1 ? 0.0 : 0.5, o2 = C == 2 ? 0.0 : 0.5;
   const int n1 = geo.ny, n2 = geo.nz;
   const long rows = long(geo.nx) * n1;
-#pragma omp parallel for schedule(static) if (rows * n2 > 16384)
-  for (long r = 0; r < rows; ++r) {
+  parallel_for_if(rows * n2 > 16384, rows, [&](long r) {
     const int i = int(r / n1), j = int(r % n1);
     std::size_t idx = p.index(i, j, 0);
     T* dst = out + std::size_t(r) * n2;
@@ -414,7 +417,7 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
       const double px = i + o0 - d0, py = j + o1 - d1, pz = k + o2 - d2;
       dst[k] = q.value(q.any_corner(p, idx, i, j, k, d0, d1, d2, px - o0, py - o1, pz - o2));
     }
-  }
+  });
 }
 
 /// MacCormack correction and limiter of component C (Selle et al. 2008 eq. 9, §4) into out.
@@ -426,8 +429,7 @@ void padded_mc(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
   constexpr double o0 = C == 0 ? 0.0 : 0.5, o1 = C == 1 ? 0.0 : 0.5, o2 = C == 2 ? 0.0 : 0.5;
   const int n1 = geo.ny, n2 = geo.nz;
   const long rows = long(geo.nx) * n1;
-#pragma omp parallel for schedule(static) if (rows * n2 > 16384)
-  for (long r = 0; r < rows; ++r) {
+  parallel_for_if(rows * n2 > 16384, rows, [&](long r) {
     const int i = int(r / n1), j = int(r % n1);
     std::size_t idx = p.index(i, j, 0);
     const std::size_t row = std::size_t(r) * n2;
@@ -445,7 +447,7 @@ void padded_mc(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
       q.extrema(q.any_corner(p, idx, i, j, k, d0, d1, d2, bx - o0, by - o1, bz - o2), lo, hi);
       out[row + k] = std::min(hi, std::max(lo, corrected));
     }
-  }
+  });
 }
 
 }  // namespace

@@ -18,6 +18,7 @@
 #include <new>
 #include <vector>
 
+#include "common/parallel.h"
 #include "common/types.h"
 
 namespace flagsim {
@@ -110,13 +111,12 @@ double deterministic_sum(std::size_t n, F&& f) {
       nblocks_needed <= kMaxBlocks ? kBlock : (n + kMaxBlocks - 1) / kMaxBlocks;
   const long nb = long((n + block - 1) / block);
   double partial[kMaxBlocks];
-#pragma omp parallel for schedule(static) if (nb > 1)
-  for (long b = 0; b < nb; ++b) {
+  parallel_for_if(nb > 1, nb, [&](long b) {
     double s = 0;
     const std::size_t end = std::min(n, std::size_t(b + 1) * block);
     for (std::size_t i = std::size_t(b) * block; i < end; ++i) s += f(i);
     partial[b] = s;
-  }
+  });
   double s = 0;
   for (long b = 0; b < nb; ++b) s += partial[b];
   return s;
@@ -126,10 +126,15 @@ double deterministic_sum(std::size_t n, F&& f) {
 template <class F>
 double parallel_max(std::size_t n, F&& f) {
   double m = 0;
-#pragma omp parallel for schedule(static) reduction(max : m) if (n > 32768)
-  for (long i = 0; i < long(n); ++i) {
+  auto fold = [&f](double acc, long i) {
     const double v = f(std::size_t(i));
-    if (!(v <= m)) m = (v == v) ? v : HUGE_VAL;  // a NaN reports as +inf
+    return (v <= acc) ? acc : ((v == v) ? v : HUGE_VAL);  // a NaN reports as +inf
+  };
+  if (use_team(n > 32768)) {  // see use_team: no region for one thread or short arrays
+#pragma omp parallel for schedule(static) reduction(max : m)
+    for (long i = 0; i < long(n); ++i) m = fold(m, i);
+  } else {
+    for (long i = 0; i < long(n); ++i) m = fold(m, i);
   }
   return m;
 }

@@ -18,8 +18,7 @@ void divergence(const MacGrid<T>& u, T* div) {
   const double inv_h = 1.0 / g.h;
   const Shape3 su = u.shape[0], sv = u.shape[1], sw = u.shape[2], sc = g.cells();
   const T *U = u.comp[0].data(), *V = u.comp[1].data(), *W = u.comp[2].data();
-#pragma omp parallel for schedule(static) if (sc.size() > 16384)
-  for (long r = 0; r < long(nx) * ny; ++r) {
+  parallel_for_if(sc.size() > 16384, long(nx) * ny, [&](long r) {
     const int i = int(r / ny), j = int(r % ny);
     const int ip = (per && i + 1 == nx) ? 0 : i + 1;
     const int jp = (per && j + 1 == ny) ? 0 : j + 1;
@@ -34,7 +33,7 @@ void divergence(const MacGrid<T>& u, T* div) {
       const int k = nz - 1;
       d[k] = T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[0]) - w0[k])) * inv_h);
     }
-  }
+  });
 }
 
 Laplace7 pressure_operator(const GridGeometry& geo) {
@@ -72,8 +71,7 @@ void subtract_gradient(const T* phi, MacGrid<T>& u) {
     T* q = u.comp[c].data();
     const long rows = long(sh.n[0]) * sh.n[1];
     const int nc = sc.n[c];
-#pragma omp parallel for schedule(static) if (sh.size() > 16384)
-    for (long r = 0; r < rows; ++r) {
+    parallel_for_if(sh.size() > 16384, rows, [&](long r) {
       const int i = int(r / sh.n[1]), j = int(r % sh.n[1]);
       T* dst = q + std::size_t(r) * sh.n[2];
       const int ij[2] = {i, j};
@@ -81,7 +79,7 @@ void subtract_gradient(const T* phi, MacGrid<T>& u) {
         // Face f = ij[c] lies between cells f-1 (lo) and f (hi) of the same k-row.
         const int f = ij[c];
         const bool held = !per && ((f == 0 && p.lo[c] == Side::kNeumann) || (f == nc && p.hi[c] == Side::kNeumann));
-        if (held) continue;
+        if (held) return;
         int lo[2] = {i, j}, hi[2] = {i, j};
         lo[c] = per ? (f == 0 ? nc - 1 : f - 1) : f - 1;
         const T* ph = (per || f < nc) ? phi + sc.index(hi[0], hi[1], 0) : nullptr;  // null: ghost 0
@@ -101,7 +99,7 @@ void subtract_gradient(const T* phi, MacGrid<T>& u) {
           for (int k = 1; k < n2; ++k) dst[k] -= (pr[k] - pr[k - 1]) * inv_h;
         }
       }
-    }
+    });
   }
 }
 
@@ -124,8 +122,7 @@ void set_mean_flow(const Vec3& target, MacGrid<T>& u) {
     const double mean = deterministic_sum(n, [&](std::size_t i) { return double(q[i]); }) / double(n);
     const double shift = target[c] - mean;
     if (shift == 0) continue;
-#pragma omp parallel for schedule(static) if (n > 16384)
-    for (long i = 0; i < long(n); ++i) q[i] = T(q[i] + shift);
+    parallel_for_if(n > 16384, long(n), [&](long i) { q[i] = T(q[i] + shift); });
   }
 }
 
@@ -233,8 +230,7 @@ void FftProjector<T>::project(MacGrid<T>& u, T* phi) {
   Impl::F::exec_r2c(m.fwd, m.div.data(), m.fc(0));
   const double scale = 1.0 / double(m.n_real);
   std::complex<T>* d = m.cplx(0);
-#pragma omp parallel for schedule(static) if (m.n_cplx > 16384)
-  for (long r = 0; r < long(g.nx) * g.ny; ++r) {
+  parallel_for_if(m.n_cplx > 16384, long(g.nx) * g.ny, [&](long r) {
     const int i = int(r / g.ny), j = int(r % g.ny);
     const double lxy = m.lam[0][i] + m.lam[1][j];
     std::complex<T>* row = d + std::size_t(r) * m.nzc;
@@ -243,7 +239,7 @@ void FftProjector<T>::project(MacGrid<T>& u, T* phi) {
       // lap phi = div: phi_hat = div_hat / lambda; the k = 0 mode (lambda = 0) has no potential.
       row[k] = l == 0 ? std::complex<T>(0) : std::complex<T>(row[k] * T(scale / l));
     }
-  }
+  });
   Impl::F::exec_c2r(m.inv, m.fc(0), phi);
   subtract_gradient(phi, u);
 }
@@ -257,8 +253,7 @@ void FftProjector<T>::diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec
   std::complex<T>* h0 = m.cplx(0);
   std::complex<T>* h1 = m.cplx(1);
   std::complex<T>* h2 = m.cplx(2);
-#pragma omp parallel for schedule(static) if (m.n_cplx > 16384)
-  for (long r = 0; r < long(g.nx) * g.ny; ++r) {
+  parallel_for_if(m.n_cplx > 16384, long(g.nx) * g.ny, [&](long r) {
     const int i = int(r / g.ny), j = int(r % g.ny);
     const std::complex<double> ax = m.a[0][i], ay = m.a[1][j];
     const double lxy = m.lam[0][i] + m.lam[1][j];
@@ -283,7 +278,7 @@ void FftProjector<T>::diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec
       h1[q] = std::complex<T>(uy);
       h2[q] = std::complex<T>(uz);
     }
-  }
+  });
   if (mean) {
     h0[0] = std::complex<T>(T((*mean)[0]));
     h1[0] = std::complex<T>(T((*mean)[1]));
