@@ -110,6 +110,9 @@ the scene unchanged. Build one with Scene.paper(), Scene.named(name) or Scene.lo
   scene.def(py::init<>());
   scene.def_static("paper", &Scene::paper, "Paper §5: 8 x 11 flag, 0.54 m tall, dt = 0.01 s, 2 m/s air.");
   scene.def_static("banner", &Scene::banner, "Banner hanging from its top edge in a 3 m/s wind along +z.");
+  scene.def_static("flapping_demo", &Scene::flapping_demo,
+                   "Paper §4.3 (Fig. 6): eq. 5 flapping alone; no air solver, no gravity, every "
+                   "mass pulled along +x.");
   scene.def_static("_builtins", &builtin_scenes);
   scene.def_static("_named", &builtin_scene, py::arg("name"));
   scene.def_readwrite("name", &Scene::name, "free text, used in exports and reports");
@@ -129,6 +132,9 @@ the scene unchanged. Build one with Scene.paper(), Scene.named(name) or Scene.lo
   part("air", &Scene::air, "AirParams");
   part("drag", &Scene::drag, "DragParams");
   part("integrator", &Scene::integrator, "IntegratorParams");
+  part("flapping", &Scene::flapping, "FlappingParams (paper eq. 5)");
+  part("self_collision", &Scene::self_collision, "SelfCollisionParams");
+  part("pole", &Scene::pole, "PoleParams");
   scene.def_property(
       "dt", [](const Scene& s) { return s.dt; },
       [](Scene& s, double dt) {
@@ -235,6 +241,44 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
       },
       "dict of kinetic, gravity (potential) and spring energies, J");
   sim.def("max_strain", &Simulation::max_strain, "largest spring strain (l - L) / L now");
+  sim.def_property_readonly(
+      "render_positions",
+      [](py::object self) {
+        return view_of(const_cast<MatX3&>(self.cast<Simulation&>().render_positions()), self, false);
+      },
+      "(N, 3) m, read-only view of the geometry to export: with flapping.mode 'visual' the "
+      "positions displaced by eq. 5 along the normals (physics untouched), else the positions");
+  sim.def_property_readonly(
+      "render_normals",
+      [](py::object self) {
+        return view_of(const_cast<MatX3&>(self.cast<Simulation&>().render_normals()), self, false);
+      },
+      "(N, 3) unit normals of render_positions, read-only view");
+  sim.def_property_readonly(
+      "flap_displacement",
+      [](py::object self) { return view_of_vec(self.cast<Simulation&>().flap_displacement(), self); },
+      "(N,) m, eq. 5 displacement z of each vertex at the current time (zeros when off)");
+  sim.def_property_readonly("pole_air_speed", &Simulation::pole_air_speed,
+                            "u_p of eq. 5 at the last flap stage: mean air speed along the "
+                            "pole-side edge, m/s");
+  sim.def_property_readonly(
+      "self_collision_stats",
+      [](const Simulation& s) -> py::object {
+        const SelfCollisionStats* st = s.self_collision_stats();
+        if (!st) return py::none();
+        py::dict d;
+        d["candidates"] = st->candidates;
+        d["contacts"] = st->contacts;
+        d["crossings"] = st->crossings;
+        d["pole"] = st->pole;
+        d["frozen"] = st->frozen;
+        d["sweeps"] = st->sweeps;
+        d["broad_phases"] = st->broad_phases;
+        return d;
+      },
+      "the last step's self-collision counts (None when self_collision is off): candidate pairs, "
+      "proximity contacts, continuous crossings stopped short, pole contacts, vertices frozen by "
+      "the fallback, sweeps, broad phases");
   sim.def_property_readonly(
       "last_step_stats",
       [](const Simulation& s) {

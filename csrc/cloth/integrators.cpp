@@ -81,18 +81,28 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
   return IntegrateStatus::kOk;
 }
 
-// out = A p with A = M - h df/dv - h^2 df/dx; pinned rows filtered.
-void apply_system(const ClothTopology& topo, double h, IntegratorScratch& s, const MatX3& p,
+// out = A p with A = M - h df/dv - h^2 df/dx, in one gather per vertex (pinned rows filtered):
+//   (A p)_i = (m_i I + h Dv_i) p_i + sum_s B_s (p_i - p_j) + sum_t (h/9) Jw_t (sum of p over t)
+// with B_s = h^2 K_s + h k_d I. implicit_once stores m_i I + h Dv_i in s.Dv, B_s in s.K and
+// (h/9) Jw_t in s.Jw before the solve.
+void apply_system(const ClothTopology& topo, const IntegratorScratch& s, const MatX3& p,
                   MatX3& out) {
-  apply_position_jacobian(topo, s.K, p, s.tmp);
-  apply_velocity_jacobian(topo, s.Dv, s.Jw, p, out);
-  const Index N = topo.num_vertices();
-  parallel_for(N, [&](Index i) {
+  parallel_for(topo.num_vertices(), [&](Index i) {
     if (topo.inv_mass[i] == 0.0) {
       out.row(i).setZero();
       return;
     }
-    out.row(i) = topo.mass[i] * p.row(i) - h * out.row(i) - (h * h) * s.tmp.row(i);
+    const Vec3 pi = p.row(i);
+    Vec3 acc = s.Dv[i] * pi;
+    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k)
+      acc.noalias() += s.K[topo.adj_spring[k]] * (pi - Vec3(p.row(topo.adj_other[k])));
+    if (!s.Jw.empty())
+      for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k) {
+        const int32_t t = topo.tri_adj[k];
+        acc.noalias() += s.Jw[t] * Vec3(p.row(topo.triangles(t, 0)) + p.row(topo.triangles(t, 1)) +
+                                        p.row(topo.triangles(t, 2)));
+      }
+    out.row(i) = acc;
   });
 }
 
@@ -120,25 +130,24 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   s.b = h * (s.f + h * s.tmp);
   filter_pinned(topo, s.b);
 
+  // Fold h and the masses into the blocks apply_system reads (see there).
+  const Index S = topo.num_springs();
+  parallel_for(S, [&](Index sp) { s.K[sp] = (h * h) * s.K[sp] + (h * topo.damping[sp]) * Mat3::Identity(); });
+  parallel_for(N, [&](Index i) { s.Dv[i] = topo.mass[i] * Mat3::Identity() + h * s.Dv[i]; });
+  for (auto& j : s.Jw) j *= h / 9.0;
   // Block-Jacobi preconditioner: inverse of A's 3x3 diagonal blocks.
-  if (!fs.springs) {
-    for (auto& k : s.K) k.setZero();
-  }
   parallel_for(N, [&](Index i) {
-    Mat3 D = topo.mass[i] * Mat3::Identity() + h * s.Dv[i];
-    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k) {
-      const int32_t sp = topo.adj_spring[k];
-      D += h * topo.damping[sp] * Mat3::Identity() + (h * h) * s.K[sp];
-    }
+    Mat3 D = s.Dv[i];
+    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k) D += s.K[topo.adj_spring[k]];
     if (!s.Jw.empty())
       for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k)
-        D += (h / 9.0) * s.Jw[topo.tri_adj[k]];
+        D += s.Jw[topo.tri_adj[k]];
     s.Pinv[i] = D.inverse();
   });
 
   // PCG warm-started from the previous step's dv.
   filter_pinned(topo, s.dv);
-  apply_system(topo, h, s, s.dv, s.q);
+  apply_system(topo, s, s.dv, s.q);
   s.r = s.b - s.q;
   const double bnorm = s.b.norm();
   if (bnorm == 0.0) {
@@ -146,8 +155,10 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   } else {
     const double tol = ip.cg_tolerance * bnorm;
     auto precondition = [&](const MatX3& r, MatX3& z) {
-      for (Index i = 0; i < N; ++i) z.row(i) = (s.Pinv[i] * r.row(i).transpose()).transpose();
-      filter_pinned(topo, z);
+      parallel_for(N, [&](Index i) {
+        if (topo.inv_mass[i] == 0.0) z.row(i).setZero();
+        else z.row(i) = (s.Pinv[i] * r.row(i).transpose()).transpose();
+      });
     };
     precondition(s.r, s.z);
     s.p = s.z;
@@ -155,7 +166,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     int it = 0;
     bool converged = s.r.norm() <= tol;
     for (; !converged && it < ip.cg_max_iterations; ++it) {
-      apply_system(topo, h, s, s.p, s.q);
+      apply_system(topo, s, s.p, s.q);
       const double pq = (s.p.array() * s.q.array()).sum();
       if (!(pq > 0)) break;  // not SPD along p (or NaN): give up, the caller halves h
       const double alpha = rz / pq;

@@ -1,3 +1,4 @@
+#include "common/parallel.h"
 #include "fluid/advect.h"
 
 #include <algorithm>
@@ -176,7 +177,7 @@ void for_each_row(const MacGrid<T>& g, F&& row) {
   for (int c = 0; c < 3; ++c) {
     const Shape3 sh = g.shape[c];
     const long rows = long(sh.n[0]) * sh.n[1];
-    parallel_for_if(sh.size() > 16384, rows, [&](long r) { row(c, int(r / sh.n[1]), int(r % sh.n[1]), std::size_t(r) * sh.n[2]); });
+    parallel_for_if(sh.size() > 16384, rows, [&](Index r) { row(c, int(r / sh.n[1]), int(r % sh.n[1]), std::size_t(r) * sh.n[2]); });
   }
 }
 
@@ -193,8 +194,7 @@ long sample_velocity(const MacGrid<T>& g, const double* points, long m, double* 
   const double inv_h = 1.0 / geo.h;
   const double n[3] = {double(geo.nx), double(geo.ny), double(geo.nz)};
   const Interpolator<T> iu(g, 0), iv(g, 1), iw(g, 2);
-  // One point: its velocity into out, 1 when it lay outside the domain.
-  auto sample_one = [&](long r) -> long {
+  auto one = [&](long r) -> long {
     double p[3];
     bool out_of_box = false;
     for (int d = 0; d < 3; ++d) {
@@ -208,14 +208,14 @@ long sample_velocity(const MacGrid<T>& g, const double* points, long m, double* 
     out[3 * r + 0] = double(iu(p[0], p[1], p[2]));
     out[3 * r + 1] = double(iv(p[0], p[1], p[2]));
     out[3 * r + 2] = double(iw(p[0], p[1], p[2]));
-    return out_of_box ? 1 : 0;
+    return out_of_box;
   };
   long outside = 0;
-  if (use_team(m > 4096)) {  // see use_team: no region for one thread or few points
+  if (use_team(m > 4096)) {  // no `if` clause: libgomp allocates one-thread teams (see use_team)
 #pragma omp parallel for schedule(static) reduction(+ : outside)
-    for (long r = 0; r < m; ++r) outside += sample_one(r);
+    for (long r = 0; r < m; ++r) outside += one(r);
   } else {
-    for (long r = 0; r < m; ++r) outside += sample_one(r);
+    for (long r = 0; r < m; ++r) outside += one(r);
   }
   return outside;
 }
@@ -289,7 +289,7 @@ void PaddedComponent<T>::fill(const T* src) {
   auto wrap = [](int i, int n) { return ((i % n) + n) % n; };
   const int n0 = n[0], n1 = n[1], n2 = n[2];
   const long rows = long(n0 + 2 * kGhost) * (n1 + 2 * kGhost);
-  parallel_for_if(data.size() > 32768, rows, [&](long r) {
+  parallel_for_if(data.size() > 32768, rows, [&](Index r) {
     const int a = int(r / (n1 + 2 * kGhost)) - kGhost, b = int(r % (n1 + 2 * kGhost)) - kGhost;
     const T* s = src + (std::size_t(wrap(a, n0)) * n1 + std::size_t(wrap(b, n1))) * n2;
     T* d = data.data() + index(a, b, -kGhost);
@@ -406,7 +406,7 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
   constexpr double o0 = C == 0 ? 0.0 : 0.5, o1 = C == 1 ? 0.0 : 0.5, o2 = C == 2 ? 0.0 : 0.5;
   const int n1 = geo.ny, n2 = geo.nz;
   const long rows = long(geo.nx) * n1;
-  parallel_for_if(rows * n2 > 16384, rows, [&](long r) {
+  parallel_for_if(rows * n2 > 16384, rows, [&](Index r) {
     const int i = int(r / n1), j = int(r % n1);
     std::size_t idx = p.index(i, j, 0);
     T* dst = out + std::size_t(r) * n2;
@@ -429,7 +429,7 @@ void padded_mc(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
   constexpr double o0 = C == 0 ? 0.0 : 0.5, o1 = C == 1 ? 0.0 : 0.5, o2 = C == 2 ? 0.0 : 0.5;
   const int n1 = geo.ny, n2 = geo.nz;
   const long rows = long(geo.nx) * n1;
-  parallel_for_if(rows * n2 > 16384, rows, [&](long r) {
+  parallel_for_if(rows * n2 > 16384, rows, [&](Index r) {
     const int i = int(r / n1), j = int(r % n1);
     std::size_t idx = p.index(i, j, 0);
     const std::size_t row = std::size_t(r) * n2;

@@ -111,7 +111,7 @@ double deterministic_sum(std::size_t n, F&& f) {
       nblocks_needed <= kMaxBlocks ? kBlock : (n + kMaxBlocks - 1) / kMaxBlocks;
   const long nb = long((n + block - 1) / block);
   double partial[kMaxBlocks];
-  parallel_for_if(nb > 1, nb, [&](long b) {
+  parallel_for_if(nb > 1, nb, [&](Index b) {
     double s = 0;
     const std::size_t end = std::min(n, std::size_t(b + 1) * block);
     for (std::size_t i = std::size_t(b) * block; i < end; ++i) s += f(i);
@@ -125,12 +125,12 @@ double deterministic_sum(std::size_t n, F&& f) {
 /// max(0, max of f(i) over [0, n)), +inf if any f(i) is NaN; independent of the thread count.
 template <class F>
 double parallel_max(std::size_t n, F&& f) {
-  double m = 0;
-  auto fold = [&f](double acc, long i) {
+  auto fold = [&f](double m, long i) {
     const double v = f(std::size_t(i));
-    return (v <= acc) ? acc : ((v == v) ? v : HUGE_VAL);  // a NaN reports as +inf
+    return (v <= m) ? m : ((v == v) ? v : HUGE_VAL);  // a NaN reports as +inf
   };
-  if (use_team(n > 32768)) {  // see use_team: no region for one thread or short arrays
+  double m = 0;
+  if (use_team(n > 32768)) {  // no `if` clause: libgomp allocates one-thread teams (see use_team)
 #pragma omp parallel for schedule(static) reduction(max : m)
     for (long i = 0; i < long(n); ++i) m = fold(m, i);
   } else {

@@ -1,3 +1,4 @@
+#include "common/parallel.h"
 #include "fluid/pressure.h"
 
 #include <cmath>
@@ -18,7 +19,7 @@ void divergence(const MacGrid<T>& u, T* div) {
   const double inv_h = 1.0 / g.h;
   const Shape3 su = u.shape[0], sv = u.shape[1], sw = u.shape[2], sc = g.cells();
   const T *U = u.comp[0].data(), *V = u.comp[1].data(), *W = u.comp[2].data();
-  parallel_for_if(sc.size() > 16384, long(nx) * ny, [&](long r) {
+  parallel_for_if(sc.size() > 16384, long(nx) * ny, [&](Index r) {
     const int i = int(r / ny), j = int(r % ny);
     const int ip = (per && i + 1 == nx) ? 0 : i + 1;
     const int jp = (per && j + 1 == ny) ? 0 : j + 1;
@@ -71,7 +72,7 @@ void subtract_gradient(const T* phi, MacGrid<T>& u) {
     T* q = u.comp[c].data();
     const long rows = long(sh.n[0]) * sh.n[1];
     const int nc = sc.n[c];
-    parallel_for_if(sh.size() > 16384, rows, [&](long r) {
+    parallel_for_if(sh.size() > 16384, rows, [&](Index r) {
       const int i = int(r / sh.n[1]), j = int(r % sh.n[1]);
       T* dst = q + std::size_t(r) * sh.n[2];
       const int ij[2] = {i, j};
@@ -122,7 +123,7 @@ void set_mean_flow(const Vec3& target, MacGrid<T>& u) {
     const double mean = deterministic_sum(n, [&](std::size_t i) { return double(q[i]); }) / double(n);
     const double shift = target[c] - mean;
     if (shift == 0) continue;
-    parallel_for_if(n > 16384, long(n), [&](long i) { q[i] = T(q[i] + shift); });
+    parallel_for_if(n > 16384, long(n), [&](Index i) { q[i] = T(q[i] + shift); });
   }
 }
 
@@ -230,7 +231,7 @@ void FftProjector<T>::project(MacGrid<T>& u, T* phi) {
   Impl::F::exec_r2c(m.fwd, m.div.data(), m.fc(0));
   const double scale = 1.0 / double(m.n_real);
   std::complex<T>* d = m.cplx(0);
-  parallel_for_if(m.n_cplx > 16384, long(g.nx) * g.ny, [&](long r) {
+  parallel_for_if(m.n_cplx > 16384, long(g.nx) * g.ny, [&](Index r) {
     const int i = int(r / g.ny), j = int(r % g.ny);
     const double lxy = m.lam[0][i] + m.lam[1][j];
     std::complex<T>* row = d + std::size_t(r) * m.nzc;
@@ -253,7 +254,7 @@ void FftProjector<T>::diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec
   std::complex<T>* h0 = m.cplx(0);
   std::complex<T>* h1 = m.cplx(1);
   std::complex<T>* h2 = m.cplx(2);
-  parallel_for_if(m.n_cplx > 16384, long(g.nx) * g.ny, [&](long r) {
+  parallel_for_if(m.n_cplx > 16384, long(g.nx) * g.ny, [&](Index r) {
     const int i = int(r / g.ny), j = int(r % g.ny);
     const std::complex<double> ax = m.a[0][i], ay = m.a[1][j];
     const double lxy = m.lam[0][i] + m.lam[1][j];

@@ -40,6 +40,10 @@ struct Scene {
   static Scene paper();
   /// A banner hanging from its top edge in a horizontal wind along +z (equilibrium-angle check).
   static Scene banner();
+  /// Paper §4.3, Fig. 6: the flapping alone. No air solver and no drag (a 2 m/s uniform wind of
+  /// zero density only sets u_p), no gravity; instead every mass is pulled along +x (a uniform
+  /// 9.81 m/s^2 field along the flag); eq. 5 "displace" on a 16 x 24 flag on its pole.
+  static Scene flapping_demo();
 };
 
 /// Built-in scenes: (name, one-line description), in display order.

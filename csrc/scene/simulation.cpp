@@ -1,10 +1,14 @@
 #include "scene/simulation.h"
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
+#include "collision/pole.h"
 #include "common/errors.h"
 #include "common/timer.h"
+#include "flapping/flapping.h"
 
 namespace flagsim {
 
@@ -17,7 +21,11 @@ const char* Simulation::stage_name(Stage s) {
     case kSprings: return "springs";
     case kIntegrate: return "integrate";
     case kStrainLimit: return "strain_limit";
+    case kFlap: return "flap";
+    case kPole: return "pole";
+    case kSelfCollision: return "self_collision";
     case kCheck: return "check";
+    case kFlapVisual: return "flap";
     case kNumStages: break;
   }
   throw std::logic_error("stage_name: unknown stage");
@@ -58,11 +66,50 @@ Simulation::Simulation(const Scene& scene)
   built_[kSprings] = forces_.springs;
   built_[kIntegrate] = true;
   built_[kStrainLimit] = scene_.integrator.strain_limit > 0;
+  const std::string& flap = scene_.flapping.mode;
+  built_[kFlap] = flap == "displace" || flap == "force";
+  built_[kFlapVisual] = flap == "visual";
+  built_[kPole] = scene_.pole.enabled;
+  built_[kSelfCollision] = scene_.self_collision.enabled;
   built_[kCheck] = true;
+  if (built_[kSelfCollision])
+    self_collision_ = std::make_unique<SelfCollision>(topo_.triangles, N, scene_.self_collision);
   for (int s = 0; s < kNumStages; ++s)
     if (built_[s]) stage_names_.emplace_back(stage_name(Stage(s)));
   n_.resize(N, 3);
   update_normals();
+  setup_flapping();
+}
+
+void Simulation::setup_flapping() {
+  const Index N = topo_.num_vertices();
+  flap_z_.setZero(N);
+  if (!built_[kFlap] && !built_[kFlapVisual]) return;
+  const FlappingParams& fp = scene_.flapping;
+  noise_ = Perlin1D(fp.seed);
+  flap_xy_ = topo_.uv;  // x = u (0 at the pole edge), y = v; y (1 - y) is symmetric
+  // L: rest distance to the nearest pinned vertex (infinite, so A = amplitude, without pins).
+  flap_L_.setConstant(N, std::numeric_limits<double>::infinity());
+  for (Index j = 0; j < N; ++j) {
+    if (!topo_.pinned(j)) continue;
+    for (Index i = 0; i < N; ++i)
+      flap_L_[i] = std::min(flap_L_[i], (topo_.rest_positions.row(i) - topo_.rest_positions.row(j)).norm());
+  }
+  flap_applied_.setZero(N);
+  flap_before_.setZero(N);
+  flap_after_.setZero(N);
+  // u_p is sampled along the flag's pole-side edge (column 0, beside the pole), at rest.
+  edge_points_.resize(topo_.rows, 3);
+  for (int r = 0; r < topo_.rows; ++r) edge_points_.row(r) = topo_.rest_positions.row(r * topo_.cols);
+  edge_air_.resize(topo_.rows, 3);
+  visual_ = built_[kFlapVisual];
+  if (visual_) {
+    u_p_ = sample_pole_air_speed();
+    flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, time_, fp, flap_z_);
+    render_x_ = x_ + flap_z_.asDiagonal() * n_;
+    render_n_.resize(N, 3);
+    compute_vertex_normals(topo_, render_x_, render_n_);
+  }
 }
 
 // The air grid (paper §2): one-way coupling, so it only needs the flag to start inside it.
@@ -95,11 +142,91 @@ void Simulation::step_once() {
   v_start_ = v_;
   stage_air();
   stage_integrate();  // includes strain limiting after every substep, timed as its own stage
+  if (built_[kFlap]) stage_flap();
+  stage_collide();
   stage_check();
+  if (built_[kFlap]) flap_applied_ = flap_z_;
   advance_fluid();  // after the check: a rolled-back step leaves the air as it was
   ++step_count_;
   time_ = double(step_count_) * scene_.dt;  // no drift from summing dt
   update_normals();
+  if (built_[kFlapVisual]) stage_flap_visual();
+}
+
+double Simulation::sample_pole_air_speed() {
+  air_velocity(edge_points_, edge_air_);
+  return edge_air_.rowwise().norm().mean();
+}
+
+// Paper eq. 5 at the end of the step, t + dt. "displace" moves each vertex along its normal by
+// the change of z since the last step, so the applied offset follows eq. 5 and springs, drag,
+// pins and collisions respond to it. "force" applies F = m d2z/dt2 n (the force that would move a
+// free mass along the wave; d2z/dt2 by the central difference over dt) by operator splitting,
+// v += dt F / m and x += dt^2 F / m, so pinned vertices (inv_mass 0) stay put.
+void Simulation::stage_flap() {
+  ScopedTimer t(seconds_[kFlap]);
+  const FlappingParams& fp = scene_.flapping;
+  const double h = scene_.dt, t1 = double(step_count_ + 1) * h;
+  u_p_ = sample_pole_air_speed();
+  compute_vertex_normals(topo_, x_, n_);
+  flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, t1, fp, flap_z_);
+  const Index N = topo_.num_vertices();
+  if (fp.mode == "displace") {
+    for (Index i = 0; i < N; ++i) {
+      if (topo_.pinned(i)) continue;
+      x_.row(i) += (flap_z_[i] - flap_applied_[i]) * n_.row(i);
+    }
+    return;  // flap_applied_ = flap_z_ once the step has passed its check
+  }
+  flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, t1 - h, fp, flap_before_);
+  flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, t1 + h, fp, flap_after_);
+  for (Index i = 0; i < N; ++i) {
+    if (topo_.pinned(i)) continue;
+    const double a = (flap_after_[i] - 2 * flap_z_[i] + flap_before_[i]) / (h * h);
+    v_.row(i) += (h * a) * n_.row(i);
+    x_.row(i) += (h * h * a) * n_.row(i);
+  }
+}
+
+// Pole, then self-collision, which keeps the pole in its own sweeps and ends on it, both from
+// the start-of-step positions (so both are swept). A vertex the pole stops while its neighbours
+// move on stretches their springs, and strain limiting pulls it along chords through the pole:
+// the two projections alternate (at most kPoleStrainRounds times) until the pole moves nothing,
+// so that a flag blown back wraps around the pole without over-stretching; the pole has the
+// last word.
+void Simulation::stage_collide() {
+  constexpr int kPoleStrainRounds = 10;
+  if (built_[kPole]) {
+    Index moved;
+    {
+      ScopedTimer t(seconds_[kPole]);
+      moved = collide_pole(scene_.pole, x_start_, x_, v_, topo_.inv_mass);
+    }
+    for (int k = 0; k < kPoleStrainRounds && moved > 0 && built_[kStrainLimit]; ++k) {
+      {
+        ScopedTimer t(seconds_[kStrainLimit]);
+        limit_strain(topo_, scene_.integrator.strain_limit,
+                     scene_.integrator.strain_limit_iterations, scene_.dt, x_, v_);
+      }
+      ScopedTimer t(seconds_[kPole]);
+      moved = collide_pole(scene_.pole, x_start_, x_, v_, topo_.inv_mass);
+    }
+  }
+  if (built_[kSelfCollision]) {
+    ScopedTimer t(seconds_[kSelfCollision]);
+    self_collision_->resolve(x_start_, x_, v_, topo_.inv_mass,
+                             built_[kPole] ? &scene_.pole : nullptr);
+  }
+}
+
+// "visual": the exported geometry is the positions displaced by eq. 5; physics is untouched.
+void Simulation::stage_flap_visual() {
+  ScopedTimer t(seconds_[kFlapVisual]);
+  u_p_ = sample_pole_air_speed();
+  flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, time_, scene_.flapping, flap_z_);
+  for (Index i = 0; i < topo_.num_vertices(); ++i)
+    render_x_.row(i) = x_.row(i) + flap_z_[i] * n_.row(i);
+  compute_vertex_normals(topo_, render_x_, render_n_);
 }
 
 // Air at every mass for this step's start time: the wind schedule (analytic), or the grid

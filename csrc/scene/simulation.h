@@ -9,6 +9,8 @@
 #include "cloth/forces.h"
 #include "cloth/integrators.h"
 #include "cloth/topology.h"
+#include "collision/self_collision.h"
+#include "flapping/perlin.h"
 #include "fluid/fluid.h"
 #include "scene/scene.h"
 
@@ -37,6 +39,19 @@ class Simulation {
   const MatX3& normals() const { return n_; }
   /// (N x 3) air velocity at each mass used by the last step, m/s.
   const MatX3& air_at_masses() const { return u_; }
+  /// (N x 3) geometry to export and render: with flapping.mode "visual" the positions displaced
+  /// by eq. 5 along the normals (physics untouched), otherwise the positions themselves.
+  const MatX3& render_positions() const { return visual_ ? render_x_ : x_; }
+  /// (N x 3) unit vertex normals of render_positions().
+  const MatX3& render_normals() const { return visual_ ? render_n_ : n_; }
+  /// (N) eq. 5 displacement z of each vertex at the current time, m (zero with flapping off).
+  const VecX& flap_displacement() const { return flap_z_; }
+  /// u_p of eq. 5: mean air speed along the pole-side edge at the last flap stage, m/s.
+  double pole_air_speed() const { return u_p_; }
+  /// Statistics of the last self-collision stage; nullptr when the stage is not built.
+  const SelfCollisionStats* self_collision_stats() const {
+    return self_collision_ ? &self_collision_->stats() : nullptr;
+  }
 
   /// Names of the stages this scene runs, in step order.
   const std::vector<std::string>& stages() const { return stage_names_; }
@@ -62,7 +77,13 @@ class Simulation {
   void update_normals();
 
  private:
-  enum Stage { kWind, kFluid, kGravity, kDrag, kSprings, kIntegrate, kStrainLimit, kCheck, kNumStages };
+  enum Stage {
+    kWind, kFluid, kGravity, kDrag, kSprings, kIntegrate, kStrainLimit,
+    kFlap,           // "displace" / "force": before the collisions, which then see its motion
+    kPole, kSelfCollision, kCheck,
+    kFlapVisual,     // "visual": after the step, on the exported geometry only
+    kNumStages
+  };
   static const char* stage_name(Stage s);
 
   void step_once();
@@ -71,6 +92,11 @@ class Simulation {
   void build_fluid();
   void stage_integrate();
   void stage_check();
+  void setup_flapping();
+  double sample_pole_air_speed();
+  void stage_flap();
+  void stage_collide();
+  void stage_flap_visual();
   [[noreturn]] void diverge(const std::string& cause, long vertex, const std::string& detail);
 
   Scene scene_;
@@ -87,6 +113,20 @@ class Simulation {
   ForceTimings force_seconds_;
   std::vector<std::string> stage_names_;
   std::unique_ptr<Fluid> fluid_;  // the air grid, when the scene needs one
+
+  // Flapping (paper eq. 5), set up only when flapping.mode != "off".
+  Perlin1D noise_{0};
+  MatX2 flap_xy_;              // (N x 2) eq. 5's normalised (x, y): the rest uv
+  VecX flap_L_;                // (N) m, rest distance to the nearest pinned vertex
+  VecX flap_z_;                // (N) m, z at the current time
+  VecX flap_applied_;          // (N) m, "displace": z already applied to the cloth
+  VecX flap_before_, flap_after_;  // (N) m, "force": z at t - dt and t + dt
+  MatX3 edge_points_, edge_air_;   // (P x 3) where u_p is sampled, and the air there
+  double u_p_ = 0;
+  bool visual_ = false;
+  MatX3 render_x_, render_n_;  // (N x 3) "visual" geometry
+
+  std::unique_ptr<SelfCollision> self_collision_;
   long air_outside_last_ = 0, air_outside_total_ = 0;
 };
 

@@ -176,7 +176,8 @@ def _install() -> None:
     Scene.to_dict = to_dict
     Scene.__reduce__ = lambda self: (from_dict, (to_dict(self),))
     for cls in (Scene, _core.FlagParams, _core.AirParams, _core.DragParams, _core.IntegratorParams,
-                _core.FanParams):
+                _core.FanParams, _core.FlappingParams, _core.SelfCollisionParams,
+                _core.PoleParams):
         cls.__repr__ = _repr
 
 

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+import flagsim
 from flagsim import study
 from flagsim.study import accuracy, runner, stability
 
@@ -134,3 +135,17 @@ def test_stability_case_is_a_pure_function_of_its_settings():
     a, b = stability.run_case(case), stability.run_case(case)
     a.pop("wall_s"), b.pop("wall_s")
     assert a == b
+
+
+@pytest.mark.skipif(not hasattr(flagsim, "Fluid"), reason="needs the air solver")
+def test_air_orders_semi_lagrangian_about_one_maccormack_clearly_higher_in_space(accuracy_rows):
+    rows, _ = accuracy_rows
+    p = "fft" if flagsim.has_fftw() else "pcg"
+    sl = -accuracy.observed_order(rows, "air", "semi_lagrangian", key="resolution", pressure=p,
+                                  tolerance=repr(1e-8), refinement="cfl")
+    assert 0.6 < sl < 1.3, sl
+    sl_h2 = -accuracy.observed_order(rows, "air", "semi_lagrangian", key="resolution", pressure=p,
+                                     tolerance=repr(1e-8), refinement="dt~h^2")
+    mc_h2 = -accuracy.observed_order(rows, "air", "maccormack", key="resolution", pressure=p,
+                                     tolerance=repr(1e-8), refinement="dt~h^2")
+    assert mc_h2 > 1.3 and mc_h2 > sl_h2 + 0.6, (sl_h2, mc_h2)

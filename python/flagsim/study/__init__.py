@@ -58,7 +58,8 @@ def _series(rows, part):
     out: dict[str, list[dict[str, str]]] = {}
     for r in rows:
         if r["part"] == part and r["error"] not in ("", "nan") and r["seconds_per_step"]:
-            key = r["method"] if part != "air" else f"{r['advection']} + {r['pressure']} (tol {float(r['tolerance']):g})"
+            key = r["method"] if part != "air" else (
+                f"{r['advection']} + {r['pressure']} (tol {float(r['tolerance']):g}, {r['refinement']})")
             if part == "coupled":
                 key = f"{r['method']}, {r['resolution']}^3"
             out.setdefault(key, []).append(r)
@@ -107,6 +108,17 @@ def _cheapest(rows, part, target):
     return min(ok, key=lambda r: float(r["seconds_per_step"])) if ok else None
 
 
+def _cheapest_table(rows, part, title) -> list[str]:
+    lines = [f"## {title}: cheapest setting per error target", "",
+             "| target | cheapest setting | error (m) | steps/s |", "|---|---|---:|---:|"]
+    for target in (1e-2, 1e-3, 1e-4):
+        r = _cheapest(rows, part, target)
+        lines.append(f"| {target:g} m | " + (
+            f"{_describe(r)} | {float(r['error']):.3g} | {float(r['steps_per_second']):,.0f} |"
+            if r else "none of the sweep | | |"))
+    return lines + [""]
+
+
 def _describe(r) -> str:
     bits = [r["method"]]
     if r.get("resolution"):
@@ -132,36 +144,27 @@ def write_accuracy_report(rows, path, plots, relative_to) -> None:
         lines.append(f"| trajectory | {m} | {observed_order(rows, 'trajectory', m):.2f} | dt |")
     for adv in ("semi_lagrangian", "maccormack"):
         for p in ("fft", "pcg"):
-            q = observed_order(rows, "air", adv, key="resolution", pressure=p, tolerance=repr(1e-8))
-            if not math.isnan(q):
-                lines.append(f"| air | {adv} + {p} | {-q:.2f} | h (dt proportional to h) |")
+            for ref, label in (("cfl", "h, dt proportional to h"), ("dt~h^2", "h, dt proportional to h^2")):
+                q = observed_order(rows, "air", adv, key="resolution", pressure=p,
+                                   tolerance=repr(1e-8), refinement=ref)
+                if not math.isnan(q):
+                    lines.append(f"| air | {adv} + {p} | {-q:.2f} | {label} |")
+    dts = sorted({float(r["dt"]) for r in rows if r["part"] == "coupled"})
     for m in ("implicit", "explicit_adaptive"):
-        res = sorted({int(r["resolution"]) for r in rows if r["part"] == "coupled"})
-        if res:
-            q = observed_order(rows, "coupled", m, resolution=str(res[-1]))
-            lines.append(f"| coupled ({res[-1]}^3) | {m} | {q:.2f} | dt |")
+        if dts:
+            q = observed_order(rows, "coupled", m, key="resolution", dt=repr(dts[0]))
+            lines.append(f"| coupled (dt = {dts[0]:g} s) | {m} | {-q:.2f} | grid h, against the finest grid |")
     lines.append("")
     if any(r["part"] == "coupled" for r in rows):
-        lines += ["## Coupled paper scene: cheapest setting per error target", "",
-                  "| target | cheapest setting | error (m) | steps/s |", "|---|---|---:|---:|"]
-        for target in (1e-2, 1e-3, 1e-4):
-            r = _cheapest(rows, "coupled", target)
-            lines.append(f"| {target:g} m | " + (f"{_describe(r)} | {float(r['error']):.3g} | {float(r['steps_per_second']):,.0f} |"
-                                                  if r else "none of the sweep | | |"))
+        lines += _cheapest_table(rows, "coupled", "Coupled paper scene")
         paper = [r for r in rows if r["part"] == "coupled" and r["resolution"] == "16"
                  and abs(float(r["dt"]) - 0.01) < 1e-12 and r["error"]]
         for r in paper:
-            lines.append(f"\nThe paper's own setting (16^3 grid, dt = 0.01 s, {r['method']}): "
+            lines.append(f"The paper's own setting (16^3 grid, dt = 0.01 s, {r['method']}): "
                          f"error {float(r['error']):.3g} m at {float(r['steps_per_second']):,.0f} steps/s.")
-        lines.append("")
+            lines.append("")
     if any(r["part"] == "trajectory" for r in rows):
-        lines += ["## Cloth alone (paper flag, uniform wind): cheapest setting per error target", "",
-                  "| target | cheapest setting | error (m) | steps/s |", "|---|---|---:|---:|"]
-        for target in (1e-2, 1e-3, 1e-4):
-            r = _cheapest(rows, "trajectory", target)
-            lines.append(f"| {target:g} m | " + (f"{_describe(r)} | {float(r['error']):.3g} | {float(r['steps_per_second']):,.0f} |"
-                                                  if r else "none of the sweep | | |"))
-        lines.append("")
+        lines += _cheapest_table(rows, "trajectory", "Cloth alone (paper flag, uniform wind)")
     for part, title in PART_TITLES.items():
         pr = [r for r in rows if r["part"] == part]
         if not pr:
@@ -174,7 +177,8 @@ def write_accuracy_report(rows, path, plots, relative_to) -> None:
         front = {id(ok[i]) for i in pareto([(float(r["seconds_per_step"]), float(r["error"])) for r in ok])}
         for r in pr:
             settings = _describe(r) if part != "air" else (
-                f"{r['advection']} + {r['pressure']}, tol {float(r['tolerance']):g}, {r['resolution']}^2 x 4")
+                f"{r['advection']} + {r['pressure']}, tol {float(r['tolerance']):g}, {r['resolution']}^2 x 4, "
+                f"dt = {float(r['dt']):.3g} s")
             if r["error"] in ("", "nan"):
                 lines.append(f"| {settings} | {r['state'] or 'n/a'} | | | |")
             else:

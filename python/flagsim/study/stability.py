@@ -48,7 +48,7 @@ def pathological_cases(reduced: bool) -> list[dict[str, Any]]:
             continue
         for integ in INTEGRATORS:
             duration = {"long_run_1000s": 20.0 if reduced else 1000.0,
-                        "fine_128x192": 0.05 if reduced else 0.5}.get(name, 0.5 if reduced else 2.0)
+                        "fine_128x192": 0.1}.get(name, 0.5 if reduced else 2.0)
             cases.append(dict(id=f"p-{name}-{integ}", kind=name, integrator=integ, k_s=100.0,
                               wind=2.0, dt=0.01, density=0.15, duration=duration))
     return cases
@@ -68,6 +68,7 @@ def build_scene(case: dict[str, Any]) -> tuple[flagsim.Scene, Any]:
     s.flag.areal_density = float(case["density"])
     s.dt = float(case["dt"])
     s.air.model = "uniform"  # the matrix varies the wind itself; the grid is not under test here
+    s.flapping.mode = "off"  # eq. 5's amplitude grows with wind speed: 3 m at 100 m/s
     w = float(case["wind"])
     direction = np.array([1.0, 0.0, 0.3]) / math.hypot(1.0, 0.3)
     s.air.wind = tuple(w * direction)
@@ -136,7 +137,9 @@ def _all_finite(sim: flagsim.Simulation, energy: float) -> bool:
 
 def cases(reduced: bool) -> list[dict[str, Any]]:
     axes = REDUCED if reduced else FULL
-    return matrix_cases(axes, 0.05 if reduced else 0.5) + pathological_cases(reduced)
+    # 0.2 s of simulated time per matrix case: 20 steps at the largest dt, 2,000 at the smallest;
+    # an explicit run at k_s = 1e7 and 1e-3 kg/m^2 already takes ~4e5 substeps for it.
+    return matrix_cases(axes, 0.05 if reduced else 0.2) + pathological_cases(reduced)
 
 
 def summarize(rows: list[dict[str, str]]) -> dict[str, dict[str, int]]:

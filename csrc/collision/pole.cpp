@@ -1,0 +1,146 @@
+#include "collision/pole.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "common/parallel.h"
+
+namespace flagsim {
+
+namespace {
+
+// Moved vertices are put this far outside (relative to the radius), so that rounding cannot leave
+// them a hair inside.
+constexpr double kSkin = 1e-9;
+
+// Earliest t in [0, 1] at which the segment a -> b enters the cylinder from outside, and the
+// outward normal of the face it enters through; -1 if never.
+double entry_time(const PoleParams& pole, const Vec3& a, const Vec3& b, Vec3& normal) {
+  const double y0 = pole.base.y(), y1 = pole.base.y() + pole.height, R = pole.radius;
+  const Vec3 d = b - a;
+  double best = std::numeric_limits<double>::infinity();
+  // Side: |(a + t d - base)_xz|^2 = R^2 with y(t) in [y0, y1].
+  const double ox = a.x() - pole.base.x(), oz = a.z() - pole.base.z();
+  const double A = d.x() * d.x() + d.z() * d.z();
+  const double B = 2 * (ox * d.x() + oz * d.z());
+  const double C = ox * ox + oz * oz - R * R;
+  if (A > 0) {
+    const double disc = B * B - 4 * A * C;
+    if (disc >= 0) {
+      const double t = (-B - std::sqrt(disc)) / (2 * A);  // the entering root
+      const double y = a.y() + t * d.y();
+      if (t >= 0 && t <= 1 && y >= y0 && y <= y1) {
+        best = t;
+        normal = Vec3(ox + t * d.x(), 0.0, oz + t * d.z()) / R;
+      }
+    }
+  }
+  // Caps: the plane y = y0 or y = y1 crossed inside the disc.
+  for (const double yc : {y0, y1}) {
+    if (d.y() == 0) break;
+    const double t = (yc - a.y()) / d.y();
+    if (t < 0 || t > 1 || t >= best) continue;
+    const double px = ox + t * d.x(), pz = oz + t * d.z();
+    if (px * px + pz * pz <= R * R) {
+      best = t;
+      normal = Vec3(0.0, yc == y0 ? -1.0 : 1.0, 0.0);
+    }
+  }
+  return std::isfinite(best) ? best : -1.0;
+}
+
+// Nearest surface point of the cylinder to p (inside) and the outward normal there; `hint` is the
+// radial direction used when p is on the axis.
+void project_out(const PoleParams& pole, const Vec3& hint, Vec3& p, Vec3& n) {
+  const double y0 = pole.base.y(), y1 = pole.base.y() + pole.height, R = pole.radius;
+  Vec3 radial(p.x() - pole.base.x(), 0.0, p.z() - pole.base.z());
+  double r = radial.norm();
+  if (!(r > 0)) {
+    radial = Vec3(hint.x() - pole.base.x(), 0.0, hint.z() - pole.base.z());
+    r = radial.norm();
+    if (!(r > 0)) radial = Vec3::UnitX(), r = 1.0;
+    radial /= r;
+    r = 0.0;
+  } else {
+    radial /= r;
+  }
+  const double side = R - r, top = y1 - p.y(), bottom = p.y() - y0;
+  if (side <= top && side <= bottom) {
+    const double target = R * (1 + kSkin);
+    p.x() = pole.base.x() + radial.x() * target;
+    p.z() = pole.base.z() + radial.z() * target;
+    n = radial;
+  } else if (top <= bottom) {
+    p.y() = y1 + R * kSkin;
+    n = Vec3::UnitY();
+  } else {
+    p.y() = y0 - R * kSkin;
+    n = -Vec3::UnitY();
+  }
+}
+
+}  // namespace
+
+bool inside_pole(const PoleParams& pole, const Vec3& p, double tolerance) {
+  const double dx = p.x() - pole.base.x(), dz = p.z() - pole.base.z();
+  const double R = pole.radius - tolerance;
+  return p.y() > pole.base.y() + tolerance && p.y() < pole.base.y() + pole.height - tolerance &&
+         R > 0 && dx * dx + dz * dz < R * R;
+}
+
+namespace {
+
+// collide_pole() for vertex i: how far it was moved, or -1 when it was left alone.
+double collide_vertex(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
+                      const VecX& inv_mass, Index i) {
+  if (inv_mass[i] == 0) return -1;
+  const Vec3 a = x0.row(i).transpose();
+  Vec3 p = x.row(i).transpose();
+  Vec3 normal;
+  const double t = inside_pole(pole, a) ? -1.0 : entry_time(pole, a, p, normal);
+  if (t >= 0) {
+    // Entered from outside (possibly right through): stop at the entry point q and keep the
+    // rest of the motion's component tangent to the face entered, which stays outside the
+    // convex cylinder.
+    const Vec3 q = a + t * (p - a);
+    const Vec3 rest = p - q;
+    p = q + rest - std::min(rest.dot(normal), 0.0) * normal + kSkin * pole.radius * normal;
+  } else if (inside_pole(pole, p)) {
+    project_out(pole, a, p, normal);  // started inside (or grazing): nearest surface point
+  } else {
+    return -1;
+  }
+  const double moved = (p - x.row(i).transpose()).norm();
+  x.row(i) = p.transpose();
+  const double vn = v.row(i).dot(normal.transpose());
+  if (vn < 0) v.row(i) -= vn * normal.transpose();
+  return moved;
+}
+
+}  // namespace
+
+Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
+                   const VecX& inv_mass, double* max_move) {
+  Index moved = 0;
+  double largest = 0;
+  const Index n = x.rows();
+  // Reductions branch in C++: an omp `if` clause would build a one-thread team (a heap
+  // allocation) for every small call.
+  if (use_team(n >= kParallelGrain)) {
+#pragma omp parallel for schedule(static) reduction(+ : moved) reduction(max : largest)
+    for (Index i = 0; i < n; ++i) {
+      const double d = collide_vertex(pole, x0, x, v, inv_mass, i);
+      if (d >= 0) ++moved, largest = std::max(largest, d);
+    }
+  } else {
+    for (Index i = 0; i < n; ++i) {
+      const double d = collide_vertex(pole, x0, x, v, inv_mass, i);
+      if (d >= 0) ++moved, largest = std::max(largest, d);
+    }
+  }
+  if (max_move) *max_move = largest;
+  return moved;
+}
+
+}  // namespace flagsim

@@ -1,0 +1,24 @@
+// The pole: a vertical (+y) cylinder of PoleParams::radius from base.y to base.y + height, around
+// the axis through base. Vertices collide with it so that a flag blown back wraps around it.
+#pragma once
+#include "collision/params.h"
+#include "common/types.h"
+
+namespace flagsim {
+
+/// True when p is strictly inside the cylinder shrunk by `tolerance` (m) on every face.
+bool inside_pole(const PoleParams& pole, const Vec3& p, double tolerance = 0.0);
+
+/// Keeps every free vertex (inv_mass > 0) out of the pole.
+/// x0  N x 3 positions at the start of the step, m (outside the pole)
+/// x   N x 3 positions at the end of the step, m (in/out)
+/// v   N x 3 velocities, m/s (in/out)
+/// A vertex ending inside is moved to the nearest point of the surface (side or a cap; sliding
+/// is kept); one whose path x0 -> x passed through the pole and out again is stopped where it
+/// entered. The velocity's component into the surface (outward normal n, v . n < 0) is removed.
+/// Returns the number of vertices moved (and the largest move, m, in *max_move if given).
+/// Vertices inside the pole at x0 are projected to its surface like the rest.
+Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
+                   double* max_move = nullptr);
+
+}  // namespace flagsim

@@ -1,0 +1,90 @@
+#include "collision/pole.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+namespace flagsim {
+namespace {
+
+PoleParams pole() {
+  PoleParams p;
+  p.radius = 0.05;
+  p.height = 2.0;
+  p.base = Vec3(0.0, -1.0, 0.0);
+  return p;
+}
+
+double radial(const PoleParams& p, const MatX3& x, Index i) {
+  return std::hypot(x(i, 0) - p.base.x(), x(i, 2) - p.base.z());
+}
+
+TEST(Pole, VertexEndingInsideSlidesOnTheSurfaceWithoutInwardVelocity) {
+  const PoleParams p = pole();
+  MatX3 x0(1, 3), x(1, 3), v(1, 3);
+  x0 << -0.2, 0.0, 0.01;
+  x << -0.02, 0.0, 0.03;  // inside
+  v << 18.0, 0.0, 2.0;
+  const VecX w = VecX::Ones(1);
+  EXPECT_EQ(collide_pole(p, x0, x, v, w), 1);
+  EXPECT_FALSE(inside_pole(p, x.row(0).transpose()));
+  // Stopped where it entered, then slid in the tangent plane there (outside the cylinder).
+  EXPECT_GE(radial(p, x, 0), p.radius);
+  EXPECT_LT(radial(p, x, 0), 1.05 * p.radius);
+  EXPECT_LT(x(0, 0), 0.0);  // stayed on the side it came from
+  const Vec3 n = Vec3(x(0, 0), 0, x(0, 2)).normalized();
+  EXPECT_GE(v.row(0).dot(n.transpose()), -1e-12);
+  EXPECT_GT(v.row(0).norm(), 0.1);  // the tangential part is kept
+}
+
+TEST(Pole, ThirtyMetresPerSecondDoesNotTunnel) {
+  const PoleParams p = pole();
+  // 30 m/s for 0.01 s: 0.3 m, six radii, straight through the axis.
+  MatX3 x0(1, 3), x(1, 3), v(1, 3);
+  x0 << -0.15, 0.2, 0.0;
+  x << 0.15, 0.2, 0.0;
+  v << 30.0, 0.0, 0.0;
+  EXPECT_EQ(collide_pole(p, x0, x, v, VecX::Ones(1)), 1);
+  EXPECT_LT(x(0, 0), -p.radius * (1 - 1e-9));  // stopped on the entry side
+  EXPECT_NEAR(x(0, 0), -p.radius, 1e-8);
+  EXPECT_NEAR(v(0, 0), 0.0, 1e-12);
+}
+
+TEST(Pole, CapsPinsAndOutsidePathsAreRespected) {
+  const PoleParams p = pole();
+  MatX3 x0(3, 3), x(3, 3), v = MatX3::Zero(3, 3);
+  x0 << 0.01, 1.2, 0.0,   // above the top cap, falls into it
+      0.0, 0.0, 0.0,      // pinned on the axis (inside): left alone
+      0.3, 0.0, 0.0;      // passes beside the pole
+  x << 0.01, 0.95, 0.0, 0.0, 0.0, 0.0, 0.3, 0.0, 0.4;
+  v.row(0) << 0, -25, 0;
+  VecX w(3);
+  w << 1, 0, 1;
+  const MatX3 before = x;
+  EXPECT_EQ(collide_pole(p, x0, x, v, w), 1);
+  EXPECT_NEAR(x(0, 1), 1.0, 1e-8);
+  EXPECT_GE(x(0, 1), 1.0);
+  EXPECT_GE(v(0, 1), 0.0);
+  EXPECT_EQ(x.row(1), before.row(1));
+  EXPECT_EQ(x.row(2), before.row(2));
+}
+
+TEST(Pole, NoVertexInsideAfterRandomFastMotion) {
+  const PoleParams p = pole();
+  std::mt19937 rng(8);
+  std::uniform_real_distribution<double> u(-0.4, 0.4);
+  const Index n = 4000;
+  MatX3 x0(n, 3), x(n, 3), v(n, 3);
+  for (Index i = 0; i < n; ++i) {
+    do x0.row(i) << u(rng), u(rng), u(rng);
+    while (inside_pole(p, x0.row(i).transpose()));
+    v.row(i) << 30 * u(rng), 30 * u(rng), 30 * u(rng);
+    x.row(i) = x0.row(i) + 0.01 * v.row(i);
+  }
+  collide_pole(p, x0, x, v, VecX::Ones(n));
+  for (Index i = 0; i < n; ++i) EXPECT_FALSE(inside_pole(p, x.row(i).transpose())) << i;
+}
+
+}  // namespace
+}  // namespace flagsim

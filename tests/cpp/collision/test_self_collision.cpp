@@ -1,0 +1,280 @@
+#include "collision/self_collision.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "collision/pole.h"
+#include "common/parallel.h"
+#include "crossing_checker.h"
+
+namespace flagsim {
+namespace {
+
+using test_support::count_crossings;
+using test_support::make_grid;
+using test_support::min_distance_nonadjacent;
+
+SelfCollisionParams params(double thickness = 0.005, double friction = 0.0, int iterations = 8) {
+  SelfCollisionParams p;
+  p.enabled = true;
+  p.thickness = thickness;
+  p.friction = friction;
+  p.iterations = iterations;
+  return p;
+}
+
+// One pinned triangle (vertices 1..3) in z = 0 and a free vertex 0 above it.
+struct OneTriangle {
+  MatX3 x0{4, 3}, x{4, 3}, v = MatX3::Zero(4, 3);
+  MatX3i tris{1, 3};
+  VecX w{4};
+  OneTriangle() {
+    x0 << 0.2, 0.3, 0.05, 0, 0, 0, 1, 0, 0, 0, 1, 0;
+    tris << 1, 2, 3;
+    w << 1, 0, 0, 0;
+  }
+};
+
+TEST(SelfCollision, VertexDrivenThroughATriangleAt30MetresPerSecondStopsAtTheThickness) {
+  OneTriangle s;
+  s.v.row(0) << 0, 0, -30;
+  s.x = s.x0 + 0.01 * s.v;  // ends 0.25 m below the triangle
+  SelfCollision collide(s.tris, 4, params());
+  const auto& stats = collide.resolve(s.x0, s.x, s.v, s.w);
+  EXPECT_NEAR(s.x(0, 2), 0.005, 1e-9);  // stopped on its way down, the thickness above
+  EXPECT_EQ(s.x(0, 0), 0.2);
+  EXPECT_EQ(s.x(0, 1), 0.3);
+  EXPECT_EQ(s.v(0, 2), 0.0);
+  EXPECT_EQ(s.x.bottomRows(3), s.x0.bottomRows(3));  // pinned
+  EXPECT_GE(stats.crossings, 1);
+  EXPECT_EQ(stats.frozen, 0);
+}
+
+TEST(SelfCollision, FreeTriangleSharesThePushByMassAndKeepsMomentum) {
+  OneTriangle s;
+  s.w << 1.0, 2.0, 2.0, 2.0;  // vertex 1 kg, triangle corners 0.5 kg
+  s.v.row(0) << 0, 0, -30;
+  s.v.bottomRows(3).col(2).setConstant(5.0);
+  s.x = s.x0 + 0.01 * s.v;
+  auto momentum = [&] {
+    Vec3 m = Vec3::Zero();
+    for (int i = 0; i < 4; ++i) m += s.v.row(i).transpose() / s.w[i];
+    return m;
+  };
+  const Vec3 before = momentum();
+  SelfCollision collide(s.tris, 4, params());
+  collide.resolve(s.x0, s.x, s.v, s.w);
+  EXPECT_TRUE(momentum().isApprox(before, 1e-12));
+  // The vertex ends the thickness from the (now tilted) triangle, over its face, and does not
+  // approach it any more.
+  const Vec3 p = s.x.row(0).transpose(), a = s.x.row(1).transpose(), b = s.x.row(2).transpose(),
+             c = s.x.row(3).transpose();
+  ASSERT_TRUE(test_support::projects_inside(p, a, b, c));
+  EXPECT_NEAR(test_support::plane_distance(p, a, b, c), 0.005, 1e-9);
+  const Vec3 n = (b - a).cross(c - a).normalized();
+  const double nn = (b - a).cross(c - a).squaredNorm();
+  const double wa = (b - p).cross(c - p).dot((b - a).cross(c - a)) / nn;
+  const double wb = (c - p).cross(a - p).dot((b - a).cross(c - a)) / nn;
+  const Vec3 vq = wa * s.v.row(1).transpose() + wb * s.v.row(2).transpose() +
+                  (1 - wa - wb) * s.v.row(3).transpose();
+  EXPECT_GE((s.v.row(0).transpose() - vq).dot(n), -1e-9);
+  EXPECT_LT(s.x(1, 2), s.x0(1, 2) + 0.05);  // the triangle was pushed down by the vertex
+}
+
+TEST(SelfCollision, CoulombFrictionTakesMuTimesTheNormalImpulse) {
+  OneTriangle s;
+  s.x0(0, 2) = 0.004;  // already within the thickness
+  s.v.row(0) << 5, 0, -10;
+  s.x = s.x0;  // a contact at rest position: only the velocity matters
+  SelfCollision collide(s.tris, 4, params(0.005, 0.3));
+  collide.resolve(s.x0, s.x, s.v, s.w);
+  EXPECT_NEAR(s.v(0, 2), 0.0, 1e-12);
+  EXPECT_NEAR(s.v(0, 0), 5 - 0.3 * 10, 1e-12);
+  EXPECT_NEAR(s.x(0, 2), 0.005, 1e-12);
+}
+
+TEST(SelfCollision, NeverTestsAVertexAgainstItsOwnTriangles) {
+  MatX3 x0(3, 3), v(3, 3);
+  x0 << 0, 0, 0, 0.01, 0, 0, 0, 0.01, 0;  // a tiny triangle, all vertices within thickness
+  MatX3i tris(1, 3);
+  tris << 0, 1, 2;
+  v << 0, 0, 3, 0, 0, -3, 1, 0, 0;
+  MatX3 x = x0 + 0.01 * v;
+  const MatX3 expected = x, v0 = v;
+  SelfCollision collide(tris, 3, params());
+  const auto& stats = collide.resolve(x0, x, v, VecX::Ones(3));
+  EXPECT_EQ(stats.candidates, 0);
+  EXPECT_EQ(x, expected);
+  EXPECT_EQ(v, v0);
+}
+
+// Kinematic steps (x += v dt, v += g dt) of a set of sheets through the collision stage, checked
+// by the independent crossing counter and distance after every step.
+struct KinematicRun {
+  long crossings = 0;
+  double min_distance = 1e9;
+  SelfCollisionStats totals;
+  MatX3 x;
+};
+
+KinematicRun run(MatX3 x, MatX3 v, const MatX3i& tris, const VecX& w, const SelfCollisionParams& p,
+        int steps, const PoleParams* pole = nullptr) {
+  KinematicRun out;
+  SelfCollision collide(tris, x.rows(), p);
+  const double dt = 0.01;
+  const Vec3 g(0, 0, -9.81);
+  for (int s = 0; s < steps; ++s) {
+    const MatX3 x0 = x;
+    for (Index i = 0; i < x.rows(); ++i)
+      if (w[i] > 0) v.row(i) += dt * g.transpose();
+    for (Index i = 0; i < x.rows(); ++i) x.row(i) += (w[i] > 0 ? dt : 0.0) * v.row(i);
+    const auto& st = collide.resolve(x0, x, v, w, pole);
+    out.totals.crossings += st.crossings;
+    out.totals.contacts += st.contacts;
+    out.totals.frozen += st.frozen;
+    out.crossings += count_crossings(x0, x, tris);
+    out.min_distance = std::min(out.min_distance, min_distance_nonadjacent(x, tris));
+  }
+  out.x = x;
+  return out;
+}
+
+// Sheet A pinned in z = 0 (11 x 11, 5 cm), sheet B (8 x 8) 4 cm above, offset by half a cell,
+// falling at 30 m/s with random jitter (+-3 m/s vertical, +-0.6 m/s sideways, so that every
+// vertex stays over sheet A).
+void two_sheets(MatX3& x, MatX3& v, MatX3i& tris, VecX& w) {
+  x.resize(0, 3);
+  tris.resize(0, 3);
+  make_grid(11, 11, Vec3(0, 0, 0), Vec3(0.05, 0, 0), Vec3(0, 0.05, 0), x, tris);
+  const Index nA = x.rows();
+  make_grid(8, 8, Vec3(0.075, 0.075, 0.04), Vec3(0.05, 0, 0), Vec3(0, 0.05, 0), x, tris);
+  std::mt19937 rng(1);
+  std::uniform_real_distribution<double> jitter(-3, 3);
+  v = MatX3::Zero(x.rows(), 3);
+  w = VecX::Ones(x.rows());
+  w.head(nA).setZero();
+  for (Index i = nA; i < x.rows(); ++i)
+    v.row(i) << 0.2 * jitter(rng), 0.2 * jitter(rng), -30 + jitter(rng);
+}
+
+TEST(SelfCollision, SheetFallingThroughASheetAt30MetresPerSecondNeverCrosses) {
+  MatX3 x, v;
+  MatX3i tris;
+  VecX w;
+  two_sheets(x, v, tris, w);
+  const KinematicRun r = run(x, v, tris, w, params(), 8);
+  EXPECT_EQ(r.crossings, 0);
+  EXPECT_GE(r.min_distance, 0.0025);
+  EXPECT_GT(r.totals.crossings, 0);  // the response was exercised
+  for (Index i = 121; i < r.x.rows(); ++i) EXPECT_GT(r.x(i, 2), 0.0) << i;
+}
+
+TEST(SelfCollision, OneSweepStillNeverCrossesThroughTheFallback) {
+  MatX3 x, v;
+  MatX3i tris;
+  VecX w;
+  two_sheets(x, v, tris, w);
+  const KinematicRun r = run(x, v, tris, w, params(0.005, 0.0, 1), 8);
+  EXPECT_EQ(r.crossings, 0);
+  EXPECT_GE(r.min_distance, 0.0025);
+}
+
+// One 8 x 24 sheet folded over itself: columns 0..11 flat in z = 0, columns 12..23 back over
+// them at z = 3 cm, shifted by half a cell; the upper layer is thrown down at 30 m/s and the
+// lower one jitters; column 0 is pinned.
+void folded(MatX3& x, MatX3& v, MatX3i& tris, VecX& w) {
+  const int rows = 8, cols = 24;
+  const double s = 0.04;
+  x.resize(0, 3);
+  tris.resize(0, 3);
+  make_grid(rows, cols, Vec3::Zero(), Vec3(s, 0, 0), Vec3(0, s, 0), x, tris);
+  std::mt19937 rng(2);
+  std::uniform_real_distribution<double> jitter(-1, 1);
+  v = MatX3::Zero(x.rows(), 3);
+  w = VecX::Ones(x.rows());
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c) {
+      const int i = r * cols + c;
+      if (c >= 12) {
+        x.row(i) << (23 - c) * s + 0.5 * s, r * s, 0.03;
+        v.row(i) << 3 * jitter(rng), 3 * jitter(rng), -30 + 3 * jitter(rng);
+      } else {
+        v.row(i) << jitter(rng), jitter(rng), jitter(rng);
+      }
+      if (c == 0) w[i] = 0, v.row(i).setZero();
+    }
+}
+
+TEST(SelfCollision, FoldedSheetThrownOntoItselfNeverCrosses) {
+  MatX3 x, v;
+  MatX3i tris;
+  VecX w;
+  folded(x, v, tris, w);
+  ASSERT_GE(min_distance_nonadjacent(x, tris), 0.005);
+  const KinematicRun r = run(x, v, tris, w, params(), 10);
+  EXPECT_EQ(r.crossings, 0);
+  EXPECT_GE(r.min_distance, 0.0025);
+  EXPECT_GT(r.totals.crossings + r.totals.contacts, 0);
+}
+
+TEST(SelfCollision, ResultsDoNotDependOnTheThreadCount) {
+  // A folded 48 x 96 sheet (4608 vertices): large enough that the broad phase and the pair loops
+  // run on the OpenMP team.
+  const int rows = 48, cols = 96;
+  const double s = 0.01;
+  MatX3 x(0, 3);
+  MatX3i tris(0, 3);
+  make_grid(rows, cols, Vec3::Zero(), Vec3(s, 0, 0), Vec3(0, s, 0), x, tris);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> jitter(-1, 1);
+  MatX3 v = MatX3::Zero(x.rows(), 3);
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c) {
+      const int i = r * cols + c;
+      if (c >= cols / 2) {
+        x.row(i) << (cols - 1 - c) * s + 0.5 * s, r * s, 0.02;
+        v.row(i) << 0.2 * jitter(rng), 0.2 * jitter(rng), -3 + 0.2 * jitter(rng);
+      }
+    }
+  const VecX w = VecX::Ones(x.rows());
+  auto run_with = [&](int threads, SelfCollisionStats& st) {
+    const int before = num_threads();
+    set_num_threads(threads);
+    SelfCollision collide(tris, x.rows(), params(0.003, 0.2));
+    MatX3 xs = x, vs = v;
+    for (int step = 0; step < 2; ++step) {
+      const MatX3 x0 = xs;
+      xs += 0.01 * vs;
+      st = collide.resolve(x0, xs, vs, w);
+    }
+    set_num_threads(before);
+    return xs;
+  };
+  SelfCollisionStats one_stats, two_stats;
+  const MatX3 one = run_with(1, one_stats), two = run_with(2, two_stats);
+  EXPECT_GE(one_stats.candidates, 4 * kParallelGrain) << "the pair loops should run in parallel";
+  EXPECT_GT(one_stats.crossings + one_stats.contacts, 0);
+  EXPECT_EQ(one, two);  // bitwise
+}
+
+TEST(SelfCollision, PoleAndSelfCollisionTogether) {
+  // The folded sheet thrown sideways into a pole standing in its way.
+  MatX3 x, v;
+  MatX3i tris;
+  VecX w;
+  folded(x, v, tris, w);
+  PoleParams pole;
+  pole.radius = 0.03;
+  pole.height = 1.0;
+  pole.base = Vec3(0.3, -0.5, -0.04);
+  for (Index i = 0; i < x.rows(); ++i)
+    if (w[i] > 0) v(i, 2) -= 15;
+  const KinematicRun r = run(x, v, tris, w, params(), 8, &pole);
+  EXPECT_EQ(r.crossings, 0);
+  EXPECT_GE(r.min_distance, 0.0025);
+  for (Index i = 0; i < r.x.rows(); ++i) EXPECT_FALSE(inside_pole(pole, r.x.row(i).transpose()));
+}
+
+}  // namespace
+}  // namespace flagsim
