@@ -228,6 +228,14 @@ class MujocoCloth(PeerStepper):
     def step(self, n: int) -> None:
         self.mj.mj_step(self.model, self.data, nstep=n)
 
+    def info(self) -> dict[str, Any]:
+        out = super().info()
+        warned = {self.mj.mjtWarning(i).name.replace("mjWARN_", "").lower(): int(w.number)
+                  for i, w in enumerate(self.data.warning) if w.number > 0}
+        if warned:
+            out["notes"] += "; MuJoCo warnings: " + ", ".join(f"{k} x{v}" for k, v in warned.items())
+        return out
+
     def positions(self) -> np.ndarray:
         return np.asarray(self.data.flexvert_xpos, dtype=float)[self.order]
 
