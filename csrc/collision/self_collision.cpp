@@ -109,7 +109,7 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
     std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(),
               [](const Pair& p, const Pair& q) { return p.t < q.t; });
   };
-  if (n_ >= kParallelGrain) {
+  if (use_team(n_ >= kParallelGrain)) {
 #pragma omp parallel
     {
       std::vector<Pair>& buffer = thread_pairs_[static_cast<size_t>(thread_id())];
