@@ -10,7 +10,7 @@ struct SelfCollisionParams {
   bool enabled = false;
   double thickness = 0.005;  ///< m, minimum vertex-triangle distance
   double friction = 0.0;     ///< Coulomb coefficient, >= 0
-  int iterations = 8;        ///< response sweeps per step before the freeze fallback, >= 1
+  int iterations = 32;       ///< response sweeps per step at most before the freeze fallback
   void validate(const std::string& prefix) const;
 };
 

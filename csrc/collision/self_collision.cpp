@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 
+#include "collision/edge_edge.h"
 #include "collision/pole.h"
 #include "collision/vertex_triangle.h"
 #include "common/parallel.h"
@@ -36,17 +38,42 @@ inline Vec3 row(const MatX3& m, Index i) { return m.row(i).transpose(); }
 // thread team on a loaded machine costs far more than a few thousand of them.
 constexpr Index kPairGrain = 4 * kParallelGrain;
 
+// Each edge of the mesh once, (lower, higher) vertex index, sorted.
+MatX2i mesh_edges(const MatX3i& tris) {
+  std::vector<std::pair<int32_t, int32_t>> e;
+  e.reserve(3 * static_cast<size_t>(tris.rows()));
+  for (Index t = 0; t < tris.rows(); ++t)
+    for (int k = 0; k < 3; ++k) {
+      const int32_t a = tris(t, k), b = tris(t, (k + 1) % 3);
+      e.emplace_back(std::min(a, b), std::max(a, b));
+    }
+  std::sort(e.begin(), e.end());
+  e.erase(std::unique(e.begin(), e.end()), e.end());
+  MatX2i out(static_cast<Index>(e.size()), 2);
+  for (size_t i = 0; i < e.size(); ++i) out.row(static_cast<Index>(i)) << e[i].first, e[i].second;
+  return out;
+}
+
+// Concatenate per-thread buffers (in thread order) onto out.
+template <class T>
+void append(const std::vector<std::vector<T>>& buffers, std::vector<T>& out) {
+  for (const auto& b : buffers) out.insert(out.end(), b.begin(), b.end());
+}
+
 }  // namespace
 
 SelfCollision::SelfCollision(const MatX3i& triangles, Index num_vertices,
                              const SelfCollisionParams& params)
     : tris_(triangles),
+      edges_(mesh_edges(triangles)),
       n_(num_vertices),
       params_(params),
       vlo_(num_vertices, 3),
       vhi_(num_vertices, 3),
       tlo_(triangles.rows(), 3),
       thi_(triangles.rows(), 3),
+      elo_(edges_.rows(), 3),
+      ehi_(edges_.rows(), 3),
       x_sweep_(num_vertices, 3),
       dv_(num_vertices, 3),
       count_v_(static_cast<size_t>(num_vertices), 0),
@@ -54,14 +81,28 @@ SelfCollision::SelfCollision(const MatX3i& triangles, Index num_vertices,
       moved_(static_cast<size_t>(num_vertices), 0),
       frozen_(static_cast<size_t>(num_vertices), 0) {
   hash_.reserve(triangles.rows());
-  const int threads = max_threads();
-  thread_pairs_.resize(static_cast<size_t>(threads));
+  edge_hash_.reserve(edges_.rows());
+  const size_t threads = static_cast<size_t>(max_threads());
+  thread_pairs_.resize(threads);
+  thread_edge_pairs_.resize(threads);
   const size_t expected = 8 * static_cast<size_t>(num_vertices) + 64;
+  const size_t expected_edges = 8 * static_cast<size_t>(edges_.rows()) + 64;
   // Thread 0 collects every pair when the broad phase runs on one thread.
   for (auto& buffer : thread_pairs_) buffer.reserve(expected);
-  pairs_.reserve(expected);
-  flag_.reserve(expected);
-  contacts_.reserve(expected);
+  for (auto& buffer : thread_edge_pairs_) buffer.reserve(expected_edges);
+  pairs_.reserve(expected + expected_edges);
+  flag_.reserve(expected + expected_edges);
+  contacts_.reserve(expected + expected_edges);
+  start_gap_.reserve(expected + expected_edges);
+}
+
+void SelfCollision::corners(const Pair& pr, int32_t idx[4]) const {
+  if (pr.edge_pair) {
+    idx[0] = edges_(pr.a, 0), idx[1] = edges_(pr.a, 1);
+    idx[2] = edges_(pr.b, 0), idx[3] = edges_(pr.b, 1);
+  } else {
+    idx[0] = pr.a, idx[1] = tris_(pr.b, 0), idx[2] = tris_(pr.b, 1), idx[3] = tris_(pr.b, 2);
+  }
 }
 
 void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv_mass,
@@ -78,7 +119,12 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
     vlo_.row(i) = a.cwiseMin(b).transpose();
     vhi_.row(i) = a.cwiseMax(b).transpose();
   }
-  const Index T = tris_.rows();
+  // Cells about the mean swept primitive size (Teschner et al. 2003 §4).
+  auto cell_of = [h](double extent, Index count) {
+    const double cell = count > 0 ? extent / static_cast<double>(count) : h;
+    return cell > 0 && std::isfinite(cell) ? cell : h;
+  };
+  const Index T = tris_.rows(), E = edges_.rows();
   double extent = 0;
   for (Index t = 0; t < T; ++t) {
     const int32_t a = tris_(t, 0), b = tris_(t, 1), c = tris_(t, 2);
@@ -86,16 +132,26 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
     thi_.row(t) = vhi_.row(a).cwiseMax(vhi_.row(b)).cwiseMax(vhi_.row(c)).array() + margin;
     extent += (thi_.row(t) - tlo_.row(t)).maxCoeff();
   }
-  // Cell about the mean swept triangle size (Teschner et al. 2003 §4).
-  double cell = T > 0 ? extent / static_cast<double>(T) : h;
-  if (!(cell > 0) || !std::isfinite(cell)) cell = h;
-  hash_.build(tlo_, thi_, cell);
+  hash_.build(tlo_, thi_, cell_of(extent, T));
+  extent = 0;
+  for (Index e = 0; e < E; ++e) {
+    const int32_t a = edges_(e, 0), b = edges_(e, 1);
+    elo_.row(e) = vlo_.row(a).cwiseMin(vlo_.row(b)).array() - margin;
+    ehi_.row(e) = vhi_.row(a).cwiseMax(vhi_.row(b)).array() + margin;
+    extent += (ehi_.row(e) - elo_.row(e)).maxCoeff();
+  }
+  edge_hash_.build(elo_, ehi_, cell_of(extent, E));
 
-  const int threads = max_threads();
-  if (static_cast<int>(thread_pairs_.size()) < threads) thread_pairs_.resize(threads);
+  const size_t threads = static_cast<size_t>(max_threads());
+  if (thread_pairs_.size() < threads) {
+    thread_pairs_.resize(threads);
+    thread_edge_pairs_.resize(threads);
+  }
   for (auto& buffer : thread_pairs_) buffer.clear();
+  for (auto& buffer : thread_edge_pairs_) buffer.clear();
   const double reach = h + margin;
-  auto collect = [&](Index i, std::vector<Pair>& buffer) {
+  auto by_b = [](const Pair& p, const Pair& q) { return p.b < q.b; };
+  auto collect_vertex = [&](Index i, std::vector<Pair>& buffer) {
     const Vec3 qlo = vlo_.row(i).transpose().array() - reach;
     const Vec3 qhi = vhi_.row(i).transpose().array() + reach;
     const size_t begin = buffer.size();
@@ -104,28 +160,81 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
       const int32_t a = tris_(t, 0), b = tris_(t, 1), c = tris_(t, 2);
       if (a == vi || b == vi || c == vi) return;  // never against its own triangles
       if (inv_mass[i] == 0 && inv_mass[a] == 0 && inv_mass[b] == 0 && inv_mass[c] == 0) return;
-      buffer.push_back({vi, t});
+      buffer.push_back({vi, t, false});
     });
-    std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(),
-              [](const Pair& p, const Pair& q) { return p.t < q.t; });
+    std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(), by_b);
+  };
+  auto collect_edge = [&](Index e, std::vector<Pair>& buffer) {
+    const Vec3 qlo = elo_.row(e).transpose().array() - h;
+    const Vec3 qhi = ehi_.row(e).transpose().array() + h;
+    const size_t begin = buffer.size();
+    const int32_t a = edges_(e, 0), b = edges_(e, 1);
+    edge_hash_.query(qlo, qhi, [&](int32_t f) {
+      if (f <= e) return;  // each pair once
+      const int32_t c = edges_(f, 0), d = edges_(f, 1);
+      if (a == c || a == d || b == c || b == d) return;  // edges sharing a vertex never cross
+      if (inv_mass[a] == 0 && inv_mass[b] == 0 && inv_mass[c] == 0 && inv_mass[d] == 0) return;
+      buffer.push_back({static_cast<int32_t>(e), f, true});
+    });
+    std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(), by_b);
   };
   if (use_team(n_ >= kParallelGrain)) {
 #pragma omp parallel
     {
-      std::vector<Pair>& buffer = thread_pairs_[static_cast<size_t>(thread_id())];
-      // Static schedule: thread k gets the k-th contiguous block of vertices, so concatenating
-      // the buffers in thread order lists pairs by vertex whatever the thread count.
+      const size_t id = static_cast<size_t>(thread_id());
+      // Static schedule: thread k gets the k-th contiguous block, so concatenating the buffers
+      // in thread order lists pairs by vertex (edge) whatever the thread count.
 #pragma omp for schedule(static)
-      for (Index i = 0; i < n_; ++i) collect(i, buffer);
+      for (Index i = 0; i < n_; ++i) collect_vertex(i, thread_pairs_[id]);
+#pragma omp for schedule(static)
+      for (Index e = 0; e < E; ++e) collect_edge(e, thread_edge_pairs_[id]);
     }
   } else {
-    for (Index i = 0; i < n_; ++i) collect(i, thread_pairs_[0]);
+    for (Index i = 0; i < n_; ++i) collect_vertex(i, thread_pairs_[0]);
+    for (Index e = 0; e < E; ++e) collect_edge(e, thread_edge_pairs_[0]);
   }
   pairs_.clear();
-  for (const auto& buffer : thread_pairs_) pairs_.insert(pairs_.end(), buffer.begin(), buffer.end());
+  append(thread_pairs_, pairs_);
+  append(thread_edge_pairs_, pairs_);
   flag_.resize(pairs_.size());
   contacts_.resize(pairs_.size());
+  start_gap_.resize(pairs_.size());
   stats_.candidates = static_cast<Index>(pairs_.size());
+  // Each pair's distance at the start of the step: with it, a pair whose points cannot have
+  // closed that gap (see reach()) needs no test at all.
+  const auto P = static_cast<Index>(pairs_.size());
+  parallel_for_if(P >= kPairGrain, P, [&](Index k) {
+    int32_t i[4];
+    corners(pairs_[k], i);
+    const Vec3 p = row(x0, i[0]), a = row(x0, i[1]), b = row(x0, i[2]), c = row(x0, i[3]);
+    if (pairs_[k].edge_pair) {
+      const Vec2 su = closest_segment_parameters(p, a, b, c);
+      start_gap_[k] = ((p + su[0] * (a - p)) - (b + su[1] * (c - b))).norm();
+    } else {
+      bool interior;
+      const Vec3 w = closest_point_barycentric(p, a, b, c, interior);
+      start_gap_[k] = (p - (w[0] * a + w[1] * b + w[2] * c)).norm();
+    }
+  });
+}
+
+// How far the pair's two sides can have approached over the step: the largest displacement of a
+// point of one side relative to a point of the other (convex combinations of the corners, so the
+// largest over corner pairs). The distance at any time t in [0, 1] is at least start gap - t *
+// that (everything moves linearly).
+double SelfCollision::reach(const Pair& pr, const MatX3& x0, const MatX3& x) const {
+  int32_t i[4];
+  corners(pr, i);
+  Vec3 d[4];
+  for (int k = 0; k < 4; ++k) d[k] = row(x, i[k]) - row(x0, i[k]);
+  double r2 = 0;
+  if (pr.edge_pair) {
+    for (int a = 0; a < 2; ++a)
+      for (int b = 2; b < 4; ++b) r2 = std::max(r2, (d[a] - d[b]).squaredNorm());
+  } else {
+    for (int b = 1; b < 4; ++b) r2 = std::max(r2, (d[0] - d[b]).squaredNorm());
+  }
+  return std::sqrt(r2);
 }
 
 bool SelfCollision::within_boxes(const MatX3& x0, const MatX3& x) const {
@@ -140,54 +249,140 @@ bool SelfCollision::within_boxes(const MatX3& x0, const MatX3& x) const {
   return true;
 }
 
-bool SelfCollision::weights(const Pair& pr, const Contact& c, const VecX& inv_mass, double w[4],
-                            double& W, double& limit) const {
-  const int32_t idx[4] = {pr.v, tris_(pr.t, 0), tris_(pr.t, 1), tris_(pr.t, 2)};
-  const double g[4] = {1.0, -c.bary[0], -c.bary[1], -c.bary[2]};
+bool SelfCollision::crossing(const Pair& pr, const MatX3& x0, const MatX3& x, double& t) const {
+  int32_t i[4];
+  corners(pr, i);
+  if (pr.edge_pair) {
+    Vec2 su;
+    return edge_edge_ccd(row(x0, i[0]), row(x0, i[1]), row(x0, i[2]), row(x0, i[3]), row(x, i[0]),
+                         row(x, i[1]), row(x, i[2]), row(x, i[3]), t, su);
+  }
+  Vec3 bary;
+  return vertex_triangle_ccd(row(x0, i[0]), row(x0, i[1]), row(x0, i[2]), row(x0, i[3]),
+                             row(x, i[0]), row(x, i[1]), row(x, i[2]), row(x, i[3]), t, bary);
+}
+
+double SelfCollision::separation(const Pair& pr, const MatX3& x0, const MatX3& x, double t) const {
+  int32_t i[4];
+  corners(pr, i);
+  const double h = params_.thickness;
+  return pr.edge_pair
+             ? edge_separation_time(row(x0, i[0]), row(x0, i[1]), row(x0, i[2]), row(x0, i[3]),
+                                    row(x, i[0]), row(x, i[1]), row(x, i[2]), row(x, i[3]), t, h)
+             : separation_time(row(x0, i[0]), row(x0, i[1]), row(x0, i[2]), row(x0, i[3]),
+                               row(x, i[0]), row(x, i[1]), row(x, i[2]), row(x, i[3]), t, h);
+}
+
+// A crossing of the step's trajectory x0 -> x, with the hit's points (g) and the normal at the
+// hit time towards the side the pair started on (Bridson et al. 2002 §7.3, for the impulse);
+// otherwise a proximity at x closer than the thickness, along the closest-points direction.
+void SelfCollision::detect(const Pair& pr, const MatX3& x0, const MatX3& x, Contact& ct) const {
+  const double h = params_.thickness;
+  int32_t i[4];
+  corners(pr, i);
+  ct.kind = Contact::kNone;
+  if (start_gap_[&pr - pairs_.data()] - reach(pr, x0, x) >= h) return;  // never within reach
+  const Vec3 p0 = row(x0, i[0]), a0 = row(x0, i[1]), b0 = row(x0, i[2]), c0 = row(x0, i[3]);
+  const Vec3 p1 = row(x, i[0]), a1 = row(x, i[1]), b1 = row(x, i[2]), c1 = row(x, i[3]);
+  double t;
+  if (pr.edge_pair) {
+    // Edges p0a0 -> p1a1 (points 0, 1) and b0c0 -> b1c1 (points 2, 3).
+    Vec2 su;
+    if (edge_edge_ccd(p0, a0, b0, c0, p1, a1, b1, c1, t, su)) {
+      const Vec3 n = ((1 - t) * (a0 - p0) + t * (a1 - p1)).cross((1 - t) * (c0 - b0) + t * (c1 - b1));
+      const double len = n.norm();
+      if (!(len > 0)) return;
+      const Vec3 gap0 = (p0 + su[0] * (a0 - p0)) - (b0 + su[1] * (c0 - b0));
+      ct.n = gap0.dot(n) >= 0 ? Vec3(n / len) : Vec3(-n / len);
+      ct.g[0] = 1 - su[0], ct.g[1] = su[0], ct.g[2] = -(1 - su[1]), ct.g[3] = -su[1];
+      ct.kind = Contact::kCrossing;
+      return;
+    }
+    const Vec3 mp = 0.5 * (p1 + a1), mq = 0.5 * (b1 + c1);
+    if ((mp - mq).norm() > 0.5 * ((a1 - p1).norm() + (c1 - b1).norm()) + h) return;
+    const Vec2 su2 = closest_segment_parameters(p1, a1, b1, c1);
+    const Vec3 r = (p1 + su2[0] * (a1 - p1)) - (b1 + su2[1] * (c1 - b1));
+    const double d = r.norm();
+    if (d >= h || !(d > 1e-9 * h)) return;  // touching exactly: left to the crossing test
+    ct.n = r / d;
+    ct.g[0] = 1 - su2[0], ct.g[1] = su2[0], ct.g[2] = -(1 - su2[1]), ct.g[3] = -su2[1];
+    ct.C = d - h;
+    ct.kind = Contact::kProximity;
+    return;
+  }
+  Vec3 bary;
+  if (vertex_triangle_ccd(p0, a0, b0, c0, p1, a1, b1, c1, t, bary)) {
+    const Vec3 n = ((1 - t) * (b0 - a0) + t * (b1 - a1)).cross((1 - t) * (c0 - a0) + t * (c1 - a1));
+    const double len = n.norm();
+    if (!(len > 0)) return;  // a degenerate triangle: left to the fallback
+    const double f0 = (b0 - a0).cross(c0 - a0).dot(p0 - a0);
+    const double f1 = (b1 - a1).cross(c1 - a1).dot(p1 - a1);
+    ct.n = (f0 > 0 || (f0 == 0 && f1 >= 0)) ? Vec3(n / len) : Vec3(-n / len);
+    ct.g[0] = 1, ct.g[1] = -bary[0], ct.g[2] = -bary[1], ct.g[3] = -bary[2];
+    ct.kind = Contact::kCrossing;
+    return;
+  }
+  if (beyond_reach(p1, a1, b1, c1, h)) return;
+  bool interior;
+  bary = closest_point_barycentric(p1, a1, b1, c1, interior);
+  const Vec3 r = p1 - (bary[0] * a1 + bary[1] * b1 + bary[2] * c1);
+  const double d = r.norm();
+  if (d >= h) return;
+  if (d > 1e-9 * h) {
+    ct.n = r / d;
+  } else {  // on the triangle: its normal, towards the side the vertex started on
+    const Vec3 n = (b1 - a1).cross(c1 - a1);
+    if (!(n.norm() > 0)) return;
+    const double f0 = (b0 - a0).cross(c0 - a0).dot(p0 - a0);
+    ct.n = f0 < 0 ? Vec3(-n.normalized()) : Vec3(n.normalized());
+  }
+  ct.g[0] = 1, ct.g[1] = -bary[0], ct.g[2] = -bary[1], ct.g[3] = -bary[2];
+  ct.C = d - h;
+  ct.kind = Contact::kProximity;
+}
+
+bool SelfCollision::weights(const int32_t idx[4], const Contact& c, const VecX& inv_mass,
+                            double w[4], double& W, double& limit) const {
   // Vertices resting on the pole count as immovable (contact mass scaling): the layers on top
   // take the whole correction instead of pushing the bottom one back into the pole each sweep,
-  // unless that leaves the constraint nearly immovable (only small-barycentric vertices free).
+  // unless that leaves the constraint nearly immovable (only small-coefficient points free).
   double W_full = 0;
   W = 0;
   for (int k = 0; k < 4; ++k) {
-    W_full += g[k] * g[k] * inv_mass[idx[k]];
-    W += g[k] * g[k] * (w[k] = on_pole_[idx[k]] ? 0.0 : inv_mass[idx[k]]);
+    W_full += c.g[k] * c.g[k] * inv_mass[idx[k]];
+    W += c.g[k] * c.g[k] * (w[k] = on_pole_[idx[k]] ? 0.0 : inv_mass[idx[k]]);
   }
   if (!(W_full > 0)) return false;
   if (W < 0.25 * W_full) {
     W = W_full;
     for (int k = 0; k < 4; ++k) w[k] = inv_mass[idx[k]];
   }
-  // No vertex moves further than the constraint's own change (it never needs to when the vertex
-  // or the nearest triangle corner is free; when only a far corner is free, the full answer
-  // C / b_k would fling it, so the rest is left to later sweeps and the fallback).
+  // No vertex moves further than the constraint's own change (it never needs to when a point
+  // with a large coefficient is free; when only a small-coefficient one is, the full answer
+  // C / g_k would fling it, so the rest is left to later sweeps and the fallback).
   double largest = 0;
-  for (int k = 0; k < 4; ++k) largest = std::max(largest, std::abs(w[k] * g[k]) / W);
+  for (int k = 0; k < 4; ++k) largest = std::max(largest, std::abs(w[k] * c.g[k]) / W);
   limit = largest > 1 ? 1 / largest : 1.0;
   return true;
 }
 
-void SelfCollision::project(const Pair& pr, const Contact& c, double C, MatX3& x,
+void SelfCollision::project(const int32_t idx[4], const Contact& c, double C, MatX3& x,
                             const VecX& inv_mass) const {
   double w[4], W, limit;
-  if (C >= 0 || !weights(pr, c, inv_mass, w, W, limit)) return;
-  const int32_t idx[4] = {pr.v, tris_(pr.t, 0), tris_(pr.t, 1), tris_(pr.t, 2)};
-  const double g[4] = {1.0, -c.bary[0], -c.bary[1], -c.bary[2]};
-  // PBD projection of C = (p - sum_k b_k x_k) . n - thickness onto C >= 0, mass-weighted.
+  if (C >= 0 || !weights(idx, c, inv_mass, w, W, limit)) return;
+  // PBD projection of C = (sum_k g_k x_k) . n - thickness onto C >= 0, mass-weighted.
   const double lambda = -C / W * limit;
-  for (int k = 0; k < 4; ++k) x.row(idx[k]) += (lambda * w[k] * g[k]) * c.n.transpose();
+  for (int k = 0; k < 4; ++k) x.row(idx[k]) += (lambda * w[k] * c.g[k]) * c.n.transpose();
 }
 
-void SelfCollision::accumulate_impulse(const Pair& pr, const Contact& c, const MatX3& v,
+void SelfCollision::accumulate_impulse(const int32_t idx[4], const Contact& c, const MatX3& v,
                                        const VecX& inv_mass) {
   double w[4], W, limit;
-  if (!weights(pr, c, inv_mass, w, W, limit)) return;
-  const int32_t idx[4] = {pr.v, tris_(pr.t, 0), tris_(pr.t, 1), tris_(pr.t, 2)};
-  const double g[4] = {1.0, -c.bary[0], -c.bary[1], -c.bary[2]};
+  if (!weights(idx, c, inv_mass, w, W, limit)) return;
   // Remove the approaching normal relative velocity, then Coulomb friction takes up to mu times
   // that change off the tangential relative velocity.
   Vec3 vrel = Vec3::Zero();
-  for (int k = 0; k < 4; ++k) vrel += g[k] * v.row(idx[k]).transpose();
+  for (int k = 0; k < 4; ++k) vrel += c.g[k] * v.row(idx[k]).transpose();
   const double vn = vrel.dot(c.n);
   if (vn >= 0) return;
   Vec3 dvrel = -vn * c.n;
@@ -197,7 +392,7 @@ void SelfCollision::accumulate_impulse(const Pair& pr, const Contact& c, const M
     if (speed > 0) dvrel -= std::min(params_.friction * (-vn), speed) / speed * vt;
   }
   for (int k = 0; k < 4; ++k) {
-    const double s = limit * w[k] * g[k] / W;
+    const double s = limit * w[k] * c.g[k] / W;
     if (s == 0) continue;
     dv_.row(idx[k]) += s * dvrel.transpose();
     ++count_v_[idx[k]];
@@ -205,7 +400,7 @@ void SelfCollision::accumulate_impulse(const Pair& pr, const Contact& c, const M
 }
 
 bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
-                          const PoleParams* pole, bool first) {
+                          const PoleParams* pole, const Projector* constraints, bool first) {
   const double h = params_.thickness;
   bool changed = false;
   x_sweep_ = x;  // to see, at the end, which vertices this sweep moved
@@ -218,87 +413,65 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
     grown.base.y() -= 0.5 * h;
     for (Index i = 0; i < n_; ++i) on_pole_[i] = inside_pole(grown, row(x, i));
   }
-  // Detection (parallel, one state for all pairs): a crossing of the step's trajectory x0 -> x,
-  // with its hit point and the triangle's normal at the hit time towards the side the vertex
-  // started on (Bridson et al. 2002 §7.3, for the impulse); otherwise a proximity at x closer
-  // than the thickness, along the closest-point direction.
+  // Detection in parallel on one state; after the first sweep only pairs with a vertex the last
+  // sweep moved can have changed.
   const auto P = static_cast<Index>(pairs_.size());
-  // After the first sweep only pairs with a vertex the last sweep moved can have changed.
   parallel_for_if(P >= kPairGrain, P, [&](Index k) {
-    const Pair pr = pairs_[k];
-    const int32_t a = tris_(pr.t, 0), b = tris_(pr.t, 1), c = tris_(pr.t, 2);
-    Contact& ct = contacts_[k];
-    ct.kind = Contact::kNone;
-    if (!first && !moved_[pr.v] && !moved_[a] && !moved_[b] && !moved_[c]) return;
-    const Vec3 p0 = row(x0, pr.v), a0 = row(x0, a), b0 = row(x0, b), c0 = row(x0, c);
-    const Vec3 p1 = row(x, pr.v), a1 = row(x, a), b1 = row(x, b), c1 = row(x, c);
-    double t;
-    if (vertex_triangle_ccd(p0, a0, b0, c0, p1, a1, b1, c1, t, ct.bary)) {
-      Vec3 n = ((1 - t) * (b0 - a0) + t * (b1 - a1)).cross((1 - t) * (c0 - a0) + t * (c1 - a1));
-      const double len = n.norm();
-      if (len > 0) {  // else a degenerate triangle: left to the fallback
-        const double f0 = (b0 - a0).cross(c0 - a0).dot(p0 - a0);
-        const double f1 = (b1 - a1).cross(c1 - a1).dot(p1 - a1);
-        ct.n = (f0 > 0 || (f0 == 0 && f1 >= 0)) ? Vec3(n / len) : Vec3(-n / len);
-        ct.kind = Contact::kCrossing;
-      }
-      return;
+    contacts_[k].kind = Contact::kNone;
+    if (!first) {
+      int32_t i[4];
+      corners(pairs_[k], i);
+      if (!moved_[i[0]] && !moved_[i[1]] && !moved_[i[2]] && !moved_[i[3]]) return;
     }
-    if (beyond_reach(p1, a1, b1, c1, h)) return;
-    bool interior;
-    ct.bary = closest_point_barycentric(p1, a1, b1, c1, interior);
-    const Vec3 r = p1 - (ct.bary[0] * a1 + ct.bary[1] * b1 + ct.bary[2] * c1);
-    const double d = r.norm();
-    if (d >= h) return;
-    if (d > 1e-9 * h) {
-      ct.n = r / d;
-    } else {  // on the triangle: its normal, towards the side the vertex started on
-      const Vec3 n = (b1 - a1).cross(c1 - a1);
-      if (!(n.norm() > 0)) return;
-      const double f0 = (b0 - a0).cross(c0 - a0).dot(p0 - a0);
-      ct.n = f0 < 0 ? Vec3(-n.normalized()) : Vec3(n.normalized());
-    }
-    ct.C = d - h;
-    ct.kind = Contact::kProximity;
+    detect(pairs_[k], x0, x, contacts_[k]);
   });
   // Response, in pair order. A crossing moves the pair's four points back along their paths to
-  // the time the vertex was still the thickness (or its starting distance) off the triangle's
-  // plane: an inelastic stop short of the hit, which only ever undoes motion, so it cannot push
-  // anything through a third layer (the freeze fallback is its limit, everything back at x0).
-  // A proximity is projected apart (Gauss-Seidel, C re-evaluated on the current positions along
-  // its detected normal and point). Velocities: Jacobi, every impulse from the sweep's starting
-  // velocities, averaged per vertex over the impulses that move it, so contacts sharing a vertex
-  // (a vertex over a shared edge, a triangle on two pinned bumps) neither add up nor bounce it.
+  // the time they were still the thickness (or their starting distance) apart: an inelastic stop
+  // short of the hit, which only ever undoes motion, so it cannot push anything through a third
+  // layer (the freeze fallback is its limit, everything back at x0). A proximity is projected
+  // apart (Gauss-Seidel, C re-evaluated on the current positions along its detected normal and
+  // points). Velocities: Jacobi, every impulse from the sweep's starting velocities, averaged per
+  // vertex over the impulses that move it, so contacts sharing a vertex (a vertex over a shared
+  // edge, a triangle on two pinned bumps) neither add up nor bounce it.
   dv_.setZero();
   std::fill(count_v_.begin(), count_v_.end(), 0);
+  bool responded = false;
   for (Index k = 0; k < P; ++k) {
-    Contact& ct = contacts_[k];
+    const Contact& ct = contacts_[k];
     if (ct.kind == Contact::kNone) continue;
-    const Pair pr = pairs_[k];
-    const int32_t idx[4] = {pr.v, tris_(pr.t, 0), tris_(pr.t, 1), tris_(pr.t, 2)};
+    responded = true;
+    int32_t idx[4];
+    corners(pairs_[k], idx);
     if (ct.kind == Contact::kCrossing) {
       double t;
-      Vec3 bary;
-      const Vec3 p0 = row(x0, idx[0]), a0 = row(x0, idx[1]), b0 = row(x0, idx[2]), c0 = row(x0, idx[3]);
-      const Vec3 p1 = row(x, idx[0]), a1 = row(x, idx[1]), b1 = row(x, idx[2]), c1 = row(x, idx[3]);
-      if (!vertex_triangle_ccd(p0, a0, b0, c0, p1, a1, b1, c1, t, bary)) continue;  // undone
-      const double back = separation_time(p0, a0, b0, c0, p1, a1, b1, c1, t, h);
-      for (const int32_t i : idx)
-        if (inv_mass[i] > 0) x.row(i) = x0.row(i) + back * (x.row(i) - x0.row(i));
+      if (!crossing(pairs_[k], x0, x, t)) continue;  // an earlier answer undid it
+      const double back = separation(pairs_[k], x0, x, t);
+      static const bool normal_only = getenv("NORMAL_ONLY") != nullptr;
+      for (const int32_t i : idx) {
+        if (inv_mass[i] == 0) continue;
+        if (normal_only) {
+          const double along = (x.row(i) - x0.row(i)).dot(ct.n.transpose());
+          x.row(i) -= ((1 - back) * along) * ct.n.transpose();
+        } else {
+          x.row(i) = x0.row(i) + back * (x.row(i) - x0.row(i));
+        }
+      }
       ++stats_.crossings;
       changed = true;
     } else {
-      const double C = (row(x, idx[0]) - (ct.bary[0] * row(x, idx[1]) + ct.bary[1] * row(x, idx[2]) +
-                                          ct.bary[2] * row(x, idx[3])))
-                           .dot(ct.n) - h;
-      project(pr, ct, C, x, inv_mass);
+      Vec3 gap = Vec3::Zero();
+      for (int j = 0; j < 4; ++j) gap += ct.g[j] * row(x, idx[j]);
+      project(idx, ct, gap.dot(ct.n) - h, x, inv_mass);
       ++stats_.contacts;
       changed = changed || ct.C < -1e-2 * h;
     }
-    accumulate_impulse(pr, ct, v, inv_mass);
+    accumulate_impulse(idx, ct, v, inv_mass);
   }
   for (Index i = 0; i < n_; ++i)
     if (count_v_[i]) v.row(i) += dv_.row(i) / count_v_[i];
+  // The caller's constraints next, when the responses moved anything (contacts alone would hold
+  // a stretched cloth stretched).
+  if (constraints && responded) (*constraints)(x, v);
   // The pole last: no sweep leaves a vertex inside it.
   if (pole) {
     double largest = 0;
@@ -315,17 +488,22 @@ bool SelfCollision::find_violations(const MatX3& x0, const MatX3& x, const VecX&
   auto still = [&](int32_t i) { return frozen_[i] || inv_mass[i] == 0; };
   const auto P = static_cast<Index>(pairs_.size());
   parallel_for_if(P >= kPairGrain, P, [&](Index k) {
-    const Pair pr = pairs_[k];
-    const int32_t a = tris_(pr.t, 0), b = tris_(pr.t, 1), c = tris_(pr.t, 2);
+    const Pair& pr = pairs_[k];
+    int32_t i[4];
+    corners(pr, i);
     flag_[k] = 0;
-    if (still(pr.v) && still(a) && still(b) && still(c)) return;  // nothing left to undo
-    const Vec3 p = row(x, pr.v), xa = row(x, a), xb = row(x, b), xc = row(x, c);
-    bool interior;
-    Vec3 bary = closest_point_barycentric(p, xa, xb, xc, interior);
-    const double d = (p - (bary[0] * xa + bary[1] * xb + bary[2] * xc)).norm();
+    if (still(i[0]) && still(i[1]) && still(i[2]) && still(i[3])) return;  // nothing to undo
+    if (start_gap_[k] - reach(pr, x0, x) >= floor) return;  // cannot have crossed or closed in
     double t;
-    flag_[k] = d < floor || vertex_triangle_ccd(row(x0, pr.v), row(x0, a), row(x0, b),
-                                                row(x0, c), p, xa, xb, xc, t, bary);
+    if (crossing(pr, x0, x, t)) {
+      flag_[k] = 1;
+    } else if (!pr.edge_pair) {
+      const Vec3 p = row(x, i[0]), a = row(x, i[1]), b = row(x, i[2]), c = row(x, i[3]);
+      if (beyond_reach(p, a, b, c, floor)) return;
+      bool interior;
+      const Vec3 bary = closest_point_barycentric(p, a, b, c, interior);
+      flag_[k] = (p - (bary[0] * a + bary[1] * b + bary[2] * c)).norm() < floor;
+    }
   });
   bool any = std::find(flag_.begin(), flag_.end(), uint8_t{1}) != flag_.end();
   if (pole)
@@ -345,8 +523,8 @@ void SelfCollision::freeze_fallback(const MatX3& x0, MatX3& x, MatX3& v, const V
   for (Index round = 0; round <= n_ && find_violations(x0, x, inv_mass, pole); ++round) {
     for (size_t k = 0; k < pairs_.size(); ++k) {
       if (!flag_[k]) continue;
-      const int32_t group[4] = {pairs_[k].v, tris_(pairs_[k].t, 0), tris_(pairs_[k].t, 1),
-                                tris_(pairs_[k].t, 2)};
+      int32_t group[4];
+      corners(pairs_[k], group);
       // Inelastic impact zone: the group keeps its momentum, moves as one, and stays at x0.
       Vec3 momentum = Vec3::Zero();
       double mass = 0;
@@ -387,7 +565,8 @@ void SelfCollision::freeze_fallback(const MatX3& x0, MatX3& x, MatX3& v, const V
 }
 
 const SelfCollisionStats& SelfCollision::resolve(const MatX3& x0, MatX3& x, MatX3& v,
-                                                 const VecX& inv_mass, const PoleParams* pole) {
+                                                 const VecX& inv_mass, const PoleParams* pole,
+                                                 const Projector* constraints) {
   stats_ = SelfCollisionStats{};
   if (pole) stats_.pole += collide_pole(*pole, x0, x, v, inv_mass);  // the sweeps start outside
   bool complete = false;  // candidates cover every pair that can violate at the current x
@@ -395,7 +574,7 @@ const SelfCollisionStats& SelfCollision::resolve(const MatX3& x0, MatX3& x, MatX
     broad_phase(x0, x, inv_mass, /*shifted=*/true);
     for (int s = 0; s < params_.iterations; ++s) {
       ++stats_.sweeps;
-      if (!sweep(x0, x, v, inv_mass, pole, s == 0)) break;
+      if (!sweep(x0, x, v, inv_mass, pole, constraints, s == 0)) break;
     }
     complete = within_boxes(x0, x);  // else a push left the candidates' reach: collect again
   }

@@ -1,31 +1,38 @@
-// Vertex-triangle self-collision of a cloth (paper §1: mass points against triangles only).
+// Self-collision of a cloth: vertex against triangle (paper §1), and edge against edge, without
+// which two edges can pass through each other and leave a tangle the vertex-triangle responses
+// then hold, stretching the cloth.
 //
 // One call of resolve() takes the step's start positions x0 (collision-free) and the integrator's
 // end positions x and velocities v, and changes x and v so that
-//   (1) no vertex crosses a triangle while everything moves linearly from x0 to x, and
+//   (1) no vertex crosses a triangle, and no edge crosses an edge, while everything moves
+//       linearly from x0 to x, and
 //   (2) no vertex ends closer than thickness / 2 to a triangle it does not belong to
 //       (the response aims at the full thickness; / 2 is the guaranteed floor),
 //   (3) with a pole, no vertex ends inside the pole.
 // Pipeline:
 //   broad phase: swept boxes of vertices and triangles over the step in a frame moving with the
 //     cloth's mean displacement (crossings are invariant under a common translation, so a 30 m/s
-//     gust does not stretch the boxes) -> spatial hash -> candidate pairs (v, t), v not in t;
+//     gust does not stretch the boxes) -> spatial hashes -> candidate pairs: (vertex, triangle),
+//     the vertex not in the triangle, and (edge, edge) sharing no vertex;
 //   sweeps (<= params.iterations), each detecting on one state (in parallel), then answering in
 //     pair order:
 //     - a crossing of the trajectory x0 -> x (roots of the coplanarity cubic, Provot 1997,
-//       Bridson et al. 2002) moves the pair's four points back along their paths to the time the
-//       vertex was still the thickness off the triangle's plane: an inelastic stop short of the
-//       hit that only undoes motion, so it cannot push anything through a third layer;
-//     - a proximity (closest point closer than the thickness) is pushed apart by the
-//       mass-weighted projection of C = (p - sum_i b_i x_i) . n - thickness >= 0 (PBD, Mueller et
-//       al. 2007): p moves by w_p lambda n, x_i by -w_i b_i lambda n,
-//       lambda = -C / (w_p + sum_i b_i^2 w_i), w = inverse mass, no vertex further than |C|;
+//       Bridson et al. 2002) moves the pair's four points back along their paths to the time
+//       they were still the thickness apart (vertex off the triangle's plane, or edge off edge):
+//       an inelastic stop short of the hit that only undoes motion, so it cannot push anything
+//       through a third layer;
+//     - a proximity (closest points closer than the thickness) is pushed apart by the
+//       mass-weighted projection of C = (sum_k g_k x_k) . n - thickness >= 0 (PBD, Mueller et
+//       al. 2007; g = (1, -b) for a vertex and its triangle's barycentric point b, (1 - s, s,
+//       -(1 - u), -u) for two edges' closest points): x_k moves by w_k g_k lambda n,
+//       lambda = -C / sum_k g_k^2 w_k, w = inverse mass, no vertex further than |C|;
 //     - the approaching normal relative velocity is removed by the impulse with the same weights,
 //       and Coulomb friction (mu) takes up to mu |dv_n| of the tangential relative velocity;
 //       impulses are averaged per vertex (Jacobi) so contacts sharing a vertex do not overshoot;
 //     - with a pole, its projection ends the sweep, and vertices resting on it count as
 //       immovable for the pushes (contact mass scaling), so stacked layers do not fight it;
-//   fallback: a pair still crossing or closer than thickness / 2 (or a vertex in the pole) has its
+//   fallback: a pair still crossing (vertex-triangle or edge-edge), a vertex closer than
+//     thickness / 2 to a triangle, or a vertex in the pole, has its
 //     free vertices sent back to x0 with their momentum-weighted mean velocity (an inelastic
 //     impact zone in the sense of Provot 1997 / Bridson et al. 2002, with zero motion over the
 //     step), with candidates recollected in the world frame, repeated until clean: x0 is clean,
@@ -37,6 +44,7 @@
 // sequentially in (vertex, triangle) order, so results do not depend on the thread count.
 #pragma once
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "collision/params.h"
@@ -62,54 +70,76 @@ class SelfCollision {
   /// triangles: T x 3 vertex indices into [0, num_vertices); params validated by the caller.
   SelfCollision(const MatX3i& triangles, Index num_vertices, const SelfCollisionParams& params);
 
+  /// Other position constraints to keep in the same sweeps (e.g. the cloth's strain limit):
+  /// called as (*constraints)(x, v) after each sweep's contact responses, before the pole.
+  using Projector = std::function<void(MatX3& x, MatX3& v)>;
+
   /// One step's response (see above). x0, x, v: N x 3 (m, m, m/s); inv_mass: N (1/kg, 0 pinned);
-  /// pole: the pole to keep vertices out of in the same sweeps, or nullptr.
+  /// pole: the pole to keep vertices out of in the same sweeps, or nullptr; constraints: see
+  /// Projector, or nullptr.
   const SelfCollisionStats& resolve(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
-                                    const PoleParams* pole = nullptr);
+                                    const PoleParams* pole = nullptr,
+                                    const Projector* constraints = nullptr);
 
   const SelfCollisionStats& stats() const { return stats_; }
   const SelfCollisionParams& params() const { return params_; }
+  /// (E x 2) the mesh's edges, each once, lower vertex index first.
+  const MatX2i& edges() const { return edges_; }
 
  private:
+  // A candidate: vertex a against triangle b, or (edge_pair) edge a against edge b (a < b).
   struct Pair {
-    int32_t v, t;
+    int32_t a, b;
+    bool edge_pair;
   };
   struct Contact {  // one pair's response in a sweep
     enum Kind : uint8_t { kNone, kCrossing, kProximity } kind;
-    Vec3 bary;       // barycentric point of the triangle
-    Vec3 n;          // unit direction the vertex must be on, from that point
+    // The constraint C = (sum_k g_k x_k) . n - thickness >= 0 on the pair's four points:
+    // vertex-triangle g = (1, -b_a, -b_b, -b_c), edge-edge g = (1 - s, s, -(1 - u), -u).
+    double g[4];
+    Vec3 n;          // unit direction, from the second point set to the first
     double C;        // proximity: distance - thickness at detection, < 0
   };
+  void corners(const Pair& pr, int32_t idx[4]) const;
+  void detect(const Pair& pr, const MatX3& x0, const MatX3& x, Contact& ct) const;
+  bool crossing(const Pair& pr, const MatX3& x0, const MatX3& x, double& t) const;
+  double separation(const Pair& pr, const MatX3& x0, const MatX3& x, double t) const;
+  double reach(const Pair& pr, const MatX3& x0, const MatX3& x) const;
   void broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv_mass, bool shifted);
   bool find_violations(const MatX3& x0, const MatX3& x, const VecX& inv_mass,
                        const PoleParams* pole);
   bool within_boxes(const MatX3& x0, const MatX3& x) const;
   bool sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass, const PoleParams* pole,
-             bool first);
+             const Projector* constraints, bool first);
   void freeze_fallback(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
                        const PoleParams* pole);
-  bool weights(const Pair& pr, const Contact& c, const VecX& inv_mass, double w[4], double& W,
-               double& limit) const;
-  void project(const Pair& pr, const Contact& c, double C, MatX3& x, const VecX& inv_mass) const;
-  void accumulate_impulse(const Pair& pr, const Contact& c, const MatX3& v, const VecX& inv_mass);
+  bool weights(const int32_t idx[4], const Contact& c, const VecX& inv_mass, double w[4],
+               double& W, double& limit) const;
+  void project(const int32_t idx[4], const Contact& c, double C, MatX3& x,
+               const VecX& inv_mass) const;
+  void accumulate_impulse(const int32_t idx[4], const Contact& c, const MatX3& v,
+                          const VecX& inv_mass);
 
   MatX3i tris_;
+  MatX2i edges_;
   Index n_;
   SelfCollisionParams params_;
-  SpatialHash hash_;
+  SpatialHash hash_, edge_hash_;
   Vec3 shift_ = Vec3::Zero();    // mean displacement over the step (broad-phase frame)
   MatX3 vlo_, vhi_;              // N x 3 swept vertex boxes in the shifted frame
   MatX3 tlo_, thi_;              // T x 3 swept triangle boxes, grown by the margin
-  std::vector<std::vector<Pair>> thread_pairs_;
-  std::vector<Pair> pairs_;
-  std::vector<uint8_t> flag_;    // per pair: crossing / violation found by the parallel pass
+  MatX3 elo_, ehi_;              // E x 3 swept edge boxes, grown by the margin
+  std::vector<std::vector<Pair>> thread_pairs_, thread_edge_pairs_;
+  std::vector<Pair> pairs_;      // vertex-triangle pairs by vertex, then edge-edge pairs by edge
+  std::vector<uint8_t> flag_;    // per pair: violation found by the parallel pass
+  std::vector<double> start_gap_;  // per pair: distance at x0, m
   std::vector<Contact> contacts_;  // per pair, in a sweep
   MatX3 x_sweep_;                  // N x 3 positions at the start of a sweep
   MatX3 dv_;                       // N x 3 summed velocity changes of a sweep
   std::vector<int> count_v_;       // per vertex: impulses in that sum
   std::vector<uint8_t> on_pole_;   // per vertex: resting on the pole in this sweep
   std::vector<uint8_t> moved_;     // per vertex: moved by the last sweep
-  std::vector<uint8_t> frozen_;  // per vertex
+  std::vector<uint8_t> frozen_;    // per vertex
   SelfCollisionStats stats_;
 };
 

@@ -129,6 +129,17 @@ bool vertex_triangle_ccd(const Vec3& p0, const Vec3& a0, const Vec3& b0, const V
     if ((q0 + s * dq).squaredNorm() > r2 * (1 + 1e-9)) return false;
   }
   const Eigen::Vector4d k = coplanarity_cubic(p0, a0, b0, c0, p1, a1, b1, c1);
+  double roots[3];
+  const int n = cubic_roots_in_unit_interval(k, roots);
+  for (int i = 0; i < n; ++i)
+    if (inside_at(roots[i], p0, a0, b0, c0, p1, a1, b1, c1, bary)) {
+      t_hit = roots[i];
+      return true;
+    }
+  return false;
+}
+
+int cubic_roots_in_unit_interval(const Eigen::Vector4d& k, double roots[3]) {
   // Split [0, 1] where f' = k1 + 2 k2 t + 3 k3 t^2 vanishes: f is monotone on each piece, so a
   // piece holds a root iff f changes sign over it.
   double cuts[4] = {0.0, 0.0, 0.0, 1.0};
@@ -155,23 +166,19 @@ bool vertex_triangle_ccd(const Vec3& p0, const Vec3& a0, const Vec3& b0, const V
   }
   std::sort(cuts + 1, cuts + n);
   cuts[n++] = 1.0;
+  int found = 0;
   double f_lo = eval_cubic(k, cuts[0]);
   for (int i = 0; i + 1 < n; ++i) {
     const double lo = cuts[i], hi = cuts[i + 1];
     const double f_hi = eval_cubic(k, hi);
-    double root = -1;
     if (f_lo == 0) {
-      root = lo;
+      if (found == 0 || roots[found - 1] != lo) roots[found++] = lo;
     } else if (f_hi == 0 || (f_lo < 0) != (f_hi < 0)) {
-      root = f_hi == 0 ? hi : bracketed_root(k, lo, hi, f_lo, f_hi);
-    }
-    if (root >= 0 && inside_at(root, p0, a0, b0, c0, p1, a1, b1, c1, bary)) {
-      t_hit = root;
-      return true;
+      roots[found++] = f_hi == 0 ? hi : bracketed_root(k, lo, hi, f_lo, f_hi);
     }
     f_lo = f_hi;
   }
-  return false;
+  return found;
 }
 
 double separation_time(const Vec3& p0, const Vec3& a0, const Vec3& b0, const Vec3& c0,

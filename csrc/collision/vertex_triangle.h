@@ -28,6 +28,12 @@ Vec3 plane_barycentric(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& 
 Eigen::Vector4d coplanarity_cubic(const Vec3& p0, const Vec3& a0, const Vec3& b0, const Vec3& c0,
                                   const Vec3& p1, const Vec3& a1, const Vec3& b1, const Vec3& c1);
 
+/// The roots in [0, 1] of the cubic k0 + k1 t + k2 t^2 + k3 t^3, ascending, into roots (at most
+/// 3): [0, 1] is split where the derivative vanishes, and each monotone piece whose ends differ in
+/// sign is refined by the Illinois method to 1e-13 in t. A cubic that is zero on a whole piece
+/// (coplanar motion) reports that piece's start only.
+int cubic_roots_in_unit_interval(const Eigen::Vector4d& k, double roots[3]);
+
 /// Continuous vertex-triangle test under linear motion over the step (t in [0, 1]): the earliest
 /// time at which p lies in the plane of abc and inside the triangle (barycentric coordinates
 /// >= -1e-9). Roots of the coplanarity cubic are bracketed between the roots of its derivative

@@ -72,8 +72,14 @@ Simulation::Simulation(const Scene& scene)
   built_[kPole] = scene_.pole.enabled;
   built_[kSelfCollision] = scene_.self_collision.enabled;
   built_[kCheck] = true;
-  if (built_[kSelfCollision])
+  if (built_[kSelfCollision]) {
     self_collision_ = std::make_unique<SelfCollision>(topo_.triangles, N, scene_.self_collision);
+    // Strain limiting inside the collision sweeps: contacts alone would hold a stretch.
+    strain_projector_ = [this](MatX3& x, MatX3& v) {
+      limit_strain(topo_, scene_.integrator.strain_limit, scene_.integrator.strain_limit_iterations,
+                   scene_.dt, x, v);
+    };
+  }
   for (int s = 0; s < kNumStages; ++s)
     if (built_[s]) stage_names_.emplace_back(stage_name(Stage(s)));
   n_.resize(N, 3);
@@ -215,7 +221,8 @@ void Simulation::stage_collide() {
   if (built_[kSelfCollision]) {
     ScopedTimer t(seconds_[kSelfCollision]);
     self_collision_->resolve(x_start_, x_, v_, topo_.inv_mass,
-                             built_[kPole] ? &scene_.pole : nullptr);
+                             built_[kPole] ? &scene_.pole : nullptr,
+                             built_[kStrainLimit] ? &strain_projector_ : nullptr);
   }
 }
 

@@ -127,6 +127,7 @@ class Simulation {
   MatX3 render_x_, render_n_;  // (N x 3) "visual" geometry
 
   std::unique_ptr<SelfCollision> self_collision_;
+  SelfCollision::Projector strain_projector_;  // built once: no allocation per step
   long air_outside_last_ = 0, air_outside_total_ = 0;
 };
 

@@ -15,11 +15,11 @@ def test_self_collision_params_validation():
         p.friction = -0.5
     with pytest.raises(ValueError, match=r"self_collision\.iterations should be in \[1, 1000\]"):
         p.iterations = 0
-    assert p.thickness == 0.005 and p.friction == 0.0 and p.iterations == 8
+    assert p.thickness == 0.005 and p.friction == 0.0 and p.iterations == 32
     p.enabled = True
     p.thickness = 0.002
     assert repr(p) == ("SelfCollisionParams(enabled=True, thickness=0.002, friction=0.0, "
-                       "iterations=8)")
+                       "iterations=32)")
 
 
 def test_pole_params_validation():
