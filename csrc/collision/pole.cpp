@@ -127,7 +127,7 @@ Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
   const Index n = x.rows();
   // Reductions branch in C++: an omp `if` clause would build a one-thread team (a heap
   // allocation) for every small call.
-  if (n >= kParallelGrain) {
+  if (use_team(n >= kParallelGrain)) {
 #pragma omp parallel for schedule(static) reduction(+ : moved) reduction(max : largest)
     for (Index i = 0; i < n; ++i) {
       const double d = collide_vertex(pole, x0, x, v, inv_mass, i);

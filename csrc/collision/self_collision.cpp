@@ -178,7 +178,7 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
     });
     std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(), by_b);
   };
-  if (n_ >= kParallelGrain) {
+  if (use_team(n_ >= kParallelGrain)) {
 #pragma omp parallel
     {
       const size_t id = static_cast<size_t>(thread_id());

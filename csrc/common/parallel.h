@@ -9,14 +9,21 @@ namespace flagsim {
 /// more than the loop (and a loaded machine makes spinning threads far worse).
 constexpr Index kParallelGrain = 4096;
 
-/// body(i) for every i in [0, n): split over the OpenMP team when `parallel`, else a plain loop
-/// on the calling thread. Use this instead of `#pragma omp parallel for if (small)`: libgomp
-/// builds a one-thread team for a region whose if clause is false, and that team is
-/// heap-allocated and freed on every call (no allocation may happen inside a step).
+/// Number of threads flagsim's loops use (default: OpenMP's default, usually all cores).
+int num_threads();
+
+/// True when a loop the caller wants parallel should enter an OpenMP region: `wanted` and more
+/// than one thread. libgomp builds a team for every region it enters, even one whose if clause is
+/// false or that has a single thread, and such a one-thread team is heap-allocated and freed on
+/// every call; teams of two or more threads are cached. No allocation may happen inside a step.
+inline bool use_team(bool wanted) { return wanted && num_threads() > 1; }
+
+/// body(i) for every i in [0, n): split over the OpenMP team when use_team(parallel), else a
+/// plain loop on the calling thread. Use this instead of `#pragma omp parallel for if (cond)`.
 template <class Body>
 inline void parallel_for_if(bool parallel, Index n, const Body& body) {
 #ifdef _OPENMP
-  if (parallel) {
+  if (use_team(parallel)) {
 #pragma omp parallel for schedule(static)
     for (Index i = 0; i < n; ++i) body(i);
     return;
@@ -33,8 +40,6 @@ inline void parallel_for(Index n, const Body& body) {
   parallel_for_if(n >= kParallelGrain, n, body);
 }
 
-/// Number of threads flagsim's loops use (default: OpenMP's default, usually all cores).
-int num_threads();
 /// Set the thread count for flagsim's loops; n >= 1. Throws InvalidArgument otherwise.
 void set_num_threads(int n);
 /// True when compiled with OpenMP.

@@ -211,7 +211,7 @@ long sample_velocity(const MacGrid<T>& g, const double* points, long m, double* 
     return out_of_box;
   };
   long outside = 0;
-  if (m > 4096) {  // no `if` clause: libgomp allocates a team even when it is false
+  if (use_team(m > 4096)) {  // no `if` clause: libgomp allocates one-thread teams (see use_team)
 #pragma omp parallel for schedule(static) reduction(+ : outside)
     for (long r = 0; r < m; ++r) outside += one(r);
   } else {

@@ -25,6 +25,8 @@ COMMANDS = {
     "scenes": ("flagsim.commands.scenes", "list the built-in scenes"),
     "study": ("flagsim.commands.study",
               "accuracy (error against run time) or stability (stiff and extreme cases) study"),
+    "bench": ("flagsim.bench",
+              "benchmark: paper scene, cloth and air alone, threads; --peers: PyBullet, MuJoCo, pyPBD"),
 }
 
 EXIT_OK = 0

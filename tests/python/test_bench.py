@@ -255,3 +255,12 @@ def test_import_flagsim_bench_loads_no_plotting_or_peers():
             "if m in sys.modules]; print(bad)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_bench_is_a_flagsim_sub_command(capsys):
+    from flagsim import cli
+
+    module, parser = cli.command_parser("bench")
+    assert module is bench
+    assert module.run(parser.parse_args(["--list", "--smoke"])) == 0
+    assert "cloth/flagsim/implicit/8x11/t1" in capsys.readouterr().out

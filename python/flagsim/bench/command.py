@@ -130,13 +130,20 @@ def selection(args) -> tuple[wl.Selection, dict[str, Any]]:
 def run_workload(w: wl.Workload, protocol: dict[str, Any], timeout: float) -> dict[str, Any]:
     """Measure one workload in a fresh process; failures come back as {'ok': False, 'error': ...}."""
     spec = json.dumps(w.spec(protocol))
-    env = dict(os.environ, OMP_NUM_THREADS=str(w.threads), OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    import flagsim
+
+    # The worker runs in a temporary directory: make sure it imports this same flagsim.
+    package_root = os.path.dirname(os.path.dirname(os.path.abspath(flagsim.__file__)))
+    paths = [package_root] + [os.path.abspath(p) for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
+    env = dict(os.environ, OMP_NUM_THREADS=str(w.threads), OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
+               PYTHONPATH=os.pathsep.join(paths))
     with tempfile.TemporaryDirectory(prefix="flagsim-bench-") as tmp:
         path = os.path.join(tmp, "result.json")
         try:
+            # cwd: engines that write logs to the working directory (MuJoCo) write them there
             proc = subprocess.run([sys.executable, "-m", "flagsim.bench.worker", spec, path], env=env,
                                   stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                                  timeout=timeout)
+                                  timeout=timeout, cwd=tmp)
         except subprocess.TimeoutExpired:
             return {"ok": False, "error": f"timed out after {timeout:g} s"}
         if os.path.exists(path):

@@ -127,7 +127,7 @@ class SimulationStepper:
 
     def info(self) -> dict[str, Any]:
         return {"vertices": int(self.sim.positions.shape[0]), "stages": list(self.sim.stages),
-                "last_step": dict(self.sim.last_step_stats)}
+                "last_step": dict(self.sim.last_step_stats), "max_strain": float(self.sim.max_strain())}
 
     def ok(self) -> bool:
         return bool(np.isfinite(self.sim.positions).all())

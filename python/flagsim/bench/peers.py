@@ -7,8 +7,9 @@ rows x cols vertices, with the closest stiffness its model offers:
 * PyBullet: deformable mass-spring soft body loaded from a generated OBJ (springs along the
   triangle edges at flagsim's stretch stiffness, bending springs at its bend stiffness), the
   pole column anchored to the world. Its solver is unstable for this cloth at one substep, so the
-  smallest stable number of substeps (1, 2, 4, ... tried for 20 steps outside the timing) is
-  used and reported. No wind (PyBullet soft bodies have no air model).
+  smallest stable number of substeps (1, 2, 4, ... 64, each tried for 1 s of simulated time or
+  20 s of wall time, outside the timing) is used and reported. No wind (PyBullet soft bodies
+  have no air model).
 * MuJoCo: a 2-D flexcomp grid with shell elasticity (``elastic2d="both"``), Young's modulus x
   thickness = flagsim's stretch stiffness (a square spring lattice's 2-D modulus is its spring
   stiffness), pole column pinned, ``integrator="discrete"`` (MuJoCo 4 integrates flex elasticity
@@ -24,6 +25,7 @@ from __future__ import annotations
 import importlib.util
 import os
 import tempfile
+import time
 from typing import Any
 
 import numpy as np
@@ -102,12 +104,11 @@ class PeerStepper:
         raise NotImplementedError
 
     def ok(self) -> bool:
-        x = self.positions()
-        return bool(np.isfinite(x).all()) and structural_strain(self.spec, x) < 2.0
+        return bool(np.isfinite(self.positions()).all())
 
     def info(self) -> dict[str, Any]:
-        x = self.positions()
-        return {"notes": self.notes, "max_strain": structural_strain(self.spec, x)}
+        strain = structural_strain(self.spec, self.positions())
+        return {"notes": f"{self.notes}; max strain {strain:.2g} after the runs", "max_strain": strain}
 
     def close(self) -> None:
         """Release what the engine holds (the worker process simply exits instead)."""
@@ -130,7 +131,7 @@ class PyBulletCloth(PeerStepper):
         self.client = pybullet.connect(pybullet.DIRECT)
         for n in self.SUBSTEPS:
             self._load(n)
-            if self._stable(20):
+            if self._stable(100, budget=20.0):
                 break
         else:
             self._dir.cleanup()
@@ -156,13 +157,19 @@ class PyBulletCloth(PeerStepper):
         for i in pole_pins(s):
             p.createSoftBodyAnchor(self.body, i, -1, -1, physicsClientId=self.client)
 
-    def _stable(self, steps: int) -> bool:
-        """Stays finite and within 50 % strain for `steps` steps (checked every 5)."""
-        for _ in range(0, steps, 5):
-            self._run(5)
-            x = self.positions()
-            if not (np.isfinite(x).all() and structural_strain(self.spec, x) < 0.5):
-                return False
+    def _stable(self, steps: int, budget: float) -> bool:
+        """Stays finite and within 50 % strain for `steps` steps, or for as many as `budget`
+        seconds allow (checked every 5 steps and at the end)."""
+        t0 = time.perf_counter()
+        for k in range(1, steps + 1):
+            self._run(1)
+            last = k == steps or time.perf_counter() - t0 > budget
+            if k % 5 == 0 or last:
+                x = self.positions()
+                if not (np.isfinite(x).all() and structural_strain(self.spec, x) < 0.5):
+                    return False
+            if last:
+                break
         return True
 
     def _run(self, n: int) -> None:
@@ -177,9 +184,6 @@ class PyBulletCloth(PeerStepper):
         _, verts = self.p.getMeshData(self.body, -1, flags=self.p.MESH_DATA_SIMULATION_MESH,
                                       physicsClientId=self.client)
         return np.asarray(verts, dtype=float)
-
-    def ok(self) -> bool:
-        return super().ok() and structural_strain(self.spec, self.positions()) < 0.5
 
     def close(self) -> None:
         self.p.disconnect(physicsClientId=self.client)
@@ -223,6 +227,14 @@ class MujocoCloth(PeerStepper):
 
     def step(self, n: int) -> None:
         self.mj.mj_step(self.model, self.data, nstep=n)
+
+    def info(self) -> dict[str, Any]:
+        out = super().info()
+        warned = {self.mj.mjtWarning(i).name.replace("mjWARN_", "").lower(): int(w.number)
+                  for i, w in enumerate(self.data.warning) if w.number > 0}
+        if warned:
+            out["notes"] += "; MuJoCo warnings: " + ", ".join(f"{k} x{v}" for k, v in warned.items())
+        return out
 
     def positions(self) -> np.ndarray:
         return np.asarray(self.data.flexvert_xpos, dtype=float)[self.order]

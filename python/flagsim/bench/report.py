@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import re
 from typing import Any, Iterable
 
 import numpy as np
@@ -45,6 +46,8 @@ def make_row(w, result: dict[str, Any]) -> dict[str, Any]:
             notes.append(f"{last['substeps']} substeps/step")
         if last.get("cg_iterations"):
             notes.append(f"{last['cg_iterations']} CG iterations/step")
+        if w.group == "cloth" and "max_strain" in info:
+            notes.append(f"max strain {info['max_strain']:.2g} after the runs")
         if info.get("stages") and w.group == "paper":
             notes.append("stages: " + " ".join(info["stages"]))
     else:
@@ -280,7 +283,10 @@ def targets(rows, comps, accuracy: dict[str, Any] | None) -> list[tuple[str, str
                     + beside, _verdict(c["ratio"] >= 2)))
     else:
         impl = find(rows, group="cloth", variant="implicit", size="128x128", threads=1)
-        got = f"flagsim {impl['steps_per_s']:,.1f} steps/s, pyPBD not run" if impl else "not run"
+        peer_failed = any(r["group"] == "peers" and r["engine"] == "pypbd" and r["size"] == "128x128"
+                          and not r["ok"] for r in rows)
+        got = (f"flagsim {impl['steps_per_s']:,.1f} steps/s, pyPBD {'failed' if peer_failed else 'not run'}"
+               if impl else "not run")
         out.append(("cloth 128x128 implicit, dt = 0.01: >= 2x pyPBD's steps/s", got + beside, _verdict(None)))
 
     s, how = collision_stage_slope(rows)
@@ -347,11 +353,9 @@ def side_by_side(rows, comps) -> list[str]:
     peers = [p for p in ("pybullet", "pypbd", "mujoco", "numpy") if any(c["peer"] == p for c in comps)]
     if not peers:
         return []
-    header = ["workload", "flagsim implicit", "flagsim explicit"] + [PEER_NAMES[p] for p in peers]
-    keys = []
-    for c in comps:
-        if (c["workload"], c["size"]) not in keys:
-            keys.append((c["workload"], c["size"]))
+    header = ["workload", "flagsim (cloth: implicit)", "flagsim explicit"] + [PEER_NAMES[p] for p in peers]
+    sizes = {(c["workload"], c["size"]): next(r["n"] for r in rows if r["size"] == c["size"]) for c in comps}
+    keys = sorted(sizes, key=lambda k: (k[0] != "cloth", sizes[k]))
     body = []
     for workload, size in keys:
         line = [f"{workload} {size}, steps/s"]
@@ -364,10 +368,29 @@ def side_by_side(rows, comps) -> list[str]:
             line += [f"{_fmt_rate(m['flagsim_steps_per_s'])} ({m['flagsim_variant']})", ""]
         for p in peers:
             c = [c for c in comps if c["peer"] == p and c["size"] == size and c["workload"] == workload]
-            line.append(f"{_fmt_rate(c[0]['peer_steps_per_s'])} (flagsim {c[0]['ratio']:.2g}x)" if c else "")
+            failed = [r for r in rows if r["group"] == "peers" and r["engine"] == p and r["size"] == size
+                      and not r["ok"]]
+            if c:
+                sub = re.search(r"(\d+) substeps", c[0]["peer_notes"])
+                extra = f", {sub.group(1)} substeps" if sub and p == "pybullet" else ""
+                line.append(f"{_fmt_rate(c[0]['peer_steps_per_s'])} (flagsim {c[0]['ratio']:.2g}x{extra})")
+            else:
+                line.append("failed" if failed else "")
         body.append(line)
-    notes = [f"- {PEER_NAMES[p]}: {next(c['peer_notes'] for c in comps if c['peer'] == p)}" for p in peers
-             if p != "numpy" and any(c["peer_notes"] for c in comps if c["peer"] == p)]
+    notes = []
+    for p in peers:
+        if p == "numpy":
+            continue
+        first = next((c["peer_notes"] for c in comps if c["peer"] == p and c["peer_notes"]), "")
+        if first:
+            notes.append(f"- {PEER_NAMES[p]}: " + re.sub(r"(, )?\d+ substeps \(smallest stable\)|; max strain.*$",
+                                                      "", first).strip(", ")
+                         + (", smallest stable substep count per size" if p == "pybullet" else ""))
+    for r in rows:
+        if r["group"] == "peers" and not r["ok"]:
+            notes.append(f"- {PEER_NAMES.get(r['engine'], r['engine'])} {r['size']} failed: {r['note']}")
+    notes.append("- max strain after the runs (largest |l - L| / L of the grid edges) is in the Peers and "
+                 "Cloth tables: the engines do not stretch alike under the same nominal stiffness.")
     return _table(header, body) + [""] + notes
 
 

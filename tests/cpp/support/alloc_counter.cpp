@@ -1,12 +1,3 @@
-// Replaces the allocator of the whole test binary with counting versions that count only while
-// a CountAllocations scope is alive, so other tests are unaffected. Two levels are replaced:
-//  - global operator new / delete (every variant), which C++ containers and std::string use;
-//  - on glibc, malloc / calloc / realloc / memalign / posix_memalign / aligned_alloc, forwarding
-//    to glibc's __libc_* entry points. Eigen's dynamic matrices (and so its temporaries) allocate
-//    with std::malloc through Eigen::internal::aligned_malloc, never with operator new, so a
-//    counter that replaced operator new alone would miss exactly the allocations that matter.
-// Under AddressSanitizer the sanitizer owns both levels: nothing is replaced, and
-// allocation_counting_available() is false (tests then skip with that reason).
 #include "alloc_counter.h"
 
 #include <atomic>
@@ -25,20 +16,24 @@
 #define FLAGSIM_COUNT_ALLOCATIONS 1
 #endif
 
-namespace {
-std::atomic<int> g_armed{0};  // CountAllocations scopes alive
-std::atomic<long> g_allocations{0};
+#if FLAGSIM_COUNT_ALLOCATIONS && defined(__GLIBC__)
+#define FLAGSIM_COUNT_C_ALLOCATIONS 1
+#else
+#define FLAGSIM_COUNT_C_ALLOCATIONS 0
+#endif
 
-inline void note_allocation() {
-  if (g_armed.load(std::memory_order_relaxed) > 0) g_allocations.fetch_add(1, std::memory_order_relaxed);
+namespace {
+std::atomic<long> g_count{0};
+std::atomic<int> g_enabled{0};
+
+inline void note() {
+  if (g_enabled.load(std::memory_order_relaxed)) g_count.fetch_add(1, std::memory_order_relaxed);
 }
 }  // namespace
 
-#if FLAGSIM_COUNT_ALLOCATIONS
-
-#if defined(__GLIBC__)
-// Counting malloc family. operator new below calls std::malloc, so with these in place every
-// operator new is counted here once (not twice).
+#if FLAGSIM_COUNT_C_ALLOCATIONS
+// glibc's own entry points: the C allocation functions below forward to them, so the memory is
+// glibc's and its free() releases it.
 extern "C" {
 void* __libc_malloc(std::size_t);
 void* __libc_calloc(std::size_t, std::size_t);
@@ -46,27 +41,27 @@ void* __libc_realloc(void*, std::size_t);
 void* __libc_memalign(std::size_t, std::size_t);
 
 void* malloc(std::size_t n) {
-  note_allocation();
+  note();
   return __libc_malloc(n);
 }
 void* calloc(std::size_t count, std::size_t n) {
-  note_allocation();
+  note();
   return __libc_calloc(count, n);
 }
 void* realloc(void* p, std::size_t n) {
-  note_allocation();
+  note();
   return __libc_realloc(p, n);
 }
 void* memalign(std::size_t alignment, std::size_t n) {
-  note_allocation();
+  note();
   return __libc_memalign(alignment, n);
 }
 void* aligned_alloc(std::size_t alignment, std::size_t n) {
-  note_allocation();
+  note();
   return __libc_memalign(alignment, n);
 }
 int posix_memalign(void** out, std::size_t alignment, std::size_t n) {
-  note_allocation();
+  note();
   if (alignment < sizeof(void*) || (alignment & (alignment - 1)) != 0) return 22;  // EINVAL
   void* p = __libc_memalign(alignment, n);
   if (!p) return 12;  // ENOMEM
@@ -74,57 +69,52 @@ int posix_memalign(void** out, std::size_t alignment, std::size_t n) {
   return 0;
 }
 }  // extern "C"
-#define FLAGSIM_NOTE_NEW()
-#else
-#define FLAGSIM_NOTE_NEW() note_allocation()
 #endif
 
+#if FLAGSIM_COUNT_ALLOCATIONS
 namespace {
-void* counted_new(std::size_t n) {
-  FLAGSIM_NOTE_NEW();
-  if (void* p = std::malloc(n ? n : 1)) return p;
-  throw std::bad_alloc();
+// With the C functions counted, operator new is counted there (once), through std::malloc.
+inline void note_new() {
+  if (!FLAGSIM_COUNT_C_ALLOCATIONS) note();
 }
-void* counted_new_aligned(std::size_t n, std::align_val_t a) {
-  FLAGSIM_NOTE_NEW();
-  const std::size_t al = static_cast<std::size_t>(a);
-  void* p = nullptr;
-  if (posix_memalign(&p, al < sizeof(void*) ? sizeof(void*) : al, n ? n : 1) != 0) throw std::bad_alloc();
+void* counted_alloc(std::size_t n) {
+  note_new();
+  void* p = std::malloc(n == 0 ? 1 : n);
+  if (!p) throw std::bad_alloc();
   return p;
+}
+void* counted_aligned_alloc(std::size_t n, std::align_val_t a) {
+  note_new();
+  const std::size_t al = static_cast<std::size_t>(a);
+  void* p = std::aligned_alloc(al, ((n + al - 1) / al) * al);
+  if (!p) throw std::bad_alloc();
+  return p;
+}
+template <class F>
+void* or_null(F&& f) noexcept {
+  try {
+    return f();
+  } catch (...) {
+    return nullptr;
+  }
 }
 }  // namespace
 
-void* operator new(std::size_t n) { return counted_new(n); }
-void* operator new[](std::size_t n) { return counted_new(n); }
+void* operator new(std::size_t n) { return counted_alloc(n); }
+void* operator new[](std::size_t n) { return counted_alloc(n); }
+void* operator new(std::size_t n, std::align_val_t a) { return counted_aligned_alloc(n, a); }
+void* operator new[](std::size_t n, std::align_val_t a) { return counted_aligned_alloc(n, a); }
 void* operator new(std::size_t n, const std::nothrow_t&) noexcept {
-  try {
-    return counted_new(n);
-  } catch (...) {
-    return nullptr;
-  }
+  return or_null([&] { return counted_alloc(n); });
 }
 void* operator new[](std::size_t n, const std::nothrow_t&) noexcept {
-  try {
-    return counted_new(n);
-  } catch (...) {
-    return nullptr;
-  }
+  return or_null([&] { return counted_alloc(n); });
 }
-void* operator new(std::size_t n, std::align_val_t a) { return counted_new_aligned(n, a); }
-void* operator new[](std::size_t n, std::align_val_t a) { return counted_new_aligned(n, a); }
 void* operator new(std::size_t n, std::align_val_t a, const std::nothrow_t&) noexcept {
-  try {
-    return counted_new_aligned(n, a);
-  } catch (...) {
-    return nullptr;
-  }
+  return or_null([&] { return counted_aligned_alloc(n, a); });
 }
 void* operator new[](std::size_t n, std::align_val_t a, const std::nothrow_t&) noexcept {
-  try {
-    return counted_new_aligned(n, a);
-  } catch (...) {
-    return nullptr;
-  }
+  return or_null([&] { return counted_aligned_alloc(n, a); });
 }
 void operator delete(void* p) noexcept { std::free(p); }
 void operator delete[](void* p) noexcept { std::free(p); }
@@ -138,12 +128,12 @@ void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::fre
 void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
 void operator delete(void* p, std::align_val_t, const std::nothrow_t&) noexcept { std::free(p); }
 void operator delete[](void* p, std::align_val_t, const std::nothrow_t&) noexcept { std::free(p); }
-
 #endif  // FLAGSIM_COUNT_ALLOCATIONS
 
 namespace flagsim::testing {
+long allocation_count() { return g_count.load(); }
 bool allocation_counting_available() { return FLAGSIM_COUNT_ALLOCATIONS != 0; }
-long allocation_count() { return g_allocations.load(); }
-CountAllocations::CountAllocations() : start_(allocation_count()) { g_armed.fetch_add(1); }
-CountAllocations::~CountAllocations() { g_armed.fetch_sub(1); }
+bool counts_c_allocations() { return FLAGSIM_COUNT_C_ALLOCATIONS != 0; }
+CountAllocations::CountAllocations() : start_(allocation_count()) { g_enabled.fetch_add(1); }
+CountAllocations::~CountAllocations() { g_enabled.fetch_sub(1); }
 }  // namespace flagsim::testing
