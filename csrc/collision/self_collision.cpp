@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdlib>
 
 #include "collision/edge_edge.h"
 #include "collision/pole.h"
@@ -446,16 +445,8 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
       double t;
       if (!crossing(pairs_[k], x0, x, t)) continue;  // an earlier answer undid it
       const double back = separation(pairs_[k], x0, x, t);
-      static const bool normal_only = getenv("NORMAL_ONLY") != nullptr;
-      for (const int32_t i : idx) {
-        if (inv_mass[i] == 0) continue;
-        if (normal_only) {
-          const double along = (x.row(i) - x0.row(i)).dot(ct.n.transpose());
-          x.row(i) -= ((1 - back) * along) * ct.n.transpose();
-        } else {
-          x.row(i) = x0.row(i) + back * (x.row(i) - x0.row(i));
-        }
-      }
+      for (const int32_t i : idx)
+        if (inv_mass[i] > 0) x.row(i) = x0.row(i) + back * (x.row(i) - x0.row(i));
       ++stats_.crossings;
       changed = true;
     } else {
