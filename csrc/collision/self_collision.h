@@ -29,8 +29,12 @@
 //     - the approaching normal relative velocity is removed by the impulse with the same weights,
 //       and Coulomb friction (mu) takes up to mu |dv_n| of the tangential relative velocity;
 //       impulses are averaged per vertex (Jacobi) so contacts sharing a vertex do not overshoot;
+//     - the caller's constraints (the Simulation passes the cloth's strain limit) are projected
+//       after a sweep that moved anything: contacts alone would hold a stretched cloth stretched;
 //     - with a pole, its projection ends the sweep, and vertices resting on it count as
 //       immovable for the pushes (contact mass scaling), so stacked layers do not fight it;
+//     - a pair is skipped outright when its start-of-step distance exceeds the largest relative
+//       displacement of its points plus the thickness (linear motion cannot close that gap);
 //   fallback: a pair still crossing (vertex-triangle or edge-edge), a vertex closer than
 //     thickness / 2 to a triangle, or a vertex in the pole, has its
 //     free vertices sent back to x0 with their momentum-weighted mean velocity (an inelastic
@@ -40,8 +44,8 @@
 // Candidates are complete for any end state within `thickness` of the broad-phase boxes; a sweep
 // that moves a vertex further triggers a new broad phase (at most kMaxRebuilds).
 // Scratch is allocated at construction; a step allocates only if it needs more candidate pairs
-// than any step before. Broad phase and detection run in OpenMP loops; corrections are summed
-// sequentially in (vertex, triangle) order, so results do not depend on the thread count.
+// than any step before. Broad phase and detection run in OpenMP loops; corrections are applied
+// sequentially in pair order, so results do not depend on the thread count.
 #pragma once
 #include <cstdint>
 #include <functional>
@@ -54,9 +58,9 @@
 namespace flagsim {
 
 struct SelfCollisionStats {
-  Index candidates = 0;  ///< vertex-triangle pairs from the (last) broad phase
+  Index candidates = 0;  ///< vertex-triangle and edge-edge pairs from the (last) broad phase
   Index contacts = 0;    ///< proximity responses applied
-  Index crossings = 0;   ///< continuous-time crossings found and pushed back
+  Index crossings = 0;   ///< continuous-time crossings found and stopped short
   Index pole = 0;        ///< pole responses applied
   Index frozen = 0;      ///< vertices sent back to x0 by the fallback
   int sweeps = 0;        ///< response sweeps run
