@@ -182,6 +182,11 @@ void Simulation::stage_flap() {
       if (topo_.pinned(i)) continue;
       x_.row(i) += (flap_z_[i] - flap_applied_[i]) * n_.row(i);
     }
+    // The cloth stays within its strain limit: eq. 5's amplitude grows with the wind, and at
+    // storm speeds its wave alone would stretch the cloth severalfold.
+    if (built_[kStrainLimit])
+      limit_strain(topo_, scene_.integrator.strain_limit, scene_.integrator.strain_limit_iterations,
+                   h, x_, v_);
     return;  // flap_applied_ = flap_z_ once the step has passed its check
   }
   flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, t1 - h, fp, flap_before_);

@@ -9,12 +9,13 @@ from _perlin_reference import reference_eq5
 
 def quiet_scene(mode="displace", wind=2.0):
     """The paper's flag with nothing moving it but eq. 5: uniform air of zero density (no drag,
-    the wind only sets u_p), no gravity."""
+    the wind only sets u_p), no gravity, no strain limiting (which would answer the wave)."""
     s = flagsim.Scene.paper()
     s.air.model = "uniform"
     s.air.wind = (wind, 0.0, 0.0)
     s.air.density = 0.0
     s.gravity = (0.0, 0.0, 0.0)
+    s.integrator.strain_limit = 0.0
     f = s.flapping
     f.mode, f.amplitude, f.l_max, f.speed, f.parabola, f.frequency, f.seed = (
         mode, 0.02, 0.25, 0.8, 1.3, 3.5, 11)
