@@ -42,7 +42,7 @@ build: $(VENV)/.deps
 	    -Cbuild-dir=$(BUILD) -Ccmake.define.FLAGSIM_BUILD_TESTS=ON \
 	    -Ccmake.build-type=Release -Cbuild.tool-args=-j$(JOBS)
 
-test: build
+test: build bench-deps
 	$(CTEST) --test-dir $(BUILD) --output-on-failure -j$(JOBS)
 	$(PY) -m pytest -q
 

@@ -264,3 +264,11 @@ def test_bench_is_a_flagsim_sub_command(capsys):
     assert module is bench
     assert module.run(parser.parse_args(["--list", "--smoke"])) == 0
     assert "cloth/flagsim/implicit/8x11/t1" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("rows, cols", [(8, 11), (128, 128)])
+def test_cloth_workloads_build_at_every_size_with_self_collision(rows, cols):
+    if not engines.features()["self_collision"][0]:
+        pytest.skip("self-collision not in this build")
+    sim = flagsim.Simulation(engines.cloth_scene(rows, cols, "implicit", self_collision=True))
+    assert "self_collision" in sim.stages and "fluid" not in sim.stages

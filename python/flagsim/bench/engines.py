@@ -97,6 +97,10 @@ def cloth_scene(rows: int, cols: int, integrator: str = "implicit", self_collisi
     s.integrator.method = integrator
     if self_collision:
         s.self_collision.enabled = True
+        # The contact thickness must stay below the rest gap between a vertex and the triangles
+        # around it: finer meshes need a thinner layer than the paper's.
+        spacing = min(s.flag.width / (cols - 1), s.flag.height / (rows - 1))
+        s.self_collision.thickness = min(s.self_collision.thickness, 0.4 * spacing)
     return s
 
 
