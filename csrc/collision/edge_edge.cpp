@@ -76,17 +76,7 @@ double edge_separation_time(const Vec3& p1_0, const Vec3& p2_0, const Vec3& q1_0
     const double len = n.norm();
     return len > 0 ? n.dot(q1 - p1) / len : 0.0;
   };
-  const double d0 = distance(0.0);
-  if (d0 == 0) return 0.0;
-  const double side = d0 > 0 ? 1.0 : -1.0;
-  const double target = std::min(gap, side * d0);
-  double lo = 0, hi = t_hit;  // side * d(lo) >= target > side * d(hi)
-  if (side * distance(hi) >= target) return hi;
-  while (hi - lo > 1e-9) {
-    const double mid = 0.5 * (lo + hi);
-    (side * distance(mid) >= target ? lo : hi) = mid;
-  }
-  return lo;
+  return stop_short_time(distance, t_hit, gap);
 }
 
 }  // namespace flagsim

@@ -1,6 +1,7 @@
 // Vertex-triangle geometry for self-collision (paper §1: mass point vs triangle only): the closest
 // point of a triangle and the continuous-time (linear motion) crossing test.
 #pragma once
+#include <algorithm>
 #include <Eigen/Geometry>
 
 #include "common/types.h"
@@ -50,5 +51,24 @@ bool vertex_triangle_ccd(const Vec3& p0, const Vec3& a0, const Vec3& b0, const V
 double separation_time(const Vec3& p0, const Vec3& a0, const Vec3& b0, const Vec3& c0,
                        const Vec3& p1, const Vec3& a1, const Vec3& b1, const Vec3& c1,
                        double t_hit, double gap);
+
+
+/// The last time in [0, t_hit] at which a signed distance d(t) (d(0) != 0 fixes the side) is still
+/// at least min(gap, |d(0)|) on its starting side: bisection to 1e-9, assuming d(t_hit) is past
+/// it. Shared by the vertex-triangle and edge-edge responses, which stop a pair short of its hit.
+template <class Distance>
+double stop_short_time(const Distance& distance, double t_hit, double gap) {
+  const double d0 = distance(0.0);
+  if (d0 == 0) return 0.0;
+  const double side = d0 > 0 ? 1.0 : -1.0;
+  const double target = std::min(gap, side * d0);
+  double lo = 0, hi = t_hit;  // side * d(lo) >= target > side * d(hi)
+  if (side * distance(hi) >= target) return hi;
+  while (hi - lo > 1e-9) {
+    const double mid = 0.5 * (lo + hi);
+    (side * distance(mid) >= target ? lo : hi) = mid;
+  }
+  return lo;
+}
 
 }  // namespace flagsim
