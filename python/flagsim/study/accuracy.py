@@ -36,11 +36,12 @@ def _set_method(scene: flagsim.Scene, method: str) -> None:
 
 # ---- scenes -------------------------------------------------------------------------------------
 
-def pair_scene(method: str, dt: float) -> flagsim.Scene:
+def pair_scene(method: str, dt: float, k: float = 100.0) -> flagsim.Scene:
+    """One free mass on a vertical spring (vertices 0-2 pinned): period 2 pi sqrt(m_3 / k)."""
     s = flagsim.Scene()
     s.flag.rows = s.flag.cols = 2
     s.flag.width = s.flag.height = 0.1
-    s.flag.stretch_stiffness = 100.0
+    s.flag.stretch_stiffness = k
     s.flag.shear_stiffness = s.flag.bend_stiffness = s.flag.damping = 0.0
     s.flag.pinned_vertices = [0, 1, 2]
     s.air.model = "none"
