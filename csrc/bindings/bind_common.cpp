@@ -70,6 +70,11 @@ py::dict build_info() {
   d["fftw"] = false;
   d["fftw_version"] = "";
 #endif
+#ifdef FLAGSIM_HAVE_FFTW_OMP
+  d["fftw_threads"] = true;  // grids of 32^3 cells and more transform on num_threads() threads
+#else
+  d["fftw_threads"] = false;
+#endif
 #ifdef NDEBUG
   d["assertions"] = false;
 #else

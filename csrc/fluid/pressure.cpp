@@ -138,12 +138,32 @@ std::mutex& fftw_planner_mutex() {
   return m;
 }
 
+/// Threads for one grid's transforms: flagsim's thread count on grids of 32^3 cells and more
+/// (below that a transform takes tens of microseconds and waking threads costs more than it
+/// saves), else one. Fixed when the plans are made: set_num_threads() before building a Fluid.
+int fft_threads(std::size_t cells) {
+#ifdef FLAGSIM_HAVE_FFTW_OMP
+  return cells >= 32768 ? num_threads() : 1;
+#else
+  (void)cells;
+  return 1;
+#endif
+}
+
 template <class T>
 struct Fftw;
 template <>
 struct Fftw<double> {
   using Plan = fftw_plan;
   using Complex = fftw_complex;
+  static void threads(int n) {
+#ifdef FLAGSIM_HAVE_FFTW_OMP
+    static const bool ready = fftw_init_threads() != 0;  // once, under the planner mutex
+    if (ready) fftw_plan_with_nthreads(n);
+#else
+    (void)n;
+#endif
+  }
   static Plan r2c(int n0, int n1, int n2, double* in, Complex* out) {
     return fftw_plan_dft_r2c_3d(n0, n1, n2, in, out, FFTW_ESTIMATE);
   }
@@ -158,6 +178,14 @@ template <>
 struct Fftw<float> {
   using Plan = fftwf_plan;
   using Complex = fftwf_complex;
+  static void threads(int n) {
+#ifdef FLAGSIM_HAVE_FFTW_OMP
+    static const bool ready = fftwf_init_threads() != 0;
+    if (ready) fftwf_plan_with_nthreads(n);
+#else
+    (void)n;
+#endif
+  }
   static Plan r2c(int n0, int n1, int n2, float* in, Complex* out) {
     return fftwf_plan_dft_r2c_3d(n0, n1, n2, in, out, FFTW_ESTIMATE);
   }
@@ -212,6 +240,7 @@ FftProjector<T>::FftProjector(const GridGeometry& geo) : impl_(new Impl) {
     }
   }
   std::lock_guard<std::mutex> lock(fftw_planner_mutex());
+  Impl::F::threads(fft_threads(m.n_real));
   m.fwd = Impl::F::r2c(geo.nx, geo.ny, geo.nz, m.div.data(), m.fc(0));
   m.inv = Impl::F::c2r(geo.nx, geo.ny, geo.nz, m.fc(0), m.div.data());
 }

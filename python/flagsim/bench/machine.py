@@ -118,6 +118,7 @@ def describe() -> dict[str, Any]:
         "openmp": (f"yes ({info.get('openmp_version')})" if info.get("openmp") else "no")
         if info else str(flagsim.has_openmp()),
         "fftw": (info.get("fftw_version") or "yes") if info.get("fftw", flagsim.has_fftw()) else "no",
+        "fftw_threads": "yes (OpenMP, grids >= 32^3)" if info.get("fftw_threads") else "no",
         "default_threads": flagsim.num_threads(),
     }
     for name, version in package_versions().items():
