@@ -90,6 +90,45 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
   return IntegrateStatus::kOk;
 }
 
+}  // namespace
+
+void assemble_implicit_system(const ClothTopology& topo, const ForceSet& fs, double h,
+                              const MatX3& x, const MatX3& v, const MatX3& u, ClothSystem& A,
+                              MatX3& Kv) {
+  const Index N = topo.num_vertices();
+  if (fs.springs) {
+    spring_position_jacobians(topo, x, A.B);
+  } else {
+    for (auto& k : A.B) k = SpringBlock{};
+  }
+  if (fs.drag) {
+    drag_velocity_jacobians(topo, fs.drag_params, fs.rho, x, v, u, A.D, A.J);
+  } else {
+    for (auto& d : A.D) d.setZero();
+    A.J.clear();
+  }
+  apply_position_jacobian(topo, A.B, v, Kv);
+  // Fold h and the masses into A's terms (see ClothSystem): B_s = h^2 K_s + h k_d I.
+  const Index S = topo.num_springs();
+  parallel_for(S, [&](Index sp) {
+    A.B[sp].a = (h * h) * A.B[sp].a + h * topo.damping[sp];
+    A.B[sp].e *= h;
+  });
+  parallel_for(N, [&](Index i) { A.D[i] = topo.mass[i] * Mat3::Identity() + h * A.D[i]; });
+  for (auto& j : A.J) j *= h / 9.0;
+  // A's 3x3 diagonal blocks, inverted (block Jacobi and the Gauss-Seidel smoother).
+  parallel_for(N, [&](Index i) {
+    Mat3 D = A.D[i];
+    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k) D += A.B[topo.adj_spring[k]].matrix();
+    if (!A.J.empty())
+      for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k)
+        D += A.J[topo.tri_adj[k]];
+    A.Pinv[i] = D.inverse();
+  });
+}
+
+namespace {
+
 // Preconditioner z = P^-1 r: one multigrid V-cycle, or block Jacobi z_i = D_i^-1 r_i. Returns r.z.
 double precondition(const ClothTopology& topo, IntegratorScratch& s, bool multigrid, const MatX3& r,
                     MatX3& z) {
@@ -121,39 +160,10 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   const Index N = topo.num_vertices();
   ClothSystem& A = s.sys;
   compute_forces(topo, fs, x, v, u, s.f, t);
-  if (fs.springs) {
-    spring_position_jacobians(topo, x, A.B);
-  } else {
-    for (auto& k : A.B) k = SpringBlock{};
-  }
-  if (fs.drag) {
-    drag_velocity_jacobians(topo, fs.drag_params, fs.rho, x, v, u, A.D, A.J);
-  } else {
-    for (auto& d : A.D) d.setZero();
-    A.J.clear();
-  }
+  assemble_implicit_system(topo, fs, h, x, v, u, A, s.tmp);
   // b = h (f0 + h K v0)
-  apply_position_jacobian(topo, A.B, v, s.tmp);
   s.b = h * (s.f + h * s.tmp);
   filter_pinned(topo, s.b);
-
-  // Fold h and the masses into A's terms (see ClothSystem): B_s = h^2 K_s + h k_d I.
-  const Index S = topo.num_springs();
-  parallel_for(S, [&](Index sp) {
-    A.B[sp].a = (h * h) * A.B[sp].a + h * topo.damping[sp];
-    A.B[sp].e *= h;
-  });
-  parallel_for(N, [&](Index i) { A.D[i] = topo.mass[i] * Mat3::Identity() + h * A.D[i]; });
-  for (auto& j : A.J) j *= h / 9.0;
-  // A's 3x3 diagonal blocks, inverted (block Jacobi and the Gauss-Seidel smoother).
-  parallel_for(N, [&](Index i) {
-    Mat3 D = A.D[i];
-    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k) D += A.B[topo.adj_spring[k]].matrix();
-    if (!A.J.empty())
-      for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k)
-        D += A.J[topo.tri_adj[k]];
-    A.Pinv[i] = D.inverse();
-  });
   const bool multigrid = use_multigrid(topo, ip, s);
   if (multigrid) multigrid_setup(topo, A, s.mg);
 

@@ -52,6 +52,12 @@ struct IntegratorScratch {
   explicit IntegratorScratch(const ClothTopology& topo);
 };
 
+/// The implicit system of a step of h from (x, v) in air u (all N x 3): A's terms (ClothSystem,
+/// sized by IntegratorScratch) and Kv = (d f / d x) v (N x 3, N), for b = h (f + h Kv).
+void assemble_implicit_system(const ClothTopology& topo, const ForceSet& fs, double h,
+                              const MatX3& x, const MatX3& v, const MatX3& u, ClothSystem& A,
+                              MatX3& Kv);
+
 /// Advance (x, v) by h. u (N x 3) is the air velocity at the masses, held over the step.
 IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const IntegratorParams& ip,
                           double h, const MatX3& u, MatX3& x, MatX3& v, IntegratorScratch& s,
