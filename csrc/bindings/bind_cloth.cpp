@@ -48,6 +48,8 @@ void bind_cloth(py::module_& m) {
             "explicit: substeps per step before DivergenceError");
   def_field(in, "cg_tolerance", &IntegratorParams::cg_tolerance, "integrator",
             "implicit: CG relative residual");
+  def_field(in, "preconditioner", &IntegratorParams::preconditioner, "integrator",
+            "implicit: CG preconditioner, 'auto' | 'jacobi' | 'multigrid' (grid flags)");
   def_field(in, "cg_max_iterations", &IntegratorParams::cg_max_iterations, "integrator",
             "implicit: CG iterations per solve before halving the step");
   def_field(in, "max_halvings", &IntegratorParams::max_halvings, "integrator",

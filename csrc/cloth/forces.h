@@ -29,6 +29,23 @@ void add_drag(const ClothTopology& topo, const DragParams& drag, double rho, con
 void spring_position_jacobians(const ClothTopology& topo, const MatX3& x, bool clamp_compression,
                                std::vector<Mat3>& K);
 
+/// A symmetric positive semi-definite 3x3 block a I + e e^T in 4 doubles (a >= 0). A spring's
+/// K_s with clamped compression is one: k (1 - L/l) I + k (L/l) d d^T, so e = sqrt(k L/l) d.
+struct SpringBlock {
+  double a = 0;
+  Vec3 e = Vec3::Zero();
+  Vec3 apply(const Vec3& p) const { return a * p + e * e.dot(p); }
+  Mat3 matrix() const { return a * Mat3::Identity() + e * e.transpose(); }
+};
+
+/// spring_position_jacobians with clamp_compression, in compact form: K[s] (S).
+void spring_position_jacobians(const ClothTopology& topo, const MatX3& x,
+                               std::vector<SpringBlock>& K);
+
+/// out = (d f / d x) p with the compact K (N x 3).
+void apply_position_jacobian(const ClothTopology& topo, const std::vector<SpringBlock>& K,
+                             const MatX3& p, MatX3& out);
+
 /// Velocity Jacobians of drag. Per-vertex models ("paper", "relative"): Dv[i] = -d f_i / d v_i
 /// (positive semi-definite). For "paper" the stabilised form c S ((|v| + |u|) I + v v^T/|v|) is
 /// used (see forces.cpp); pass u = 0 to get the exact Jacobian. "triangle": Jw[t] = d F_t / d w (w = mean air - mean vertex velocity

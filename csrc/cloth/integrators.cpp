@@ -11,10 +11,11 @@ namespace flagsim {
 IntegratorScratch::IntegratorScratch(const ClothTopology& topo) {
   const Index n = topo.num_vertices();
   for (MatX3* m : {&f, &x0, &v0, &dv, &r, &z, &p, &q, &b, &tmp}) m->setZero(n, 3);
-  K.resize(topo.num_springs());
-  Dv.resize(n);
-  Jw.reserve(topo.triangles.rows());
-  Pinv.resize(n);
+  sys.B.resize(topo.num_springs());
+  sys.D.resize(n);
+  sys.J.reserve(topo.triangles.rows());
+  sys.Pinv.resize(n);
+  if (multigrid_applies(topo)) multigrid_build(topo, mg);
 }
 
 void compute_forces(const ClothTopology& topo, const ForceSet& fs, const MatX3& x, const MatX3& v,
@@ -42,6 +43,14 @@ namespace {
 inline void filter_pinned(const ClothTopology& topo, MatX3& a) {
   for (Index i = 0; i < a.rows(); ++i)
     if (topo.inv_mass[i] == 0.0) a.row(i).setZero();
+}
+
+// Multigrid when asked for ("auto": on grids of at least kAutoMultigridVertices vertices, where it
+// measured faster; docs/design.md) and when the topology is a grid it can coarsen.
+constexpr Index kAutoMultigridVertices = 200;
+bool use_multigrid(const ClothTopology& topo, const IntegratorParams& ip, const IntegratorScratch& s) {
+  if (s.mg.levels.empty() || ip.preconditioner == "jacobi") return false;
+  return ip.preconditioner == "multigrid" || topo.num_vertices() >= kAutoMultigridVertices;
 }
 
 // Symplectic Euler over h. With ip.adaptive, every substep is at most safety x the stable step
@@ -81,29 +90,65 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
   return IntegrateStatus::kOk;
 }
 
-// out = A p with A = M - h df/dv - h^2 df/dx, in one gather per vertex (pinned rows filtered):
-//   (A p)_i = (m_i I + h Dv_i) p_i + sum_s B_s (p_i - p_j) + sum_t (h/9) Jw_t (sum of p over t)
-// with B_s = h^2 K_s + h k_d I. implicit_once stores m_i I + h Dv_i in s.Dv, B_s in s.K and
-// (h/9) Jw_t in s.Jw before the solve.
-void apply_system(const ClothTopology& topo, const IntegratorScratch& s, const MatX3& p,
-                  MatX3& out) {
-  parallel_for(topo.num_vertices(), [&](Index i) {
-    if (topo.inv_mass[i] == 0.0) {
-      out.row(i).setZero();
-      return;
-    }
-    const Vec3 pi = p.row(i);
-    Vec3 acc = s.Dv[i] * pi;
-    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k)
-      acc.noalias() += s.K[topo.adj_spring[k]] * (pi - Vec3(p.row(topo.adj_other[k])));
-    if (!s.Jw.empty())
-      for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k) {
-        const int32_t t = topo.tri_adj[k];
-        acc.noalias() += s.Jw[t] * Vec3(p.row(topo.triangles(t, 0)) + p.row(topo.triangles(t, 1)) +
-                                        p.row(topo.triangles(t, 2)));
-      }
-    out.row(i) = acc;
+}  // namespace
+
+void assemble_implicit_system(const ClothTopology& topo, const ForceSet& fs, double h,
+                              const MatX3& x, const MatX3& v, const MatX3& u, ClothSystem& A,
+                              MatX3& Kv) {
+  const Index N = topo.num_vertices();
+  if (fs.springs) {
+    spring_position_jacobians(topo, x, A.B);
+  } else {
+    for (auto& k : A.B) k = SpringBlock{};
+  }
+  if (fs.drag) {
+    drag_velocity_jacobians(topo, fs.drag_params, fs.rho, x, v, u, A.D, A.J);
+  } else {
+    for (auto& d : A.D) d.setZero();
+    A.J.clear();
+  }
+  apply_position_jacobian(topo, A.B, v, Kv);
+  // Fold h and the masses into A's terms (see ClothSystem): B_s = h^2 K_s + h k_d I.
+  const Index S = topo.num_springs();
+  parallel_for(S, [&](Index sp) {
+    A.B[sp].a = (h * h) * A.B[sp].a + h * topo.damping[sp];
+    A.B[sp].e *= h;
   });
+  parallel_for(N, [&](Index i) { A.D[i] = topo.mass[i] * Mat3::Identity() + h * A.D[i]; });
+  for (auto& j : A.J) j *= h / 9.0;
+  // A's 3x3 diagonal blocks, inverted (block Jacobi and the Gauss-Seidel smoother).
+  parallel_for(N, [&](Index i) {
+    Mat3 D = A.D[i];
+    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k) D += A.B[topo.adj_spring[k]].matrix();
+    if (!A.J.empty())
+      for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k)
+        D += A.J[topo.tri_adj[k]];
+    A.Pinv[i] = D.inverse();
+  });
+}
+
+namespace {
+
+// Preconditioner z = P^-1 r: one multigrid V-cycle, or block Jacobi z_i = D_i^-1 r_i. Returns r.z.
+double precondition(const ClothTopology& topo, IntegratorScratch& s, bool multigrid, const MatX3& r,
+                    MatX3& z) {
+  if (multigrid) {
+    multigrid_vcycle(topo, s.sys, s.mg, r, z);
+    return (r.array() * z.array()).sum();
+  }
+  double rz = 0;
+  const Index N = topo.num_vertices();
+  for (Index i = 0; i < N; ++i) {
+    if (topo.inv_mass[i] == 0.0) {
+      z.row(i).setZero();
+      continue;
+    }
+    const Vec3 ri = r.row(i);
+    const Vec3 zi = s.sys.Pinv[i] * ri;
+    z.row(i) = zi.transpose();
+    rz += ri.dot(zi);
+  }
+  return rz;
 }
 
 // One linearised backward Euler step (Baraff-Witkin eq. 16):
@@ -113,72 +158,44 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
                               MatX3& v, IntegratorScratch& s, IntegratorStats& stats,
                               ForceTimings* t) {
   const Index N = topo.num_vertices();
+  ClothSystem& A = s.sys;
   compute_forces(topo, fs, x, v, u, s.f, t);
-  if (fs.springs) {
-    spring_position_jacobians(topo, x, /*clamp_compression=*/true, s.K);
-  } else {
-    for (auto& k : s.K) k.setZero();
-  }
-  if (fs.drag) {
-    drag_velocity_jacobians(topo, fs.drag_params, fs.rho, x, v, u, s.Dv, s.Jw);
-  } else {
-    for (auto& d : s.Dv) d.setZero();
-    s.Jw.clear();
-  }
+  assemble_implicit_system(topo, fs, h, x, v, u, A, s.tmp);
   // b = h (f0 + h K v0)
-  apply_position_jacobian(topo, s.K, v, s.tmp);
   s.b = h * (s.f + h * s.tmp);
   filter_pinned(topo, s.b);
-
-  // Fold h and the masses into the blocks apply_system reads (see there).
-  const Index S = topo.num_springs();
-  parallel_for(S, [&](Index sp) { s.K[sp] = (h * h) * s.K[sp] + (h * topo.damping[sp]) * Mat3::Identity(); });
-  parallel_for(N, [&](Index i) { s.Dv[i] = topo.mass[i] * Mat3::Identity() + h * s.Dv[i]; });
-  for (auto& j : s.Jw) j *= h / 9.0;
-  // Block-Jacobi preconditioner: inverse of A's 3x3 diagonal blocks.
-  parallel_for(N, [&](Index i) {
-    Mat3 D = s.Dv[i];
-    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k) D += s.K[topo.adj_spring[k]];
-    if (!s.Jw.empty())
-      for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k)
-        D += s.Jw[topo.tri_adj[k]];
-    s.Pinv[i] = D.inverse();
-  });
+  const bool multigrid = use_multigrid(topo, ip, s);
+  if (multigrid) multigrid_setup(topo, A, s.mg);
 
   // PCG warm-started from the previous step's dv.
   filter_pinned(topo, s.dv);
-  apply_system(topo, s, s.dv, s.q);
+  apply_system(topo, A, s.dv, s.q);
   s.r = s.b - s.q;
   const double bnorm = s.b.norm();
   if (bnorm == 0.0) {
     s.dv.setZero();
   } else {
-    const double tol = ip.cg_tolerance * bnorm;
-    auto precondition = [&](const MatX3& r, MatX3& z) {
-      parallel_for(N, [&](Index i) {
-        if (topo.inv_mass[i] == 0.0) z.row(i).setZero();
-        else z.row(i) = (s.Pinv[i] * r.row(i).transpose()).transpose();
-      });
-    };
-    precondition(s.r, s.z);
-    s.p = s.z;
-    double rz = (s.r.array() * s.z.array()).sum();
+    const double tol2 = (ip.cg_tolerance * bnorm) * (ip.cg_tolerance * bnorm);
     int it = 0;
-    bool converged = s.r.norm() <= tol;
+    bool converged = s.r.squaredNorm() <= tol2;
+    double rz = 0;
+    if (!converged) {
+      rz = precondition(topo, s, multigrid, s.r, s.z);
+      s.p = s.z;
+    }
     for (; !converged && it < ip.cg_max_iterations; ++it) {
-      apply_system(topo, s, s.p, s.q);
+      apply_system(topo, A, s.p, s.q);
       const double pq = (s.p.array() * s.q.array()).sum();
       if (!(pq > 0)) break;  // not SPD along p (or NaN): give up, the caller halves h
       const double alpha = rz / pq;
       s.dv += alpha * s.p;
       s.r -= alpha * s.q;
-      if (s.r.norm() <= tol) {
+      if (s.r.squaredNorm() <= tol2) {
         converged = true;
         ++it;
         break;
       }
-      precondition(s.r, s.z);
-      const double rz_new = (s.r.array() * s.z.array()).sum();
+      const double rz_new = precondition(topo, s, multigrid, s.r, s.z);
       s.p = s.z + (rz_new / rz) * s.p;
       rz = rz_new;
     }

@@ -1,9 +1,11 @@
 // Time integration of the cloth: symplectic Euler with adaptive substepping, and linearised
-// backward Euler (Baraff-Witkin 1998 §4-5) solved by block-Jacobi preconditioned CG.
+// backward Euler (Baraff-Witkin 1998 §4-5) solved by CG preconditioned by block Jacobi or an
+// aggregation multigrid V-cycle (cloth/multigrid.h).
 #pragma once
 #include <vector>
 
 #include "cloth/forces.h"
+#include "cloth/multigrid.h"
 #include "cloth/params.h"
 #include "cloth/topology.h"
 
@@ -44,10 +46,17 @@ struct IntegratorStats {
 /// Scratch for both integrators, sized once for a topology (no allocation inside a step).
 struct IntegratorScratch {
   MatX3 f, x0, v0, dv, r, z, p, q, b, tmp;
-  std::vector<Mat3> K, Dv, Jw, Pinv;
+  ClothSystem sys;  ///< the implicit system of the current step
+  Multigrid mg;     ///< levels built when the topology is a grid (multigrid_applies)
   double unused_timer = 0;
   explicit IntegratorScratch(const ClothTopology& topo);
 };
+
+/// The implicit system of a step of h from (x, v) in air u (all N x 3): A's terms (ClothSystem,
+/// sized by IntegratorScratch) and Kv = (d f / d x) v (N x 3, N), for b = h (f + h Kv).
+void assemble_implicit_system(const ClothTopology& topo, const ForceSet& fs, double h,
+                              const MatX3& x, const MatX3& v, const MatX3& u, ClothSystem& A,
+                              MatX3& Kv);
 
 /// Advance (x, v) by h. u (N x 3) is the air velocity at the masses, held over the step.
 IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const IntegratorParams& ip,

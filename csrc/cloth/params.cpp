@@ -40,6 +40,8 @@ void IntegratorParams::validate(const std::string& p) const {
   if (!(safety > 0 && safety <= 1)) fail_param(p + ".safety", "in (0, 1]", safety);
   if (max_substeps < 1) fail_param(p + ".max_substeps", ">= 1", max_substeps);
   if (!(cg_tolerance > 0 && cg_tolerance < 1)) fail_param(p + ".cg_tolerance", "in (0, 1)", cg_tolerance);
+  if (preconditioner != "auto" && preconditioner != "jacobi" && preconditioner != "multigrid")
+    fail_param(p + ".preconditioner", "one of 'auto', 'jacobi', 'multigrid'", "'" + preconditioner + "'");
   if (cg_max_iterations < 1) fail_param(p + ".cg_max_iterations", ">= 1", cg_max_iterations);
   if (max_halvings < 0 || max_halvings > 30) fail_param(p + ".max_halvings", "in [0, 30]", max_halvings);
   check_positive(p + ".max_strain", max_strain);

@@ -23,6 +23,7 @@ BAD_VALUES = [
     ("integrator", "method", "rk4", r"integrator.method should be one of 'explicit', 'implicit', got 'rk4'"),
     ("integrator", "safety", 1.5, r"integrator.safety should be in \(0, 1\], got 1.5"),
     ("integrator", "cg_tolerance", 0.0, r"integrator.cg_tolerance should be in \(0, 1\), got 0"),
+    ("integrator", "preconditioner", "ilu", r"integrator.preconditioner should be one of 'auto', 'jacobi', 'multigrid', got 'ilu'"),
     ("integrator", "max_strain", -1.0, r"integrator.max_strain should be finite and > 0"),
     ("air", "model", "wind", r"air.model should be one of 'none', 'uniform', 'grid', got 'wind'"),
     ("air", "density", -1.2, r"air.density should be finite and >= 0, got -1.2"),
