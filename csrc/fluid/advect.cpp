@@ -39,7 +39,7 @@ inline Axis locate(double q, int n, bool periodic) {
 
 template <class T>
 inline T lerp(T a, T b, double f) {
-  return T(a + f * (b - a));
+  return a + T(f) * (b - a);  // in T: a float grid interpolates in float, without conversions
 }
 
 /// Trilinear interpolation of one component array (shape sh, staggering offset off) at a point p
@@ -146,19 +146,19 @@ struct RowVelocity {
   inline void at(int k, double vel[3]) const {
     for (int s = 0; s < 2; ++s) {
       const int n = n2e[s];
-      double sum = 0;
+      T sum = 0;  // in T: no conversions on a float grid
       for (int q = 0; q < 4; ++q) {
         const int kk = node(k + shift[s][q], n, periodic);
         sum += rows[s][q][kk];
       }
-      vel[comp[s]] = 0.25 * sum;
+      vel[comp[s]] = double(T(0.25) * sum);
     }
   }
   inline void at_interior(int k, double vel[3]) const {
     for (int s = 0; s < 2; ++s) {
-      double sum = 0;
+      T sum = 0;  // in T: no conversions on a float grid
       for (int q = 0; q < 4; ++q) sum += rows[s][q][k + shift[s][q]];
-      vel[comp[s]] = 0.25 * sum;
+      vel[comp[s]] = double(T(0.25) * sum);
     }
   }
   inline void velocity(int k, int k_end, double vel[3]) const {
@@ -388,12 +388,12 @@ inline void padded_velocity(const std::array<PaddedComponent<T>, 3>& u, std::siz
     if (e == C) continue;
     const T* q = u[e].data.data() + idx;
     const std::ptrdiff_t dc = stride[C], de = stride[e];
-    double sum = 0;
+    T sum = 0;  // in T, as RowVelocity
     sum += q[-dc];
     sum += q[de - dc];
     sum += q[0];
     sum += q[de];
-    vel[e] = 0.25 * sum;
+    vel[e] = double(T(0.25) * sum);
   }
 }
 
