@@ -132,7 +132,10 @@ namespace {
 // Preconditioner z = P^-1 r: one multigrid V-cycle, or block Jacobi z_i = D_i^-1 r_i. Returns r.z.
 double precondition(const ClothTopology& topo, IntegratorScratch& s, bool multigrid, const MatX3& r,
                     MatX3& z) {
-  if (multigrid) return multigrid_vcycle(topo, s.sys, s.mg, r, z);
+  if (multigrid) {
+    multigrid_vcycle(topo, s.sys, s.mg, r, z);
+    return (r.array() * z.array()).sum();
+  }
   double rz = 0;
   const Index N = topo.num_vertices();
   for (Index i = 0; i < N; ++i) {

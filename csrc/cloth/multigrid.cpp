@@ -20,69 +20,40 @@ inline int slot(int dr, int dc) { return 3 * (dr + 1) + (dc + 1); }
 
 inline bool free_vertex(const ClothTopology& topo, Index i) { return topo.inv_mass[i] != 0.0; }
 
-using Vec4f = Eigen::Vector4f;
-using Vec4fMap = Eigen::Map<Vec4f, Eigen::Aligned16>;
-using Vec4fCMap = Eigen::Map<const Vec4f, Eigen::Aligned16>;
-
-// Position of vertex (r, c) in the fine level's bordered array, and of the stencil's offsets.
-inline Index fine_index(const MultigridFine& F, int r, int c) {
-  return Index(r + kFinePad) * F.stride + c + kFinePad;
-}
-inline void fine_offsets(const MultigridFine& F, Index (&off)[kFineStencil]) {
-  for (int k = 0; k < kFineStencil; ++k) off[k] = Index(kFineOffset[k][0]) * F.stride + kFineOffset[k][1];
-}
-
-// Slot k of the stencil with j = i + o_k (i, j grid vertices, i before j), or -1.
-int stencil_slot(int cols, Index i, Index j) {
-  const int dr = int(j / cols - i / cols), dc = int(j % cols - i % cols);
-  for (int k = 0; k < kFineStencil; ++k)
-    if (kFineOffset[k][0] == dr && kFineOffset[k][1] == dc) return k;
-  return -1;
-}
-
-// Index into F.M of the coupling of grid vertices i and j (either order), -1 outside the stencil.
-Index coupling_index(const ClothTopology& topo, const MultigridFine& F, Index i, Index j) {
-  if (i > j) std::swap(i, j);
-  const int k = stencil_slot(topo.cols, i, j);
-  if (k < 0) return -1;
-  return kFineStencil * fine_index(F, int(i / topo.cols), int(i % topo.cols)) + k;
-}
-
-// sum_{j != p} -A_pj x_j over the later (kUpper), earlier (kLower) or all neighbours j of p:
-// -A_{p, p + o_k} = M[6 p + k], -A_{p, p - o_k} = M[6 (p - o_k) + k]^T.
+// sum_{j in nb(i)} A_ij x_j over the neighbours j of the free vertex i, negated: springs give
+// -B_s, triangles J_t. kLower / kUpper: only j < i / j > i.
 enum class Side { kAll, kLower, kUpper };
 template <Side side>
-inline Vec4f fine_neighbours(const MultigridFine& F, const Index (&off)[kFineStencil], Index p) {
-  Vec4f acc = Vec4f::Zero();
-  const float* x = F.x.data();
-  if (side != Side::kLower) {
-    const Mat43f* m = &F.M[kFineStencil * p];
-    for (int k = 0; k < kFineStencil; ++k)
-      acc.noalias() += m[k] * Vec4fCMap(x + 4 * (p + off[k])).head<3>();
+inline Vec3 minus_offdiagonal(const ClothTopology& topo, const ClothSystem& A, const MatX3& x, Index i) {
+  auto take = [i](Index j) { return side == Side::kAll ? j != i : side == Side::kLower ? j < i : j > i; };
+  Vec3 acc = Vec3::Zero();
+  for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k) {
+    const int32_t j = topo.adj_other[k];
+    if (side == Side::kAll || take(j)) acc += A.B[topo.adj_spring[k]].apply(x.row(j));
   }
-  if (side != Side::kUpper)
-    for (int k = 0; k < kFineStencil; ++k) {
-      const Index q = p - off[k];
-      acc.noalias() += F.M[kFineStencil * q + k] * Vec4fCMap(x + 4 * q).head<3>();
+  if (!A.J.empty())
+    for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k) {
+      const int32_t t = topo.tri_adj[k];
+      Vec3 sum = Vec3::Zero();
+      for (int q = 0; q < 3; ++q)
+        if (take(topo.triangles(t, q))) sum += x.row(topo.triangles(t, q));
+      acc.noalias() -= A.J[t] * sum;
     }
   return acc;
 }
 
-// Fine-level block Gauss-Seidel: x_p <- D_p^-1 (b_p - sum_{j != p} A_pj x_j) over the grid in
-// increasing (forward) or decreasing order; pinned vertices have D_p^-1 = 0 and stay 0.
-// from_zero: the forward sweep that starts from x = 0 reads only the earlier neighbours.
-void gauss_seidel_fine(const ClothTopology& topo, MultigridFine& F, bool forward, bool from_zero) {
-  Index off[kFineStencil];
-  fine_offsets(F, off);
-  const int R = topo.rows, C = topo.cols;
-  for (int n = 0; n < R; ++n) {
-    const int r = forward ? n : R - 1 - n;
-    for (int m = 0; m < C; ++m) {
-      const Index p = fine_index(F, r, forward ? m : C - 1 - m);
-      const Vec4f acc = Vec4fCMap(F.b.data() + 4 * p) +
-                        (from_zero ? fine_neighbours<Side::kLower>(F, off, p) : fine_neighbours<Side::kAll>(F, off, p));
-      Vec4fMap(F.x.data() + 4 * p).noalias() = F.Dinv[p] * acc.head<3>();
-    }
+// Fine-level block Gauss-Seidel: x_i <- D_i^-1 (b_i - sum_{j != i} A_ij x_j), D_i A's diagonal
+// block, over the free vertices in increasing (forward) or decreasing order. from_zero: the
+// forward sweep that starts from x = 0 reads only the j < i it has already set.
+void gauss_seidel_fine(const ClothTopology& topo, const ClothSystem& A, const MatX3& b, MatX3& x,
+                       bool forward, bool from_zero) {
+  const Index N = topo.num_vertices();
+  for (Index n = 0; n < N; ++n) {
+    const Index i = forward ? n : N - 1 - n;
+    if (!free_vertex(topo, i)) continue;
+    const Vec3 acc = Vec3(b.row(i)) + (from_zero ? minus_offdiagonal<Side::kLower>(topo, A, x, i)
+                                                 : minus_offdiagonal<Side::kAll>(topo, A, x, i));
+    x.row(i) = (A.Pinv[i] * acc).transpose();
   }
 }
 
@@ -231,39 +202,13 @@ void apply_system(const ClothTopology& topo, const ClothSystem& A, const MatX3& 
 }
 
 bool multigrid_applies(const ClothTopology& topo) {
-  if (!(topo.rows >= 1 && topo.cols >= 1 && Index(topo.rows) * topo.cols == topo.num_vertices() &&
-        topo.num_vertices() > kCoarsestVertices))
-    return false;
-  MultigridFine F;
-  F.stride = topo.cols + 2 * kFinePad;
-  for (Index s = 0; s < topo.num_springs(); ++s)
-    if (coupling_index(topo, F, topo.springs(s, 0), topo.springs(s, 1)) < 0) return false;
-  for (Index t = 0; t < topo.triangles.rows(); ++t)
-    for (int p = 0; p < 3; ++p)
-      for (int q = p + 1; q < 3; ++q)
-        if (coupling_index(topo, F, topo.triangles(t, p), topo.triangles(t, q)) < 0) return false;
-  return true;
+  return topo.rows >= 1 && topo.cols >= 1 && Index(topo.rows) * topo.cols == topo.num_vertices() &&
+         topo.num_vertices() > kCoarsestVertices;
 }
 
 void multigrid_build(const ClothTopology& topo, Multigrid& mg) {
   mg.levels.clear();
-  MultigridFine& F = mg.fine;
-  F.stride = topo.cols + 2 * kFinePad;
-  const Index np = Index(topo.rows + 2 * kFinePad) * F.stride;
-  F.M.assign(kFineStencil * np, Mat43f::Zero());
-  F.Dinv.assign(np, Mat43f::Zero());
-  for (MatX4f* m : {&F.b, &F.x}) m->setZero(np, 4);
-  auto pair_index = [&](Index i, Index j) -> int32_t {
-    return free_vertex(topo, i) && free_vertex(topo, j) ? int32_t(coupling_index(topo, F, i, j)) : -1;
-  };
-  F.spring_slot.resize(topo.num_springs());
-  for (Index s = 0; s < topo.num_springs(); ++s) F.spring_slot[s] = pair_index(topo.springs(s, 0), topo.springs(s, 1));
-  F.tri_slot.resize(3 * topo.triangles.rows());
-  for (Index t = 0; t < topo.triangles.rows(); ++t) {
-    F.tri_slot[3 * t + 0] = pair_index(topo.triangles(t, 0), topo.triangles(t, 1));
-    F.tri_slot[3 * t + 1] = pair_index(topo.triangles(t, 0), topo.triangles(t, 2));
-    F.tri_slot[3 * t + 2] = pair_index(topo.triangles(t, 1), topo.triangles(t, 2));
-  }
+  mg.fine_r.setZero(topo.num_vertices(), 3);
   int R = topo.rows, C = topo.cols;
   std::vector<uint8_t> active(topo.num_vertices());
   for (Index i = 0; i < topo.num_vertices(); ++i) active[i] = free_vertex(topo, i);
@@ -290,22 +235,6 @@ void multigrid_build(const ClothTopology& topo, Multigrid& mg) {
 }
 
 void multigrid_setup(const ClothTopology& topo, const ClothSystem& A, Multigrid& mg) {
-  // Fine level in float: springs give -A_ij = B_s, triangles -A_ij = -J_t (J_t is symmetric).
-  MultigridFine& F = mg.fine;
-  for (int32_t k : F.spring_slot)
-    if (k >= 0) F.M[k].setZero();
-  for (int32_t k : F.tri_slot)
-    if (k >= 0) F.M[k].setZero();
-  for (Index s = 0; s < topo.num_springs(); ++s)
-    if (F.spring_slot[s] >= 0) F.M[F.spring_slot[s]].topRows<3>() += A.B[s].matrix().cast<float>();
-  for (Index t = 0; t < Index(A.J.size()); ++t)
-    for (int q = 0; q < 3; ++q)
-      if (F.tri_slot[3 * t + q] >= 0) F.M[F.tri_slot[3 * t + q]].topRows<3>() -= A.J[t].cast<float>();
-  for (int r = 0; r < topo.rows; ++r)
-    for (int c = 0; c < topo.cols; ++c) {
-      const Index i = Index(r) * topo.cols + c;
-      if (free_vertex(topo, i)) F.Dinv[fine_index(F, r, c)].topRows<3>() = A.Pinv[i].cast<float>();
-    }
   // Level 0 = P^T A P from the terms of A: with P piecewise constant, a term X (x) w w^T becomes
   // X (x) (P^T w)(P^T w)^T; a spring inside one aggregate cancels, one across two aggregates
   // adds B to both diagonals and -B to both couplings (pinned ends dropped).
@@ -373,8 +302,8 @@ void multigrid_setup(const ClothTopology& topo, const ClothSystem& A, Multigrid&
   }
   // Coarsest level: dense matrix, then its Cholesky factor in the lower triangle.
   const MultigridLevel& Lc = mg.levels.back();
-  Eigen::MatrixXd& G = mg.coarse_L;
-  G.setZero();
+  Eigen::MatrixXd& F = mg.coarse_L;
+  F.setZero();
   for (int r = 0; r < Lc.rows; ++r)
     for (int c = 0; c < Lc.cols; ++c) {
       const Index v = Index(r) * Lc.cols + c;
@@ -382,57 +311,42 @@ void multigrid_setup(const ClothTopology& topo, const ClothSystem& A, Multigrid&
         for (int dc = -1; dc <= 1; ++dc) {
           const int r2 = r + dr, c2 = c + dc;
           if (r2 < 0 || r2 >= Lc.rows || c2 < 0 || c2 >= Lc.cols) continue;
-          G.block<3, 3>(3 * v, 3 * (Index(r2) * Lc.cols + c2)) = Lc.A[9 * v + slot(dr, dc)];
+          F.block<3, 3>(3 * v, 3 * (Index(r2) * Lc.cols + c2)) = Lc.A[9 * v + slot(dr, dc)];
         }
     }
-  const Index n = G.rows();
+  const Index n = F.rows();
   for (Index j = 0; j < n; ++j) {
-    double d = G(j, j);
-    for (Index k = 0; k < j; ++k) d -= G(j, k) * G(j, k);
+    double d = F(j, j);
+    for (Index k = 0; k < j; ++k) d -= F(j, k) * F(j, k);
     d = std::sqrt(d);  // A_c is SPD: P has full column rank on the active vertices
-    G(j, j) = d;
+    F(j, j) = d;
     for (Index i = j + 1; i < n; ++i) {
-      double s = G(i, j);
-      for (Index k = 0; k < j; ++k) s -= G(i, k) * G(j, k);
-      G(i, j) = s / d;
+      double s = F(i, j);
+      for (Index k = 0; k < j; ++k) s -= F(i, k) * F(j, k);
+      F(i, j) = s / d;
     }
   }
 }
 
-double multigrid_vcycle(const ClothTopology& topo, const ClothSystem& A, Multigrid& mg,
-                        const MatX3& r, MatX3& z) {
-  (void)A;
-  MultigridFine& F = mg.fine;
-  const int R = topo.rows, C = topo.cols;
-  for (int i = 0; i < R; ++i)
-    for (int j = 0; j < C; ++j) F.b.row(fine_index(F, i, j)).head<3>() = r.row(Index(i) * C + j).cast<float>();
-  gauss_seidel_fine(topo, F, true, true);
-  // After a forward sweep x_p solves row p against the x_j, j < p, it had: the residual of row p
-  // is what the j > p contribute, r_p - (A x)_p = -sum_{j > p} A_pj x_j (half a product).
-  // Restricted on the fly: level 0's b = P^T r.
-  MultigridLevel& L0 = mg.levels.front();
-  L0.b.setZero();
-  Index off[kFineStencil];
-  fine_offsets(F, off);
-  for (int i = 0; i < R; ++i)
-    for (int j = 0; j < C; ++j) {
-      const Vec4f rp = fine_neighbours<Side::kUpper>(F, off, fine_index(F, i, j));
-      L0.b.row(Index(i / 2) * L0.cols + j / 2) += rp.head<3>().cast<double>().transpose();
-    }
+void multigrid_vcycle(const ClothTopology& topo, const ClothSystem& A, Multigrid& mg, const MatX3& r,
+                      MatX3& z) {
+  z.setZero();
+  gauss_seidel_fine(topo, A, r, z, true, true);
+  // After a forward sweep x_i solves row i against the x_j, j < i, it had: the residual of row i
+  // is what the j > i contribute, r_i - (A x)_i = -sum_{j > i} A_ij x_j (half a product).
+  const Index N = topo.num_vertices();
+  for (Index i = 0; i < N; ++i)
+    if (free_vertex(topo, i)) mg.fine_r.row(i) = minus_offdiagonal<Side::kUpper>(topo, A, z, i).transpose();
+    else mg.fine_r.row(i).setZero();
+  restrict_to(topo.rows, topo.cols, mg.fine_r, mg.levels.front());
   cycle_level(mg, 0);
-  for (int i = 0; i < R; ++i)
-    for (int j = 0; j < C; ++j)
-      if (free_vertex(topo, Index(i) * C + j))
-        F.x.row(fine_index(F, i, j)).head<3>() += L0.x.row(Index(i / 2) * L0.cols + j / 2).cast<float>();
-  gauss_seidel_fine(topo, F, false, false);
-  double rz = 0;
-  for (int i = 0; i < R; ++i)
-    for (int j = 0; j < C; ++j) {
-      const Index v = Index(i) * C + j;
-      z.row(v) = F.x.row(fine_index(F, i, j)).head<3>().cast<double>();
-      rz += r.row(v).dot(z.row(v));
+  const MultigridLevel& L0 = mg.levels.front();
+  for (int i = 0; i < topo.rows; ++i)
+    for (int j = 0; j < topo.cols; ++j) {
+      const Index v = Index(i) * topo.cols + j;
+      if (free_vertex(topo, v)) z.row(v) += L0.x.row(Index(i / 2) * L0.cols + j / 2);
     }
-  return rz;
+  gauss_seidel_fine(topo, A, r, z, false, false);
 }
 
 }  // namespace flagsim

@@ -37,41 +37,15 @@ struct MultigridLevel {
   MatX3 x_sum, b_in;             ///< (rows cols x 3) W-cycle: first pass's x, the level's b
 };
 
-/// A 3x3 block padded to 4 rows (row 3 zero), so a block times a vector is three 4-wide
-/// multiply-adds of its columns (SSE2, no -march needed).
-using Mat43f = Eigen::Matrix<float, 4, 3>;
-using MatX4f = Eigen::Matrix<float, Eigen::Dynamic, 4, Eigen::RowMajor>;
-
-/// Offsets (dr, dc) of the couplings a grid flag's springs and triangles make from vertex (r, c)
-/// to later vertices (row-major order); the earlier ones are their mirror images.
-constexpr int kFineStencil = 6;
-constexpr int kFineOffset[kFineStencil][2] = {{0, 1}, {0, 2}, {1, -1}, {1, 0}, {1, 1}, {2, 0}};
-constexpr int kFinePad = 2;  ///< zero border around the fine grid, in vertices
-
-/// The smoother's fine level in single precision (the preconditioner need not be double; PCG
-/// is), laid out as the grid: vertex (r, c) at p = (r + 2) W + c + 2, W = cols + 4, in a zero
-/// border of 2, so the neighbour p + o_k of any vertex is read without an index or bounds check.
-struct MultigridFine {
-  int stride = 0;                ///< W = cols + 4
-  /// (kFineStencil Np) M[6 p + k] = -A_{p, p + o_k} = -A_{p + o_k, p} (A's blocks are
-  /// symmetric), Np = (rows + 4) W
-  std::vector<Mat43f, Eigen::aligned_allocator<Mat43f>> M;
-  std::vector<Mat43f, Eigen::aligned_allocator<Mat43f>> Dinv;  ///< (Np) inverse diagonal blocks; 0 for pinned and border
-  MatX4f b, x;                   ///< (Np x 4, column 3 zero) right-hand side, smoothed solution
-  std::vector<int32_t> spring_slot;  ///< (S) index into M of spring s, -1 if an end is pinned
-  std::vector<int32_t> tri_slot;     ///< (3 T) index into M of triangle t's pairs (0,1), (0,2), (1,2), or -1
-};
-
 /// Levels are sized once per topology (multigrid_build); no allocation afterwards.
 struct Multigrid {
-  MultigridFine fine;
   std::vector<MultigridLevel> levels;  ///< levels[0] aggregates the cloth's vertices
   Eigen::MatrixXd coarse_L;  ///< (3n x 3n) Cholesky factor of the coarsest level (n vertices)
   VecX coarse_y;             ///< (3n)
+  MatX3 fine_r;              ///< (N x 3) fine residual
 };
 
-/// True when topo is a rows x cols grid (vertex r cols + c) that multigrid_build can coarsen and
-/// whose springs and triangles couple only vertices kFineOffset apart.
+/// True when topo is a rows x cols grid (vertex r cols + c) that multigrid_build can coarsen.
 bool multigrid_applies(const ClothTopology& topo);
 
 /// Levels down to at most kCoarsestVertices vertices (solved directly).
@@ -82,8 +56,8 @@ void multigrid_setup(const ClothTopology& topo, const ClothSystem& A, Multigrid&
 
 /// z = V(r): one symmetric V-cycle (forward block Gauss-Seidel before, backward after the coarse
 /// correction, exact coarsest solve), a symmetric positive definite approximation of A^-1.
-/// r, z (N x 3); r's pinned rows must be zero, z's come out zero. Returns r.z (for PCG).
-double multigrid_vcycle(const ClothTopology& topo, const ClothSystem& A, Multigrid& mg, const MatX3& r,
+/// r, z (N x 3); r's pinned rows must be zero, z's come out zero.
+void multigrid_vcycle(const ClothTopology& topo, const ClothSystem& A, Multigrid& mg, const MatX3& r,
                       MatX3& z);
 
 }  // namespace flagsim
