@@ -87,25 +87,6 @@ void add_drag(const ClothTopology& topo, const DragParams& drag, double rho, con
 }
 
 void spring_position_jacobians(const ClothTopology& topo, const MatX3& x, bool clamp_compression,
-                               std::vector<Mat3>& K) {
-  const Index S = topo.num_springs();
-  K.resize(S);
-  parallel_for(S, [&](Index s) {
-    const Vec3 d = x.row(topo.springs(s, 1)) - x.row(topo.springs(s, 0));
-    const double l = d.norm(), k = topo.stiffness[s], L = topo.rest_length[s];
-    if (l < kTinyLength) {
-      K[s] = (L == 0.0 ? k : 0.0) * Mat3::Identity();
-      return;
-    }
-    const Vec3 e = d / l;
-    const Mat3 P = e * e.transpose();
-    double a = 1.0 - L / l;
-    if (clamp_compression && a < 0) a = 0;
-    K[s] = k * (a * (Mat3::Identity() - P) + P);
-  });
-}
-
-void spring_position_jacobians(const ClothTopology& topo, const MatX3& x,
                                std::vector<SpringBlock>& K) {
   const Index S = topo.num_springs();
   K.resize(S);
@@ -117,8 +98,9 @@ void spring_position_jacobians(const ClothTopology& topo, const MatX3& x,
       K[s].e.setZero();
       return;
     }
-    // k [a (I - P) + P] = k a I + k (1 - a) P, a = max(0, 1 - L/l), P = d d^T / l^2
-    const double a = std::max(0.0, 1.0 - L / l);
+    // k [a (I - P) + P] = k a I + k (1 - a) P, a = 1 - L/l (clamped: max(0, that)), P = d d^T / l^2;
+    // 1 - a = L/l >= 0 either way, so e is real.
+    const double a = clamp_compression ? std::max(0.0, 1.0 - L / l) : 1.0 - L / l;
     K[s].a = k * a;
     K[s].e = (std::sqrt(k * (1.0 - a)) / l) * d;
   });
@@ -176,19 +158,6 @@ void drag_velocity_jacobians(const ClothTopology& topo, const DragParams& drag, 
       Jw[t] = A * J;
     }
   }
-}
-
-void apply_position_jacobian(const ClothTopology& topo, const std::vector<Mat3>& K, const MatX3& p,
-                             MatX3& out) {
-  const Index n = topo.num_vertices();
-  out.resize(n, 3);
-  parallel_for(n, [&](Index i) {
-    Vec3 acc = Vec3::Zero();
-    const Vec3 pi = p.row(i);
-    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k)
-      acc += K[topo.adj_spring[k]] * (Vec3(p.row(topo.adj_other[k])) - pi);
-    out.row(i) = acc;
-  });
 }
 
 void apply_velocity_jacobian(const ClothTopology& topo, const std::vector<Mat3>& Dv,

@@ -22,15 +22,7 @@ void add_spring_forces(const ClothTopology& topo, const MatX3& x, const MatX3& v
 void add_drag(const ClothTopology& topo, const DragParams& drag, double rho, const MatX3& x,
               const MatX3& v, const MatX3& u_air, MatX3& f);
 
-/// Per spring s = (i, j): K_s = d f_i / d x_j = k [(1 - L/l)(I - d d^T) + d d^T], d = unit(x_j - x_i),
-/// l = |x_j - x_i| (Baraff-Witkin 1998 §5). d f_i/d x_i = -K_s. With `clamp_compression`, the
-/// factor (1 - L/l) is clamped at 0 so every K_s is positive semi-definite (Choi-Ko 2002), which
-/// keeps the implicit system SPD. Writes K (S).
-void spring_position_jacobians(const ClothTopology& topo, const MatX3& x, bool clamp_compression,
-                               std::vector<Mat3>& K);
-
-/// A symmetric positive semi-definite 3x3 block a I + e e^T in 4 doubles (a >= 0). A spring's
-/// K_s with clamped compression is one: k (1 - L/l) I + k (L/l) d d^T, so e = sqrt(k L/l) d.
+/// A symmetric 3x3 block a I + e e^T in 4 doubles.
 struct SpringBlock {
   double a = 0;
   Vec3 e = Vec3::Zero();
@@ -38,8 +30,12 @@ struct SpringBlock {
   Mat3 matrix() const { return a * Mat3::Identity() + e * e.transpose(); }
 };
 
-/// spring_position_jacobians with clamp_compression, in compact form: K[s] (S).
-void spring_position_jacobians(const ClothTopology& topo, const MatX3& x,
+/// Per spring s = (i, j): K_s = d f_i / d x_j = k [(1 - L/l)(I - d d^T) + d d^T], d = unit(x_j - x_i),
+/// l = |x_j - x_i| (Baraff-Witkin 1998 §5), as the block k (1 - L/l) I + k (L/l) d d^T
+/// (e = sqrt(k L/l) d). d f_i/d x_i = -K_s. With `clamp_compression`, the factor (1 - L/l) is
+/// clamped at 0 so every K_s is positive semi-definite (Choi-Ko 2002), which keeps the implicit
+/// system SPD (the solver's form); without, it is the exact Jacobian. Writes K (S).
+void spring_position_jacobians(const ClothTopology& topo, const MatX3& x, bool clamp_compression,
                                std::vector<SpringBlock>& K);
 
 /// out = (d f / d x) p with the compact K (N x 3).
@@ -54,10 +50,6 @@ void drag_velocity_jacobians(const ClothTopology& topo, const DragParams& drag, 
                              const MatX3& x, const MatX3& v, const MatX3& u_air,
                              std::vector<Mat3>& Dv, std::vector<Mat3>& Jw);
 
-/// out = (d f / d x) p using K from spring_position_jacobians (springs only: gravity is constant,
-/// drag's position dependence is not linearised). For tests and the implicit solver.
-void apply_position_jacobian(const ClothTopology& topo, const std::vector<Mat3>& K, const MatX3& p,
-                             MatX3& out);
 /// out = (d f / d v) p: spring damping and drag.
 void apply_velocity_jacobian(const ClothTopology& topo, const std::vector<Mat3>& Dv,
                              const std::vector<Mat3>& Jw, const MatX3& p, MatX3& out);

@@ -97,7 +97,7 @@ void assemble_implicit_system(const ClothTopology& topo, const ForceSet& fs, dou
                               MatX3& Kv) {
   const Index N = topo.num_vertices();
   if (fs.springs) {
-    spring_position_jacobians(topo, x, A.B);
+    spring_position_jacobians(topo, x, /*clamp_compression=*/true, A.B);
   } else {
     for (auto& k : A.B) k = SpringBlock{};
   }

@@ -62,7 +62,7 @@ TEST(Forces, PositionJacobianMatchesCentralDifferences) {
   const MatX3 x = t.rest_positions * 1.05 + random_rows(n, 0.02, 3);
   const MatX3 v = MatX3::Zero(n, 3);
   const MatX3 p = random_rows(n, 1.0, 4);
-  std::vector<Mat3> K;
+  std::vector<SpringBlock> K;
   spring_position_jacobians(t, x, /*clamp_compression=*/false, K);
   MatX3 jp;
   apply_position_jacobian(t, K, p, jp);
