@@ -454,9 +454,9 @@ inline T load_scalar(const T* p) {
 ///
 /// Each row first takes the fast path: upwind_sample on 16-byte vectors (2 doubles or 4 floats
 /// per instruction; GCC and Clang generic vectors, so plain SSE2 on any x86-64), the row's tail
-/// in scalars. When a departure on the row is a cell or more from its node on some axis (CFL
-/// >= 1) or not finite, the row is redone by the general sampler (any_corner: floor, wrap). The
-/// two agree to round-off (tests/cpp/fluid/test_advect.cpp).
+/// in scalars. Nodes whose departure is a cell or more away on some axis (CFL >= 1) or not
+/// finite are then redone by the general sampler (any_corner: floor, wrap). The two agree to
+/// round-off (tests/cpp/fluid/test_advect.cpp).
 template <int C, class T>
 void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, double s, T* out) {
   const PaddedSampler<T> q(sc.u[C]);
@@ -510,8 +510,12 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
       dst[k] = upwind_sample<T, T>(rows9, k, d0, d1, d2, &load_scalar<T>);
     }
     if (near) return;
+    // Departures of a cell or more (or not finite): those nodes again, by the general sampler.
     std::size_t idx = idx0;
     for (k = 0; k < n2; ++k, ++idx) {
+      T f0, f1, f2;
+      departure(&load_scalar<T>, k, f0, f1, f2);  // as the vector lanes computed it
+      if (std::fabs(f0) < 1 && std::fabs(f1) < 1 && std::fabs(f2) < 1) continue;
       double vel[3];
       padded_velocity<C>(sc.u, idx, stride, vel);
       const double e0 = s * vel[0], e1v = s * vel[1], e2v = s * vel[2];
