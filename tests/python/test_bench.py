@@ -22,7 +22,7 @@ def _figures_ok(row):
 
 def test_smoke_run_writes_csv_table_and_plot(tmp_path, capsys):
     out = tmp_path / "bench"
-    assert bench.main(["--smoke", "--out", str(out)]) == 0
+    assert bench.main(["--quick", "--out", str(out)]) == 0  # the CI smoke run
     printed = capsys.readouterr().out
     for name in ("results.csv", "results.md", "scaling.png", "results.json"):
         assert (out / name).is_file(), name
@@ -40,7 +40,7 @@ def test_smoke_run_writes_csv_table_and_plot(tmp_path, capsys):
     for r in rows:
         assert r["ok"] == "True", r
         _figures_ok(r)
-        assert int(r["steps_per_run"]) >= 1 and int(r["runs"]) == 2
+        assert int(r["steps_per_run"]) >= 1 and int(r["runs"]) == workloads.PROTOCOLS["quick"]["repeats"]
         assert float(r["steps_per_s"]) == pytest.approx(1e3 / float(r["ms_median"]), rel=1e-4)
         assert float(r["ms_min"]) <= float(r["ms_median"])
     paper = [r for r in rows if r["group"] == "paper"][0]
@@ -52,7 +52,7 @@ def test_smoke_run_writes_csv_table_and_plot(tmp_path, capsys):
     png = (out / "scaling.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000
     data = json.loads((out / "results.json").read_text(encoding="utf-8"))
-    assert data["protocol"] == workloads.PROTOCOLS["smoke"]
+    assert data["protocol"] == workloads.PROTOCOLS["quick"]
     # one progress line per workload, and a line for everything skipped
     assert printed.count("steps/s (median") == len(rows)
     for what, _ in data["skipped"]:
