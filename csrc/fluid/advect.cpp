@@ -513,11 +513,10 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
     // Departures of a cell or more (or not finite): those nodes again, by the general sampler.
     std::size_t idx = idx0;
     for (k = 0; k < n2; ++k, ++idx) {
-      T f0, f1, f2;
-      departure(&load_scalar<T>, k, f0, f1, f2);  // as the vector lanes computed it
-      if (std::fabs(f0) < 1 && std::fabs(f1) < 1 && std::fabs(f2) < 1) continue;
-      double vel[3];
+      double vel[3];  // each exactly a T: the fast path's velocity, summed in the same order
       padded_velocity<C>(sc.u, idx, stride, vel);
+      if (std::fabs(st * T(vel[0])) < 1 && std::fabs(st * T(vel[1])) < 1 && std::fabs(st * T(vel[2])) < 1)
+        continue;  // the fast path's departure (same T arithmetic): its value stands
       const double e0 = s * vel[0], e1v = s * vel[1], e2v = s * vel[2];
       const double px = i + o0 - e0, py = j + o1 - e1v, pz = k + o2 - e2v;
       dst[k] = q.value(q.any_corner(p, idx, i, j, k, e0, e1v, e2v, px - o0, py - o1, pz - o2));
