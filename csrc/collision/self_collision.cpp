@@ -79,8 +79,6 @@ SelfCollision::SelfCollision(const MatX3i& triangles, Index num_vertices,
       on_pole_(static_cast<size_t>(num_vertices), 0),
       moved_(static_cast<size_t>(num_vertices), 0),
       frozen_(static_cast<size_t>(num_vertices), 0) {
-  hash_.reserve(triangles.rows());
-  edge_hash_.reserve(edges_.rows());
   const size_t threads = static_cast<size_t>(max_threads());
   thread_pairs_.resize(threads);
   thread_edge_pairs_.resize(threads);
@@ -118,28 +116,25 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
     vlo_.row(i) = a.cwiseMin(b).transpose();
     vhi_.row(i) = a.cwiseMax(b).transpose();
   }
-  // Cells about the mean swept primitive size (Teschner et al. 2003 §4).
-  auto cell_of = [h](double extent, Index count) {
-    const double cell = count > 0 ? extent / static_cast<double>(count) : h;
-    return cell > 0 && std::isfinite(cell) ? cell : h;
-  };
   const Index T = tris_.rows(), E = edges_.rows();
-  double extent = 0;
   for (Index t = 0; t < T; ++t) {
     const int32_t a = tris_(t, 0), b = tris_(t, 1), c = tris_(t, 2);
     tlo_.row(t) = vlo_.row(a).cwiseMin(vlo_.row(b)).cwiseMin(vlo_.row(c)).array() - margin;
     thi_.row(t) = vhi_.row(a).cwiseMax(vhi_.row(b)).cwiseMax(vhi_.row(c)).array() + margin;
-    extent += (thi_.row(t) - tlo_.row(t)).maxCoeff();
   }
-  hash_.build(tlo_, thi_, cell_of(extent, T));
-  extent = 0;
   for (Index e = 0; e < E; ++e) {
     const int32_t a = edges_(e, 0), b = edges_(e, 1);
     elo_.row(e) = vlo_.row(a).cwiseMin(vlo_.row(b)).array() - margin;
     ehi_.row(e) = vhi_.row(a).cwiseMax(vhi_.row(b)).array() + margin;
-    extent += (ehi_.row(e) - elo_.row(e)).maxCoeff();
   }
-  edge_hash_.build(elo_, ehi_, cell_of(extent, E));
+  // The trees take their shape from the first step's boxes and are refitted after that.
+  if (tri_tree_.built()) {
+    tri_tree_.refit(tlo_, thi_);
+    edge_tree_.refit(elo_, ehi_);
+  } else {
+    tri_tree_.build(tlo_, thi_);
+    edge_tree_.build(elo_, ehi_);
+  }
 
   const size_t threads = static_cast<size_t>(max_threads());
   if (thread_pairs_.size() < threads) {
@@ -155,7 +150,7 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
     const Vec3 qhi = vhi_.row(i).transpose().array() + reach;
     const size_t begin = buffer.size();
     const auto vi = static_cast<int32_t>(i);
-    hash_.query(qlo, qhi, [&](int32_t t) {
+    tri_tree_.query(tlo_, thi_, qlo, qhi, [&](int32_t t) {
       const int32_t a = tris_(t, 0), b = tris_(t, 1), c = tris_(t, 2);
       if (a == vi || b == vi || c == vi) return;  // never against its own triangles
       if (inv_mass[i] == 0 && inv_mass[a] == 0 && inv_mass[b] == 0 && inv_mass[c] == 0) return;
@@ -168,13 +163,12 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
     const Vec3 qhi = ehi_.row(e).transpose().array() + h;
     const size_t begin = buffer.size();
     const int32_t a = edges_(e, 0), b = edges_(e, 1);
-    edge_hash_.query(qlo, qhi, [&](int32_t f) {
-      if (f <= e) return;  // each pair once
+    edge_tree_.query(elo_, ehi_, qlo, qhi, [&](int32_t f) {  // f > e: each pair once
       const int32_t c = edges_(f, 0), d = edges_(f, 1);
       if (a == c || a == d || b == c || b == d) return;  // edges sharing a vertex never cross
       if (inv_mass[a] == 0 && inv_mass[b] == 0 && inv_mass[c] == 0 && inv_mass[d] == 0) return;
       buffer.push_back({static_cast<int32_t>(e), f, true});
-    });
+    }, static_cast<int32_t>(e));
     std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(), by_b);
   };
   if (use_team(n_ >= kParallelGrain)) {

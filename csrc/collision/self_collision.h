@@ -12,7 +12,7 @@
 // Pipeline:
 //   broad phase: swept boxes of vertices and triangles over the step in a frame moving with the
 //     cloth's mean displacement (crossings are invariant under a common translation, so a 30 m/s
-//     gust does not stretch the boxes) -> spatial hashes -> candidate pairs: (vertex, triangle),
+//     gust does not stretch the boxes) -> box trees (box_tree.h) -> candidate pairs: (vertex, triangle),
 //     the vertex not in the triangle, and (edge, edge) sharing no vertex;
 //   sweeps (<= params.iterations), each detecting on one state (in parallel), then answering in
 //     pair order:
@@ -52,7 +52,7 @@
 #include <vector>
 
 #include "collision/params.h"
-#include "collision/spatial_hash.h"
+#include "collision/box_tree.h"
 #include "common/types.h"
 
 namespace flagsim {
@@ -128,7 +128,7 @@ class SelfCollision {
   MatX2i edges_;
   Index n_;
   SelfCollisionParams params_;
-  SpatialHash hash_, edge_hash_;
+  BoxTree tri_tree_, edge_tree_;  // shaped on the first broad phase, refitted after
   Vec3 shift_ = Vec3::Zero();    // mean displacement over the step (broad-phase frame)
   MatX3 vlo_, vhi_;              // N x 3 swept vertex boxes in the shifted frame
   MatX3 tlo_, thi_;              // T x 3 swept triangle boxes, grown by the margin
