@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <type_traits>
 
 namespace flagsim {
 
@@ -287,16 +288,22 @@ void PaddedComponent<T>::resize(const Shape3& s) {
 
 template <class T>
 void PaddedComponent<T>::fill(const T* src) {
-  auto wrap = [](int i, int n) { return ((i % n) + n) % n; };
+  constexpr int G = kGhost;
   const int n0 = n[0], n1 = n[1], n2 = n[2];
-  const long rows = long(n0 + 2 * kGhost) * (n1 + 2 * kGhost);
+  // i in [-G, n + G): one conditional add or subtract when n >= G, a modulo otherwise.
+  auto wrap = [](int i, int n) { return n >= G ? (i < 0 ? i + n : i >= n ? i - n : i) : ((i % n) + n) % n; };
+  const long rows = long(n0 + 2 * G) * (n1 + 2 * G);
   parallel_for_if(data.size() > 32768, rows, [&](Index r) {
-    const int a = int(r / (n1 + 2 * kGhost)) - kGhost, b = int(r % (n1 + 2 * kGhost)) - kGhost;
+    const int a = int(r / (n1 + 2 * G)) - G, b = int(r % (n1 + 2 * G)) - G;
     const T* s = src + (std::size_t(wrap(a, n0)) * n1 + std::size_t(wrap(b, n1))) * n2;
-    T* d = data.data() + index(a, b, -kGhost);
-    for (int k = -kGhost; k < 0; ++k) d[k + kGhost] = s[wrap(k, n2)];
-    std::copy(s, s + n2, d + kGhost);
-    for (int k = n2; k < n2 + kGhost; ++k) d[k + kGhost] = s[wrap(k, n2)];
+    T* d = data.data() + index(a, b, -G);
+    if (n2 >= G) {
+      std::copy(s + n2 - G, s + n2, d);
+      std::copy(s, s + n2, d + G);
+      std::copy(s, s + G, d + G + n2);
+    } else {
+      for (int k = -G; k < n2 + G; ++k) d[k + G] = s[wrap(k, n2)];
+    }
   });
 }
 
@@ -400,24 +407,36 @@ inline void padded_velocity(const std::array<PaddedComponent<T>, 3>& u, std::siz
 
 #if defined(__GNUC__)  // GCC and Clang: generic vectors (SSE2 on x86-64, NEON on arm64)
 #define FLAGSIM_VECTOR_ADVECTION 1
-/// 16-byte vectors of T: 2 doubles or 4 floats, loaded and stored unaligned through memcpy.
+#define FLAGSIM_INLINE inline __attribute__((always_inline))
+/// 16- and 32-byte vectors of T (2 or 4 doubles, 4 or 8 floats), loaded and stored unaligned
+/// through memcpy. The 32-byte ones are only used inside functions compiled for AVX.
 template <class T>
-struct Lanes {
+struct Lanes16 {
   static constexpr int W = 16 / int(sizeof(T));
   typedef T V __attribute__((vector_size(16)));
-  static V load(const T* p) {
-    V v;
-    std::memcpy(&v, p, sizeof(V));
-    return v;
-  }
-  static void store(T* p, const V& v) { std::memcpy(p, &v, sizeof(V)); }
-  static V splat(T x) {
-    V v;
-    for (int i = 0; i < W; ++i) v[i] = x;
-    return v;
-  }
 };
+template <class T>
+struct Lanes32 {
+  static constexpr int W = 32 / int(sizeof(T));
+  typedef T V __attribute__((vector_size(32)));
+};
+template <class V, class T>
+FLAGSIM_INLINE V load_lanes(const T* p) {
+  V v;
+  std::memcpy(&v, p, sizeof(V));
+  return v;
+}
+#else
+#define FLAGSIM_INLINE inline
 #endif
+
+template <class S, class T>
+FLAGSIM_INLINE S load_one(const T* p) {
+  if constexpr (std::is_same<S, T>::value)
+    return *p;
+  else
+    return load_lanes<S>(p);
+}
 
 /// Semi-Lagrangian sample at node k of one row when the departure is within one cell of the node
 /// on every axis (|d| < 1): the departure point lies in the cell on the upwind side of the node,
@@ -427,7 +446,7 @@ struct Lanes {
 /// (b + 1)] is the padded row at x offset a, y offset b (a, b in -1..1) from the node's row. A
 /// uniform field comes out exactly.
 template <class S, class T>
-inline S upwind_sample(const T* const rows[9], int k, S d0, S d1, S d2, S (*load)(const T*)) {
+FLAGSIM_INLINE S upwind_sample(const T* const rows[9], int k, S d0, S d1, S d2) {
   const S zero = S{};  // 0 in every lane
   const S l0 = d0 > zero ? d0 : zero, h0 = d0 < zero ? -d0 : zero;
   const S l1 = d1 > zero ? d1 : zero, h1 = d1 < zero ? -d1 : zero;
@@ -437,26 +456,122 @@ inline S upwind_sample(const T* const rows[9], int k, S d0, S d1, S d2, S (*load
     S vz[3];
     for (int b = -1; b <= 1; ++b) {
       const T* row = rows[3 * (a + 1) + (b + 1)] + k;
-      const S mid = load(row);
-      vz[b + 1] = mid + l2 * (load(row - 1) - mid) + h2 * (load(row + 1) - mid);
+      const S mid = load_one<S>(row);
+      vz[b + 1] = mid + l2 * (load_one<S>(row - 1) - mid) + h2 * (load_one<S>(row + 1) - mid);
     }
     vy[a + 1] = vz[1] + l1 * (vz[0] - vz[1]) + h1 * (vz[2] - vz[1]);
   }
   return vy[1] + l0 * (vy[0] - vy[1]) + h0 * (vy[2] - vy[1]);
 }
 
+/// One row (i, j) of padded_sl's fast path, node by node from k = 0: what the row needs.
 template <class T>
-inline T load_scalar(const T* p) {
-  return *p;
+struct SlRow {
+  const T *own, *e1, *e2;  // the row's start in the padded component and in the other two
+  const T* rows9[9];       // see upwind_sample
+  std::ptrdiff_t dc, d1s, d2s;
+  T st;                    // dt / h
+  T* dst;
+};
+
+/// The departure displacement (cells) of node k: velocity (own value, 4-node means of the other
+/// components, as padded_velocity) times dt / h, for component C.
+template <int C, class S, class T>
+FLAGSIM_INLINE void departure(const SlRow<T>& w, int k, S& d0, S& d1, S& d2) {
+  const S vc = load_one<S>(w.own + k);
+  const S v1 = T(0.25) * (((load_one<S>(w.e1 + k - w.dc) + load_one<S>(w.e1 + k + w.d1s - w.dc)) +
+                           load_one<S>(w.e1 + k)) + load_one<S>(w.e1 + k + w.d1s));
+  const S v2 = T(0.25) * (((load_one<S>(w.e2 + k - w.dc) + load_one<S>(w.e2 + k + w.d2s - w.dc)) +
+                           load_one<S>(w.e2 + k)) + load_one<S>(w.e2 + k + w.d2s));
+  d0 = w.st * (C == 0 ? vc : v1);
+  d1 = w.st * (C == 1 ? vc : C == 0 ? v1 : v2);
+  d2 = w.st * (C == 2 ? vc : v2);
 }
+
+/// The fast path over a row: vectors of L (Lanes16 or Lanes32; void: scalars only), the tail in
+/// scalars. Returns false if some node's departure is a cell or more away (or not finite).
+template <int C, class L, class T>
+FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
+  bool near = true;
+  int k = 0;
+#ifdef FLAGSIM_VECTOR_ADVECTION
+  if constexpr (!std::is_void<L>::value) {
+    using V = typename L::V;
+    V one = V{};
+    one += T(1);
+    auto inside = V{} == V{};  // all lanes true
+    for (; k + L::W <= n2; k += L::W) {
+      V d0, d1, d2;
+      departure<C>(w, k, d0, d1, d2);
+      inside &= (d0 < one) & (-d0 < one) & (d1 < one) & (-d1 < one) & (d2 < one) & (-d2 < one);
+      const V out = upwind_sample<V, T>(w.rows9, k, d0, d1, d2);
+      std::memcpy(w.dst + k, &out, sizeof(V));
+    }
+    for (int lane = 0; lane < L::W; ++lane) near = near && inside[lane];
+  }
+#endif
+  for (; k < n2; ++k) {
+    T d0, d1, d2;
+    departure<C>(w, k, d0, d1, d2);
+    near = near && std::fabs(d0) < 1 && std::fabs(d1) < 1 && std::fabs(d2) < 1;  // false for NaN
+    w.dst[k] = upwind_sample<T, T>(w.rows9, k, d0, d1, d2);
+  }
+  return near;
+}
+
+#ifdef FLAGSIM_VECTOR_ADVECTION
+template <int C, class T>
+bool sl_row_16(const SlRow<T>& w, int n2) {
+  return sl_row_body<C, Lanes16<T>>(w, n2);
+}
+#else
+template <int C, class T>
+bool sl_row_16(const SlRow<T>& w, int n2) {
+  return sl_row_body<C, void>(w, n2);
+}
+#endif
+
+// x86-64: the same row on 32-byte AVX vectors where the CPU has them (chosen at run time). The
+// operations are the same per lane and AVX alone has no fused multiply-add (contraction needs
+// FMA), so both widths give the same bits.
+#if defined(FLAGSIM_VECTOR_ADVECTION) && (defined(__x86_64__) || defined(__i386__))
+#define FLAGSIM_AVX_ADVECTION 1
+template <int C, class T>
+__attribute__((target("avx"))) bool sl_row_32(const SlRow<T>& w, int n2) {
+  return sl_row_body<C, Lanes32<T>>(w, n2);
+}
+#endif
+
+}  // namespace
+
+namespace detail {
+int advection_vector_bytes(int force) {
+  static int chosen = [] {
+#ifdef FLAGSIM_AVX_ADVECTION
+    __builtin_cpu_init();
+    if (__builtin_cpu_supports("avx")) return 32;
+#endif
+#ifdef FLAGSIM_VECTOR_ADVECTION
+    return 16;
+#else
+    return 0;
+#endif
+  }();
+  static int forced = 0;
+  if (force >= 0) forced = force;
+  return forced > 0 && forced < chosen ? forced : chosen;
+}
+}  // namespace detail
+
+namespace {
 
 /// Semi-Lagrangian pass of component C: out (unpadded) from padded u^n.
 ///
-/// Each row first takes the fast path: upwind_sample on 16-byte vectors (2 doubles or 4 floats
-/// per instruction; GCC and Clang generic vectors, so plain SSE2 on any x86-64), the row's tail
-/// in scalars. Nodes whose departure is a cell or more away on some axis (CFL >= 1) or not
-/// finite are then redone by the general sampler (any_corner: floor, wrap). The two agree to
-/// round-off (tests/cpp/fluid/test_advect.cpp).
+/// Each row first takes the fast path: upwind_sample on vectors (32 bytes with AVX, else 16: SSE2
+/// on any x86-64, GCC and Clang generic vectors), the row's tail in scalars. Nodes whose
+/// departure is a cell or more away on some axis (CFL >= 1) or not finite are then redone by the
+/// general sampler (any_corner: floor, wrap). The two agree to round-off
+/// (tests/cpp/fluid/test_advect.cpp).
 template <int C, class T>
 void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, double s, T* out) {
   const PaddedSampler<T> q(sc.u[C]);
@@ -464,62 +579,39 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
   const std::ptrdiff_t stride[3] = {std::ptrdiff_t(p.p1) * p.p2, std::ptrdiff_t(p.p2), 1};
   constexpr double o0 = C == 0 ? 0.0 : 0.5, o1 = C == 1 ? 0.0 : 0.5, o2 = C == 2 ? 0.0 : 0.5;
   constexpr int E1 = C == 0 ? 1 : 0, E2 = C == 2 ? 1 : 2;  // the other two components
-  const std::ptrdiff_t sx = stride[0], sy = stride[1], dc = stride[C], d1s = stride[E1], d2s = stride[E2];
+  const std::ptrdiff_t sx = stride[0], sy = stride[1];
   const T st = T(s);
   const int n1 = geo.ny, n2 = geo.nz;
   const long rows = long(geo.nx) * n1;
+  bool (*row_fn)(const SlRow<T>&, int) = &sl_row_16<C, T>;
+#ifdef FLAGSIM_AVX_ADVECTION
+  if (detail::advection_vector_bytes() == 32) row_fn = &sl_row_32<C, T>;
+#endif
   parallel_for_if(rows * n2 > 16384, rows, [&](Index r) {
     const int i = int(r / n1), j = int(r % n1);
     const std::size_t idx0 = p.index(i, j, 0);
-    T* dst = out + std::size_t(r) * n2;
-    const T* own = sc.u[C].data.data() + idx0;
-    const T* e1 = sc.u[E1].data.data() + idx0;
-    const T* e2 = sc.u[E2].data.data() + idx0;
-    const T* rows9[9];
+    SlRow<T> w;
+    w.own = sc.u[C].data.data() + idx0;
+    w.e1 = sc.u[E1].data.data() + idx0;
+    w.e2 = sc.u[E2].data.data() + idx0;
     for (int a = -1; a <= 1; ++a)
-      for (int b = -1; b <= 1; ++b) rows9[3 * (a + 1) + (b + 1)] = q.q + idx0 + a * sx + b * sy;
-    bool near = true;
-    int k = 0;
-    // The departure displacement (cells) of node k: velocity (own value, 4-node means of the
-    // other components, as padded_velocity) times dt / h. S: T or a vector of T.
-    auto departure = [&](auto load, int kk, auto& d0, auto& d1, auto& d2) {
-      const auto vc = load(own + kk);
-      const auto v1 = T(0.25) * (((load(e1 + kk - dc) + load(e1 + kk + d1s - dc)) + load(e1 + kk)) + load(e1 + kk + d1s));
-      const auto v2 = T(0.25) * (((load(e2 + kk - dc) + load(e2 + kk + d2s - dc)) + load(e2 + kk)) + load(e2 + kk + d2s));
-      d0 = st * (C == 0 ? vc : v1);
-      d1 = st * (C == 1 ? vc : C == 0 ? v1 : v2);
-      d2 = st * (C == 2 ? vc : v2);
-    };
-#ifdef FLAGSIM_VECTOR_ADVECTION
-    using L = Lanes<T>;
-    using V = typename L::V;
-    const V one = L::splat(T(1));
-    auto inside = V{} == V{};  // all lanes true
-    for (; k + L::W <= n2; k += L::W) {
-      V d0, d1, d2;
-      departure(&L::load, k, d0, d1, d2);
-      inside &= (d0 < one) & (-d0 < one) & (d1 < one) & (-d1 < one) & (d2 < one) & (-d2 < one);
-      L::store(dst + k, upwind_sample<V, T>(rows9, k, d0, d1, d2, &L::load));
-    }
-    for (int lane = 0; lane < L::W; ++lane) near = near && inside[lane];
-#endif
-    for (; k < n2; ++k) {
-      T d0, d1, d2;
-      departure(&load_scalar<T>, k, d0, d1, d2);
-      near = near && std::fabs(d0) < 1 && std::fabs(d1) < 1 && std::fabs(d2) < 1;  // false for NaN
-      dst[k] = upwind_sample<T, T>(rows9, k, d0, d1, d2, &load_scalar<T>);
-    }
-    if (near) return;
+      for (int b = -1; b <= 1; ++b) w.rows9[3 * (a + 1) + (b + 1)] = q.q + idx0 + a * sx + b * sy;
+    w.dc = stride[C];
+    w.d1s = stride[E1];
+    w.d2s = stride[E2];
+    w.st = st;
+    w.dst = out + std::size_t(r) * n2;
+    if (row_fn(w, n2)) return;
     // Departures of a cell or more (or not finite): those nodes again, by the general sampler.
     std::size_t idx = idx0;
-    for (k = 0; k < n2; ++k, ++idx) {
+    for (int k = 0; k < n2; ++k, ++idx) {
       double vel[3];  // each exactly a T: the fast path's velocity, summed in the same order
       padded_velocity<C>(sc.u, idx, stride, vel);
       if (std::fabs(st * T(vel[0])) < 1 && std::fabs(st * T(vel[1])) < 1 && std::fabs(st * T(vel[2])) < 1)
         continue;  // the fast path's departure (same T arithmetic): its value stands
       const double e0 = s * vel[0], e1v = s * vel[1], e2v = s * vel[2];
       const double px = i + o0 - e0, py = j + o1 - e1v, pz = k + o2 - e2v;
-      dst[k] = q.value(q.any_corner(p, idx, i, j, k, e0, e1v, e2v, px - o0, py - o1, pz - o2));
+      w.dst[k] = q.value(q.any_corner(p, idx, i, j, k, e0, e1v, e2v, px - o0, py - o1, pz - o2));
     }
   });
 }
