@@ -1,10 +1,10 @@
 #include "common/parallel.h"
 #include "fluid/advect.h"
+#include "common/simd.h"
 
 #include <algorithm>
 #include <cmath>
 #include <cstring>
-#include <type_traits>
 
 namespace flagsim {
 
@@ -405,39 +405,6 @@ inline void padded_velocity(const std::array<PaddedComponent<T>, 3>& u, std::siz
   }
 }
 
-#if defined(__GNUC__)  // GCC and Clang: generic vectors (SSE2 on x86-64, NEON on arm64)
-#define FLAGSIM_VECTOR_ADVECTION 1
-#define FLAGSIM_INLINE inline __attribute__((always_inline))
-/// 16- and 32-byte vectors of T (2 or 4 doubles, 4 or 8 floats), loaded and stored unaligned
-/// through memcpy. The 32-byte ones are only used inside functions compiled for AVX.
-template <class T>
-struct Lanes16 {
-  static constexpr int W = 16 / int(sizeof(T));
-  typedef T V __attribute__((vector_size(16)));
-};
-template <class T>
-struct Lanes32 {
-  static constexpr int W = 32 / int(sizeof(T));
-  typedef T V __attribute__((vector_size(32)));
-};
-template <class V, class T>
-FLAGSIM_INLINE V load_lanes(const T* p) {
-  V v;
-  std::memcpy(&v, p, sizeof(V));
-  return v;
-}
-#else
-#define FLAGSIM_INLINE inline
-#endif
-
-template <class S, class T>
-FLAGSIM_INLINE S load_one(const T* p) {
-  if constexpr (std::is_same<S, T>::value)
-    return *p;
-  else
-    return load_lanes<S>(p);
-}
-
 /// Semi-Lagrangian sample at node k of one row when the departure is within one cell of the node
 /// on every axis (|d| < 1): the departure point lies in the cell on the upwind side of the node,
 /// so each axis interpolates between the node and its upwind neighbour, lerp(node, upwind, |d|),
@@ -456,8 +423,8 @@ FLAGSIM_INLINE S upwind_sample(const T* const rows[9], int k, S d0, S d1, S d2) 
     S vz[3];
     for (int b = -1; b <= 1; ++b) {
       const T* row = rows[3 * (a + 1) + (b + 1)] + k;
-      const S mid = load_one<S>(row);
-      vz[b + 1] = mid + l2 * (load_one<S>(row - 1) - mid) + h2 * (load_one<S>(row + 1) - mid);
+      const S mid = load_lanes<S>(row);
+      vz[b + 1] = mid + l2 * (load_lanes<S>(row - 1) - mid) + h2 * (load_lanes<S>(row + 1) - mid);
     }
     vy[a + 1] = vz[1] + l1 * (vz[0] - vz[1]) + h1 * (vz[2] - vz[1]);
   }
@@ -478,11 +445,11 @@ struct SlRow {
 /// components, as padded_velocity) times dt / h, for component C.
 template <int C, class S, class T>
 FLAGSIM_INLINE void departure(const SlRow<T>& w, int k, S& d0, S& d1, S& d2) {
-  const S vc = load_one<S>(w.own + k);
-  const S v1 = T(0.25) * (((load_one<S>(w.e1 + k - w.dc) + load_one<S>(w.e1 + k + w.d1s - w.dc)) +
-                           load_one<S>(w.e1 + k)) + load_one<S>(w.e1 + k + w.d1s));
-  const S v2 = T(0.25) * (((load_one<S>(w.e2 + k - w.dc) + load_one<S>(w.e2 + k + w.d2s - w.dc)) +
-                           load_one<S>(w.e2 + k)) + load_one<S>(w.e2 + k + w.d2s));
+  const S vc = load_lanes<S>(w.own + k);
+  const S v1 = T(0.25) * (((load_lanes<S>(w.e1 + k - w.dc) + load_lanes<S>(w.e1 + k + w.d1s - w.dc)) +
+                           load_lanes<S>(w.e1 + k)) + load_lanes<S>(w.e1 + k + w.d1s));
+  const S v2 = T(0.25) * (((load_lanes<S>(w.e2 + k - w.dc) + load_lanes<S>(w.e2 + k + w.d2s - w.dc)) +
+                           load_lanes<S>(w.e2 + k)) + load_lanes<S>(w.e2 + k + w.d2s));
   d0 = w.st * (C == 0 ? vc : v1);
   d1 = w.st * (C == 1 ? vc : C == 0 ? v1 : v2);
   d2 = w.st * (C == 2 ? vc : v2);
@@ -494,7 +461,7 @@ template <int C, class L, class T>
 FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
   bool near = true;
   int k = 0;
-#ifdef FLAGSIM_VECTOR_ADVECTION
+#ifdef FLAGSIM_HAVE_VECTORS
   if constexpr (!std::is_void<L>::value) {
     using V = typename L::V;
     V one = V{};
@@ -504,8 +471,7 @@ FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
       V d0, d1, d2;
       departure<C>(w, k, d0, d1, d2);
       inside &= (d0 < one) & (-d0 < one) & (d1 < one) & (-d1 < one) & (d2 < one) & (-d2 < one);
-      const V out = upwind_sample<V, T>(w.rows9, k, d0, d1, d2);
-      std::memcpy(w.dst + k, &out, sizeof(V));
+      store_lanes(w.dst + k, upwind_sample<V, T>(w.rows9, k, d0, d1, d2));
     }
     for (int lane = 0; lane < L::W; ++lane) near = near && inside[lane];
   }
@@ -519,51 +485,21 @@ FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
   return near;
 }
 
-#ifdef FLAGSIM_VECTOR_ADVECTION
 template <int C, class T>
 bool sl_row_16(const SlRow<T>& w, int n2) {
+#ifdef FLAGSIM_HAVE_VECTORS
   return sl_row_body<C, Lanes16<T>>(w, n2);
-}
 #else
-template <int C, class T>
-bool sl_row_16(const SlRow<T>& w, int n2) {
   return sl_row_body<C, void>(w, n2);
-}
 #endif
+}
 
-// x86-64: the same row on 32-byte AVX vectors where the CPU has them (chosen at run time). The
-// operations are the same per lane and AVX alone has no fused multiply-add (contraction needs
-// FMA), so both widths give the same bits.
-#if defined(FLAGSIM_VECTOR_ADVECTION) && (defined(__x86_64__) || defined(__i386__))
-#define FLAGSIM_AVX_ADVECTION 1
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
 template <int C, class T>
-__attribute__((target("avx"))) bool sl_row_32(const SlRow<T>& w, int n2) {
+FLAGSIM_TARGET_AVX bool sl_row_32(const SlRow<T>& w, int n2) {
   return sl_row_body<C, Lanes32<T>>(w, n2);
 }
 #endif
-
-}  // namespace
-
-namespace detail {
-int advection_vector_bytes(int force) {
-  static int chosen = [] {
-#ifdef FLAGSIM_AVX_ADVECTION
-    __builtin_cpu_init();
-    if (__builtin_cpu_supports("avx")) return 32;
-#endif
-#ifdef FLAGSIM_VECTOR_ADVECTION
-    return 16;
-#else
-    return 0;
-#endif
-  }();
-  static int forced = 0;
-  if (force >= 0) forced = force;
-  return forced > 0 && forced < chosen ? forced : chosen;
-}
-}  // namespace detail
-
-namespace {
 
 /// Semi-Lagrangian pass of component C: out (unpadded) from padded u^n.
 ///
@@ -584,8 +520,8 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
   const int n1 = geo.ny, n2 = geo.nz;
   const long rows = long(geo.nx) * n1;
   bool (*row_fn)(const SlRow<T>&, int) = &sl_row_16<C, T>;
-#ifdef FLAGSIM_AVX_ADVECTION
-  if (detail::advection_vector_bytes() == 32) row_fn = &sl_row_32<C, T>;
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+  if (vector_bytes() == 32) row_fn = &sl_row_32<C, T>;
 #endif
   parallel_for_if(rows * n2 > 16384, rows, [&](Index r) {
     const int i = int(r / n1), j = int(r % n1);

@@ -68,10 +68,4 @@ template <class T>
 void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, PeriodicAdvectScratch<T>& scratch,
                      MacGrid<T>& hat);
 
-namespace detail {
-/// Vector width (bytes) of advect_periodic's fast path: 32 (AVX, chosen at run time on x86-64),
-/// 16 (SSE2 / NEON) or 0 (scalar). force > 0 caps it (tests compare the widths), 0 lifts the cap.
-int advection_vector_bytes(int force = -1);
-}  // namespace detail
-
 }  // namespace flagsim

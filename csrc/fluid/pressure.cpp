@@ -1,4 +1,5 @@
 #include "common/parallel.h"
+#include "common/simd.h"
 #include "fluid/pressure.h"
 
 #include <cmath>
@@ -212,6 +213,7 @@ struct FftProjector<T>::Impl {
   // from faces to cells), lam_d(m) = (2 cos theta - 2) / h^2, theta = 2 pi m / n_d.
   std::array<std::vector<std::complex<double>>, 3> a;
   std::array<std::vector<double>, 3> lam;
+  std::vector<double> azr, azi;       // a_z split into real and imaginary parts (vector loads)
   typename F::Plan fwd = nullptr, inv = nullptr;
 
   C* cplx(int c) { return hat[c].data(); }
@@ -238,6 +240,10 @@ FftProjector<T>::FftProjector(const GridGeometry& geo) : impl_(new Impl) {
       m.a[d][q] = std::complex<double>(std::cos(th) - 1.0, std::sin(th)) / geo.h;
       m.lam[d][q] = (2.0 * std::cos(th) - 2.0) / (geo.h * geo.h);
     }
+  }
+  for (const auto& z : m.a[2]) {
+    m.azr.push_back(z.real());
+    m.azi.push_back(z.imag());
   }
   std::lock_guard<std::mutex> lock(fftw_planner_mutex());
   Impl::F::threads(fft_threads(m.n_real));
@@ -274,53 +280,133 @@ void FftProjector<T>::project(MacGrid<T>& u, T* phi) {
   subtract_gradient(phi, u);
 }
 
+namespace {
+
+/// One (i, j) row of diffuse_and_project's spectral update: what it reads and writes.
+template <class T>
+struct SpectralRow {
+  T *p0, *p1, *p2;                  // the three transforms' row, interleaved (re, im)
+  const double *azr, *azi, *lamz;   // per k
+  double axr, axi, ayr, ayi, lxy;   // per row
+  double scale, nu_dt;
+};
+
+template <class S, class T>
+FLAGSIM_INLINE void load_complex(const T* p, S& re, S& im) {
+  if constexpr (std::is_same<S, double>::value) {
+    re = p[0];
+    im = p[1];
+  } else {
+    re = S{};
+    im = S{};
+    for (int l = 0; l < int(sizeof(S) / sizeof(double)); ++l) {
+      re[l] = p[2 * l];
+      im[l] = p[2 * l + 1];
+    }
+  }
+}
+
+template <class S, class T>
+FLAGSIM_INLINE void store_complex(T* p, const S& re, const S& im) {
+  if constexpr (std::is_same<S, double>::value) {
+    p[0] = T(re);
+    p[1] = T(im);
+  } else {
+    for (int l = 0; l < int(sizeof(S) / sizeof(double)); ++l) {
+      p[2 * l] = T(re[l]);
+      p[2 * l + 1] = T(im[l]);
+    }
+  }
+}
+
+/// Modes k.. of a row, one per lane of S (double or a vector of doubles).
+template <class S, class T>
+FLAGSIM_INLINE void spectral_modes(const SpectralRow<T>& w, int k) {
+  S xr, xi, yr, yi, zr, zi;
+  load_complex(w.p0 + 2 * k, xr, xi);
+  load_complex(w.p1 + 2 * k, yr, yi);
+  load_complex(w.p2 + 2 * k, zr, zi);
+  const S azr = load_lanes<S>(w.azr + k), azi = load_lanes<S>(w.azi + k);
+  const S l = w.lxy + load_lanes<S>(w.lamz + k);
+  // Backward Euler diffusion: (1 - nu dt lambda) u_hat_new = u_hat (Stam 2001 §3), then
+  // phi_hat = (a . u_hat_new) / lambda and u_hat_new -= g phi_hat with g_d = -conj(a_d)
+  // (backward difference from cells to faces), so that a . g = lambda. One division:
+  // s = scale / (1 - nu dt l) and s / l = scale / (l (1 - nu dt l)). The mode lambda = 0 (the
+  // mean) has no potential: s = scale, sp = 0.
+  const S zero = S{}, one = zero + 1.0;
+  const auto mean = l == zero;
+  const S ls = mean ? one : l;
+  const S inv = 1.0 / (ls * (1.0 - w.nu_dt * ls));
+  const S s = mean ? zero + w.scale : w.scale * ls * inv;
+  const S sp = mean ? zero : w.scale * inv;
+  // phi = sp (a . u_hat) (complex), then u += conj(a) phi, in real arithmetic: std::complex
+  // products check for NaN and call __muldc3, which keeps a loop scalar and branchy.
+  const S pr = sp * (w.axr * xr - w.axi * xi + w.ayr * yr - w.ayi * yi + azr * zr - azi * zi);
+  const S pi = sp * (w.axr * xi + w.axi * xr + w.ayr * yi + w.ayi * yr + azr * zi + azi * zr);
+  store_complex(w.p0 + 2 * k, S(s * xr + w.axr * pr + w.axi * pi), S(s * xi + w.axr * pi - w.axi * pr));
+  store_complex(w.p1 + 2 * k, S(s * yr + w.ayr * pr + w.ayi * pi), S(s * yi + w.ayr * pi - w.ayi * pr));
+  store_complex(w.p2 + 2 * k, S(s * zr + azr * pr + azi * pi), S(s * zi + azr * pi - azi * pr));
+}
+
+/// A whole row: vectors of L (Lanes16<double>, Lanes32<double>; void: scalars), then the tail.
+template <class L, class T>
+FLAGSIM_INLINE void spectral_row_body(const SpectralRow<T>& w, int nzc) {
+  int k = 0;
+#ifdef FLAGSIM_HAVE_VECTORS
+  if constexpr (!std::is_void<L>::value)
+    for (; k + L::W <= nzc; k += L::W) spectral_modes<typename L::V>(w, k);
+#endif
+  for (; k < nzc; ++k) spectral_modes<double>(w, k);
+}
+
+template <class T>
+void spectral_row_16(const SpectralRow<T>& w, int nzc) {
+#ifdef FLAGSIM_HAVE_VECTORS
+  spectral_row_body<Lanes16<double>>(w, nzc);
+#else
+  spectral_row_body<void>(w, nzc);
+#endif
+}
+
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+template <class T>
+FLAGSIM_TARGET_AVX void spectral_row_32(const SpectralRow<T>& w, int nzc) {
+  spectral_row_body<Lanes32<double>>(w, nzc);
+}
+#endif
+
+}  // namespace
+
 template <class T>
 void FftProjector<T>::diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec3* mean) {
   Impl& m = *impl_;
   const GridGeometry& g = m.geo;
   for (int c = 0; c < 3; ++c) Impl::F::exec_r2c(m.fwd, u.comp[c].data(), m.fc(c));
-  const double scale = 1.0 / double(m.n_real);
   std::complex<T>* h0 = m.cplx(0);
   std::complex<T>* h1 = m.cplx(1);
   std::complex<T>* h2 = m.cplx(2);
-  // Written out in real arithmetic: std::complex products check for NaN and call __muldc3 on
-  // that path, which keeps the loop scalar and branchy (about a fifth of the projection at 64^3).
+  void (*row_fn)(const SpectralRow<T>&, int) = &spectral_row_16<T>;
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+  if (vector_bytes() == 32) row_fn = &spectral_row_32<T>;
+#endif
   parallel_for_if(m.n_cplx > 16384, long(g.nx) * g.ny, [&](Index r) {
     const int i = int(r / g.ny), j = int(r % g.ny);
-    const double axr = m.a[0][i].real(), axi = m.a[0][i].imag();
-    const double ayr = m.a[1][j].real(), ayi = m.a[1][j].imag();
-    const double lxy = m.lam[0][i] + m.lam[1][j];
     const std::size_t base = std::size_t(r) * m.nzc;
-    T* __restrict p0 = reinterpret_cast<T*>(h0 + base);
-    T* __restrict p1 = reinterpret_cast<T*>(h1 + base);
-    T* __restrict p2 = reinterpret_cast<T*>(h2 + base);
-    for (int k = 0; k < m.nzc; ++k) {
-      const double azr = m.a[2][k].real(), azi = m.a[2][k].imag();
-      const double l = lxy + m.lam[2][k];
-      const double xr = p0[2 * k], xi = p0[2 * k + 1];
-      const double yr = p1[2 * k], yi = p1[2 * k + 1];
-      const double zr = p2[2 * k], zi = p2[2 * k + 1];
-      // Backward Euler diffusion: (1 - nu dt lambda) u_hat_new = u_hat (Stam 2001 §3), then
-      // phi_hat = (a . u_hat_new) / lambda and u_hat_new -= g phi_hat with g_d = -conj(a_d)
-      // (backward difference from cells to faces), so that a . g = lambda. One division:
-      // s = scale / (1 - nu dt l) and s / l = scale / (l (1 - nu dt l)).
-      double s = scale, sp = 0;
-      if (l != 0) {
-        const double inv = 1.0 / (l * (1.0 - nu_dt * l));
-        s = scale * l * inv;
-        sp = scale * inv;
-      }
-      // phi = sp (a . u_hat) (complex)
-      const double pr = sp * (axr * xr - axi * xi + ayr * yr - ayi * yi + azr * zr - azi * zi);
-      const double pi = sp * (axr * xi + axi * xr + ayr * yi + ayi * yr + azr * zi + azi * zr);
-      // u += conj(a) phi
-      p0[2 * k] = T(s * xr + axr * pr + axi * pi);
-      p0[2 * k + 1] = T(s * xi + axr * pi - axi * pr);
-      p1[2 * k] = T(s * yr + ayr * pr + ayi * pi);
-      p1[2 * k + 1] = T(s * yi + ayr * pi - ayi * pr);
-      p2[2 * k] = T(s * zr + azr * pr + azi * pi);
-      p2[2 * k + 1] = T(s * zi + azr * pi - azi * pr);
-    }
+    SpectralRow<T> w;
+    w.p0 = reinterpret_cast<T*>(h0 + base);
+    w.p1 = reinterpret_cast<T*>(h1 + base);
+    w.p2 = reinterpret_cast<T*>(h2 + base);
+    w.azr = m.azr.data();
+    w.azi = m.azi.data();
+    w.lamz = m.lam[2].data();
+    w.axr = m.a[0][i].real();
+    w.axi = m.a[0][i].imag();
+    w.ayr = m.a[1][j].real();
+    w.ayi = m.a[1][j].imag();
+    w.lxy = m.lam[0][i] + m.lam[1][j];
+    w.scale = 1.0 / double(m.n_real);
+    w.nu_dt = nu_dt;
+    row_fn(w, m.nzc);
   });
   if (mean) {
     h0[0] = std::complex<T>(T((*mean)[0]));

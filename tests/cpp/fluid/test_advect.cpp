@@ -1,4 +1,5 @@
 #include "fluid/advect.h"
+#include "common/simd.h"
 
 #include <gtest/gtest.h>
 
@@ -129,12 +130,12 @@ void expect_widths_agree(double scale) {
   for (auto& comp : u0.comp)
     for (T& x : comp) x = T(n(rng));
   auto run = [&](int cap) {
-    detail::advection_vector_bytes(cap);
+    vector_bytes(cap);
     MacGrid<T> u = u0, hat(g);
     PeriodicAdvectScratch<T> scratch;
     scratch.resize(g);
     advect_periodic(u, 0.1, false, scratch, hat);
-    detail::advection_vector_bytes(0);
+    vector_bytes(0);
     return u;
   };
   const MacGrid<T> wide = run(0), narrow = run(16);
@@ -144,7 +145,7 @@ void expect_widths_agree(double scale) {
 }
 
 TEST(Advect, PeriodicFastPathVectorWidthsGiveTheSameBits) {
-  if (detail::advection_vector_bytes() < 32) GTEST_SKIP() << "this CPU has one vector width only (no AVX)";
+  if (vector_bytes() < 32) GTEST_SKIP() << "this CPU has one vector width only (no AVX)";
   for (const double scale : {0.3, 3.0}) {  // 3: many nodes take the general sampler too
     expect_widths_agree<double>(scale);
     expect_widths_agree<float>(scale);
