@@ -27,6 +27,16 @@ MacGrid<double> random_grid(bool periodic, double scale, unsigned seed) {
   return m;
 }
 
+GridGeometry periodic_geometry(int nx, int ny, int nz) {
+  GridGeometry g;
+  g.nx = nx;
+  g.ny = ny;
+  g.nz = nz;
+  g.h = 0.1;
+  g.periodic = true;
+  return g;
+}
+
 bool same_bits(const MacGrid<double>& a, const MacGrid<double>& b) {
   for (int c = 0; c < 3; ++c)
     if (std::memcmp(a.comp[c].data(), b.comp[c].data(), a.comp[c].size() * sizeof(double)) != 0) return false;
@@ -72,12 +82,7 @@ INSTANTIATE_TEST_SUITE_P(Advect, PeriodicFastPath,
 // The fast path reproduces a uniform field exactly, whatever the direction of the flow, on grids
 // whose rows are not a multiple of the vector width (the scalar tail).
 TEST(Advect, PeriodicFastPathKeepsAUniformFieldExactly) {
-  GridGeometry g;
-  g.nx = 5;
-  g.ny = 4;
-  g.nz = 7;
-  g.h = 0.1;
-  g.periodic = true;
+  const GridGeometry g = periodic_geometry(5, 4, 7);
   for (const Vec3 w : {Vec3(0.3, -0.2, 0.45), Vec3(-0.7, 0.1, -0.05)}) {
     MacGrid<double> u(g), hat(g);
     for (int c = 0; c < 3; ++c) std::fill(u.comp[c].begin(), u.comp[c].end(), w[c]);
@@ -118,12 +123,7 @@ TEST(Advect, PaddedComponentWrapsItsGhosts) {
 // leave a scalar tail at every width.
 template <class T>
 void expect_widths_agree(double scale) {
-  GridGeometry g;
-  g.nx = 6;
-  g.ny = 5;
-  g.nz = 21;
-  g.h = 0.1;
-  g.periodic = true;
+  const GridGeometry g = periodic_geometry(6, 5, 21);
   MacGrid<T> u0(g);
   std::mt19937 rng(17);
   std::normal_distribution<double> n(0.0, scale);
