@@ -8,7 +8,7 @@
 //
 // Replaced a uniform-grid spatial hash (Teschner et al. 2003): on the paper's 8 x 11 flag every
 // query scanned 8-27 hash cells of a few entries each, about three times the box tests the tree
-// needs (docs/design.md, "Self-collision broad phase").
+// needs (docs/design.md, Self-collision: "Broad phase: box trees").
 #pragma once
 #include <cstdint>
 #include <vector>
