@@ -19,6 +19,7 @@ import time
 import numpy as np
 
 import flagsim
+from flagsim.testing.shapes import folded_onto_itself
 
 
 def wind_scene(n_side):
@@ -52,26 +53,12 @@ def fold_scene(n_side):
     return s
 
 
-def fold(sim, n_side):
-    """Lay the flag flat in the x-z plane, upper half folded 2 cm over the lower half."""
-    rest = np.array(sim.rest_positions)
-    x = np.empty_like(rest)
-    half, dx = n_side // 2, 0.01
-    for r in range(n_side):
-        for c in range(n_side):
-            i = r * n_side + c
-            if c < half:
-                x[i] = (rest[i, 0], 0.0, -rest[i, 1])
-            else:
-                x[i] = (rest[r * n_side + (n_side - 1 - c), 0] + 0.5 * dx, 0.02, -rest[i, 1])
-    sim.positions = x
-
-
 def measure(workload, n_side, warmup, seconds):
     s = (fold_scene if workload == "fold" else wind_scene)(n_side)
     sim = flagsim.Simulation(s)
     if workload == "fold":
-        fold(sim, n_side)
+        # the upper half 2 cm over the lower half, held by its pins, then dropped
+        sim.positions = folded_onto_itself(sim, n_side, n_side, s.flag.width, height=0.02)
     sim.step(round(warmup / s.dt))
     before = dict(sim.timings)
     steps = round(seconds / s.dt)

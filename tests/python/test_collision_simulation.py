@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 import flagsim
+from flagsim.testing.shapes import folded_onto_itself
 from _collision_checks import crossings, inside_cylinder, min_distance
 
 
@@ -37,22 +38,6 @@ def small_flag(scene):
     scene.flag.rows, scene.flag.cols = 10, 16
     scene.flag.width, scene.flag.height = 0.8, 0.5
     scene.self_collision.enabled = True
-
-
-def folded_onto_itself(sim, cols, rows, width, height=0.05):
-    """Positions of a flag laid flat in the x-z plane and folded over along its middle column:
-    columns >= cols/2 lie back over the first half, `height` above, shifted by half a cell."""
-    rest = np.array(sim.rest_positions)
-    x = np.empty_like(rest)
-    half, dx = cols // 2, width / (cols - 1)
-    for r in range(rows):
-        for c in range(cols):
-            i = r * cols + c
-            if c < half:
-                x[i] = (rest[i, 0], 0.0, -rest[i, 1])
-            else:
-                x[i] = (rest[r * cols + (cols - 1 - c), 0] + 0.5 * dx, height, -rest[i, 1])
-    return x
 
 
 def test_folded_flag_dropped_onto_itself():
