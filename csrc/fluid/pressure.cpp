@@ -211,9 +211,8 @@ struct FftProjector<T>::Impl {
   std::array<AlignedVector<C>, 3> hat;  // nx*ny*nzc each
   // Per-axis Fourier symbols: a_d(m) = (e^{i theta} - 1) / h (forward difference, i.e. MAC div
   // from faces to cells), lam_d(m) = (2 cos theta - 2) / h^2, theta = 2 pi m / n_d.
-  std::array<std::vector<std::complex<double>>, 3> a;
+  std::array<std::vector<double>, 3> ar, ai;  // real and imaginary parts of a_d
   std::array<std::vector<double>, 3> lam;
-  std::vector<double> azr, azi;       // a_z split into real and imaginary parts (vector loads)
   typename F::Plan fwd = nullptr, inv = nullptr;
 
   C* cplx(int c) { return hat[c].data(); }
@@ -233,17 +232,15 @@ FftProjector<T>::FftProjector(const GridGeometry& geo) : impl_(new Impl) {
   for (int d = 0; d < 3; ++d) {
     const int n = geo.n(d);
     const int count = d == 2 ? m.nzc : n;
-    m.a[d].resize(count);
+    m.ar[d].resize(count);
+    m.ai[d].resize(count);
     m.lam[d].resize(count);
     for (int q = 0; q < count; ++q) {
       const double th = two_pi * q / n;
-      m.a[d][q] = std::complex<double>(std::cos(th) - 1.0, std::sin(th)) / geo.h;
+      m.ar[d][q] = (std::cos(th) - 1.0) / geo.h;
+      m.ai[d][q] = std::sin(th) / geo.h;
       m.lam[d][q] = (2.0 * std::cos(th) - 2.0) / (geo.h * geo.h);
     }
-  }
-  for (const auto& z : m.a[2]) {
-    m.azr.push_back(z.real());
-    m.azi.push_back(z.imag());
   }
   std::lock_guard<std::mutex> lock(fftw_planner_mutex());
   Impl::F::threads(fft_threads(m.n_real));
@@ -396,13 +393,13 @@ void FftProjector<T>::diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec
     w.p0 = reinterpret_cast<T*>(h0 + base);
     w.p1 = reinterpret_cast<T*>(h1 + base);
     w.p2 = reinterpret_cast<T*>(h2 + base);
-    w.azr = m.azr.data();
-    w.azi = m.azi.data();
+    w.azr = m.ar[2].data();
+    w.azi = m.ai[2].data();
     w.lamz = m.lam[2].data();
-    w.axr = m.a[0][i].real();
-    w.axi = m.a[0][i].imag();
-    w.ayr = m.a[1][j].real();
-    w.ayi = m.a[1][j].imag();
+    w.axr = m.ar[0][i];
+    w.axi = m.ai[0][i];
+    w.ayr = m.ar[1][j];
+    w.ayi = m.ai[1][j];
     w.lxy = m.lam[0][i] + m.lam[1][j];
     w.scale = 1.0 / double(m.n_real);
     w.nu_dt = nu_dt;
