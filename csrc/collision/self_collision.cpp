@@ -230,8 +230,7 @@ double SelfCollision::reach(const Pair& pr, const MatX3& x0, const MatX3& x) con
   return std::sqrt(r2);
 }
 
-bool SelfCollision::within_boxes(const MatX3& x0, const MatX3& x) const {
-  (void)x0;
+bool SelfCollision::within_boxes(const MatX3& x) const {
   const double margin = params_.thickness;
   for (Index i = 0; i < n_; ++i) {
     const Vec3 p = row(x, i) - shift_;
@@ -561,7 +560,7 @@ const SelfCollisionStats& SelfCollision::resolve(const MatX3& x0, MatX3& x, MatX
       ++stats_.sweeps;
       if (!sweep(x0, x, v, inv_mass, pole, constraints, s == 0)) break;
     }
-    complete = within_boxes(x0, x);  // else a push left the candidates' reach: collect again
+    complete = within_boxes(x);  // else a push left the candidates' reach: collect again
   }
   if (!complete) broad_phase(x0, x, inv_mass, /*shifted=*/true);
   freeze_fallback(x0, x, v, inv_mass, pole);

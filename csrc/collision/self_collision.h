@@ -112,7 +112,7 @@ class SelfCollision {
   void broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv_mass, bool shifted);
   bool find_violations(const MatX3& x0, const MatX3& x, const VecX& inv_mass,
                        const PoleParams* pole);
-  bool within_boxes(const MatX3& x0, const MatX3& x) const;
+  bool within_boxes(const MatX3& x) const;
   bool sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass, const PoleParams* pole,
              const Projector* constraints, bool first);
   void freeze_fallback(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
