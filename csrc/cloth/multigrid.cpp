@@ -57,6 +57,23 @@ void gauss_seidel_fine(const ClothTopology& topo, const ClothSystem& A, const Ma
   }
 }
 
+// b_v - sum over the 9-point stencil of vertex v = (r, c) of A_vw x_w, the centre included or not.
+template <bool with_centre>
+inline Vec3 b_minus_stencil(const MultigridLevel& L, int r, int c) {
+  const int R = L.rows, C = L.cols;
+  const Index v = Index(r) * C + c;
+  Vec3 acc = L.b.row(v);
+  const Mat3* a = &L.A[9 * v];
+  for (int dr = -1; dr <= 1; ++dr) {
+    if (r + dr < 0 || r + dr >= R) continue;
+    for (int dc = -1; dc <= 1; ++dc) {
+      if (c + dc < 0 || c + dc >= C || (!with_centre && dr == 0 && dc == 0)) continue;
+      acc.noalias() -= a[slot(dr, dc)] * Vec3(L.x.row(v + dr * C + dc));
+    }
+  }
+  return acc;
+}
+
 // Coarse-level block Gauss-Seidel sweep with the 9-point block stencil.
 void gauss_seidel_level(MultigridLevel& L, bool forward) {
   const int R = L.rows, C = L.cols;
@@ -64,17 +81,7 @@ void gauss_seidel_level(MultigridLevel& L, bool forward) {
   for (Index m = 0; m < n; ++m) {
     const Index v = forward ? m : n - 1 - m;
     if (!L.active[v]) continue;
-    const int r = int(v / C), c = int(v % C);
-    Vec3 acc = L.b.row(v);
-    const Mat3* a = &L.A[9 * v];
-    for (int dr = -1; dr <= 1; ++dr) {
-      if (r + dr < 0 || r + dr >= R) continue;
-      for (int dc = -1; dc <= 1; ++dc) {
-        if (c + dc < 0 || c + dc >= C || (dr == 0 && dc == 0)) continue;
-        acc.noalias() -= a[slot(dr, dc)] * Vec3(L.x.row(v + dr * C + dc));
-      }
-    }
-    L.x.row(v) = (L.Dinv[v] * acc).transpose();
+    L.x.row(v) = (L.Dinv[v] * b_minus_stencil<false>(L, int(v / C), int(v % C))).transpose();
   }
 }
 
@@ -82,19 +89,7 @@ void gauss_seidel_level(MultigridLevel& L, bool forward) {
 void residual_level(MultigridLevel& L) {
   const int R = L.rows, C = L.cols;
   for (int r = 0; r < R; ++r)
-    for (int c = 0; c < C; ++c) {
-      const Index v = Index(r) * C + c;
-      Vec3 acc = L.b.row(v);
-      const Mat3* a = &L.A[9 * v];
-      for (int dr = -1; dr <= 1; ++dr) {
-        if (r + dr < 0 || r + dr >= R) continue;
-        for (int dc = -1; dc <= 1; ++dc) {
-          if (c + dc < 0 || c + dc >= C) continue;
-          acc.noalias() -= a[slot(dr, dc)] * Vec3(L.x.row(v + dr * C + dc));
-        }
-      }
-      L.r.row(v) = acc.transpose();
-    }
+    for (int c = 0; c < C; ++c) L.r.row(Index(r) * C + c) = b_minus_stencil<true>(L, r, c).transpose();
 }
 
 // out.b = P^T r: each coarse vertex sums the residuals of its 2 x 2 fine vertices.
@@ -102,6 +97,17 @@ void restrict_to(int rows, int cols, const MatX3& r, MultigridLevel& out) {
   out.b.setZero();
   for (int i = 0; i < rows; ++i)
     for (int j = 0; j < cols; ++j) out.b.row(Index(i / 2) * out.cols + j / 2) += r.row(Index(i) * cols + j);
+}
+
+// x_v += the correction of v's 2 x 2 aggregate in Lc, for the vertices v of a rows x cols level
+// with take(v) (P x_c, P piecewise constant).
+template <class Take>
+void prolong_add(int rows, int cols, const MultigridLevel& Lc, Take take, MatX3& x) {
+  for (int r = 0; r < rows; ++r)
+    for (int c = 0; c < cols; ++c) {
+      const Index v = Index(r) * cols + c;
+      if (take(v)) x.row(v) += Lc.x.row(Index(r / 2) * Lc.cols + c / 2);
+    }
 }
 
 // Coarsest level: x = A^-1 b by the dense Cholesky factor (forward, then backward substitution).
@@ -153,9 +159,7 @@ void cycle_level(Multigrid& mg, size_t l) {
   residual_level(L);
   restrict_to(L.rows, L.cols, L.r, Lc);
   coarse_correction(mg, l);
-  for (int r = 0; r < L.rows; ++r)
-    for (int c = 0; c < L.cols; ++c)
-      if (L.active[Index(r) * L.cols + c]) L.x.row(Index(r) * L.cols + c) += Lc.x.row(Index(r / 2) * Lc.cols + c / 2);
+  prolong_add(L.rows, L.cols, Lc, [&](Index v) { return L.active[v] != 0; }, L.x);
   gauss_seidel_level(L, false);
 }
 
@@ -340,12 +344,7 @@ void multigrid_vcycle(const ClothTopology& topo, const ClothSystem& A, Multigrid
     else mg.fine_r.row(i).setZero();
   restrict_to(topo.rows, topo.cols, mg.fine_r, mg.levels.front());
   cycle_level(mg, 0);
-  const MultigridLevel& L0 = mg.levels.front();
-  for (int i = 0; i < topo.rows; ++i)
-    for (int j = 0; j < topo.cols; ++j) {
-      const Index v = Index(i) * topo.cols + j;
-      if (free_vertex(topo, v)) z.row(v) += L0.x.row(Index(i / 2) * L0.cols + j / 2);
-    }
+  prolong_add(topo.rows, topo.cols, mg.levels.front(), [&](Index v) { return free_vertex(topo, v); }, z);
   gauss_seidel_fine(topo, A, r, z, false, false);
 }
 
