@@ -75,10 +75,7 @@ Simulation::Simulation(const Scene& scene)
   if (built_[kSelfCollision]) {
     self_collision_ = std::make_unique<SelfCollision>(topo_.triangles, N, scene_.self_collision);
     // Strain limiting inside the collision sweeps: contacts alone would hold a stretch.
-    strain_projector_ = [this](MatX3& x, MatX3& v) {
-      limit_strain(topo_, scene_.integrator.strain_limit, scene_.integrator.strain_limit_iterations,
-                   scene_.dt, x, v);
-    };
+    strain_projector_ = [this](MatX3& x, MatX3& v) { limit_cloth_strain(x, v); };
   }
   for (int s = 0; s < kNumStages; ++s)
     if (built_[s]) stage_names_.emplace_back(stage_name(Stage(s)));
@@ -184,9 +181,7 @@ void Simulation::stage_flap() {
     }
     // The cloth stays within its strain limit: eq. 5's amplitude grows with the wind, and at
     // storm speeds its wave alone would stretch the cloth severalfold.
-    if (built_[kStrainLimit])
-      limit_strain(topo_, scene_.integrator.strain_limit, scene_.integrator.strain_limit_iterations,
-                   h, x_, v_);
+    if (built_[kStrainLimit]) limit_cloth_strain(x_, v_);
     return;  // flap_applied_ = flap_z_ once the step has passed its check
   }
   flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, t1 - h, fp, flap_before_);
@@ -205,6 +200,13 @@ void Simulation::stage_flap() {
 // the two projections alternate (at most kPoleStrainRounds times) until the pole moves nothing,
 // so that a flag blown back wraps around the pole without over-stretching; the pole has the
 // last word.
+// The integrator's strain limit on (x, v) over one step: outside the integrator, after the
+// flapping displacement, between pole passes and inside the collision sweeps.
+void Simulation::limit_cloth_strain(MatX3& x, MatX3& v) {
+  limit_strain(topo_, scene_.integrator.strain_limit, scene_.integrator.strain_limit_iterations,
+               scene_.dt, x, v);
+}
+
 void Simulation::stage_collide() {
   constexpr int kPoleStrainRounds = 10;
   if (built_[kPole]) {
@@ -216,8 +218,7 @@ void Simulation::stage_collide() {
     for (int k = 0; k < kPoleStrainRounds && moved > 0 && built_[kStrainLimit]; ++k) {
       {
         ScopedTimer t(seconds_[kStrainLimit]);
-        limit_strain(topo_, scene_.integrator.strain_limit,
-                     scene_.integrator.strain_limit_iterations, scene_.dt, x_, v_);
+        limit_cloth_strain(x_, v_);
       }
       ScopedTimer t(seconds_[kPole]);
       moved = collide_pole(scene_.pole, x_start_, x_, v_, topo_.inv_mass);

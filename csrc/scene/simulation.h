@@ -96,6 +96,7 @@ class Simulation {
   double sample_pole_air_speed();
   void stage_flap();
   void stage_collide();
+  void limit_cloth_strain(MatX3& x, MatX3& v);
   void stage_flap_visual();
   [[noreturn]] void diverge(const std::string& cause, long vertex, const std::string& detail);
 
