@@ -184,17 +184,28 @@ void finish_level(MultigridLevel& L) {
 
 }  // namespace
 
-void apply_system(const ClothTopology& topo, const ClothSystem& A, const MatX3& p, MatX3& out) {
+void apply_system(const ClothTopology& topo, const ClothSystem& A, const MatX3& p, MatX3& out,
+                  MatX3& spring_terms) {
+  // Each spring's term y_s = B_s (p_i - p_j), s = (i, j), once; vertex i adds y_s and j adds -y_s,
+  // which is B_s (p_j - p_i) to the last bit (negation is exact), so the sums are those of
+  // computing every term from both ends, at half the cost.
+  const Index S = topo.num_springs();
+  parallel_for(S, [&](Index s) {
+    spring_terms.row(s) =
+        A.B[s].apply(Vec3(p.row(topo.springs(s, 0))) - Vec3(p.row(topo.springs(s, 1)))).transpose();
+  });
   const bool tri = !A.J.empty();
   parallel_for(topo.num_vertices(), [&](Index i) {
     if (!free_vertex(topo, i)) {
       out.row(i).setZero();
       return;
     }
-    const Vec3 pi = p.row(i);
-    Vec3 acc = A.D[i] * pi;
-    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k)
-      acc += A.B[topo.adj_spring[k]].apply(pi - Vec3(p.row(topo.adj_other[k])));
+    Vec3 acc = A.D[i] * Vec3(p.row(i));
+    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k) {
+      const int32_t s = topo.adj_spring[k];
+      if (topo.springs(s, 0) == i) acc += Vec3(spring_terms.row(s));
+      else acc -= Vec3(spring_terms.row(s));
+    }
     if (tri)
       for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k) {
         const int32_t t = topo.tri_adj[k];

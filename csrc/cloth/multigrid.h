@@ -23,7 +23,9 @@ struct ClothSystem {
 };
 
 /// out = A p (N x 3); rows of pinned vertices are zero, p's pinned rows must be zero.
-void apply_system(const ClothTopology& topo, const ClothSystem& A, const MatX3& p, MatX3& out);
+/// spring_terms (S x 3) is scratch.
+void apply_system(const ClothTopology& topo, const ClothSystem& A, const MatX3& p, MatX3& out,
+                  MatX3& spring_terms);
 
 /// One coarse level: a rows x cols grid whose vertex (r, c) aggregates the 2 x 2 vertices
 /// (2r..2r+1, 2c..2c+1) of the level below. Its Galerkin operator P^T A P (P piecewise constant,
