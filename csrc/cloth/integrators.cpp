@@ -11,11 +11,12 @@ namespace flagsim {
 IntegratorScratch::IntegratorScratch(const ClothTopology& topo) {
   const Index n = topo.num_vertices();
   for (MatX3* m : {&f, &x0, &v0, &dv, &r, &z, &p, &q, &b, &tmp}) m->setZero(n, 3);
-  spring_terms.setZero(topo.num_springs(), 3);
   sys.B.resize(topo.num_springs());
   sys.D.resize(n);
   sys.J.reserve(topo.triangles.rows());
+  sys.diag.resize(n);
   sys.Pinv.resize(n);
+  sys.off.build(topo);
   if (multigrid_applies(topo)) multigrid_build(topo, mg);
 }
 
@@ -117,7 +118,7 @@ void assemble_implicit_system(const ClothTopology& topo, const ForceSet& fs, dou
   });
   parallel_for(N, [&](Index i) { A.D[i] = topo.mass[i] * Mat3::Identity() + h * A.D[i]; });
   for (auto& j : A.J) j *= h / 9.0;
-  // A's 3x3 diagonal blocks, inverted (block Jacobi and the Gauss-Seidel smoother).
+  // A's 3x3 diagonal blocks and their inverses (block Jacobi and the Gauss-Seidel smoother).
   // The spring blocks a I + e e^T are added entry by entry in scalars: the same sums as adding
   // B.matrix(), without the Mat3 temporaries whose mixed scalar stores and vector loads stalled
   // store forwarding (this loop was 6 % of the paper scene's step).
@@ -137,8 +138,10 @@ void assemble_implicit_system(const ClothTopology& topo, const ForceSet& fs, dou
     if (!A.J.empty())
       for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k)
         D += A.J[topo.tri_adj[k]];
+    A.diag[i] = D;
     A.Pinv[i] = D.inverse();
   });
+  A.off.fill(topo, A.B);
 }
 
 namespace {
@@ -183,7 +186,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
 
   // PCG warm-started from the previous step's dv.
   filter_pinned(topo, s.dv);
-  apply_system(topo, A, s.dv, s.q, s.spring_terms);
+  apply_system(topo, A, s.dv, s.q);
   s.r = s.b - s.q;
   const double bnorm = s.b.norm();
   if (bnorm == 0.0) {
@@ -198,7 +201,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
       s.p = s.z;
     }
     for (; !converged && it < ip.cg_max_iterations; ++it) {
-      apply_system(topo, A, s.p, s.q, s.spring_terms);
+      apply_system(topo, A, s.p, s.q);
       const double pq = (s.p.array() * s.q.array()).sum();
       if (!(pq > 0)) break;  // not SPD along p (or NaN): give up, the caller halves h
       const double alpha = rz / pq;

@@ -1,8 +1,11 @@
 #include "cloth/multigrid.h"
 
+#include <algorithm>
 #include <cmath>
+#include <numeric>
 
 #include "common/parallel.h"
+#include "common/simd.h"
 
 namespace flagsim {
 
@@ -20,18 +23,49 @@ inline int slot(int dr, int dc) { return 3 * (dr + 1) + (dc + 1); }
 
 inline bool free_vertex(const ClothTopology& topo, Index i) { return topo.inv_mass[i] != 0.0; }
 
+// sum of B_k x_{nb_k} over the slots [k, end) of NeighbourBlocks: two slots per step on 16-byte
+// vectors (every x86-64), the odd one in scalars. One kernel for the CG product and the smoother.
+inline Vec3 spring_blocks_times(const NeighbourBlocks& n, const double* x, int32_t k, int32_t end) {
+  double sx = 0, sy = 0, sz = 0;
+#ifdef FLAGSIM_HAVE_VECTORS
+  using V = Lanes16<double>::V;
+  V vx{}, vy{}, vz{};
+  for (; k + 2 <= end; k += 2) {
+    const double* p = x + 3 * std::size_t(n.nb[size_t(k)]);
+    const double* q = x + 3 * std::size_t(n.nb[size_t(k) + 1]);
+    const V X = {p[0], q[0]}, Y = {p[1], q[1]}, Z = {p[2], q[2]};
+    const V a = load_lanes<V>(&n.a[size_t(k)]), ex = load_lanes<V>(&n.ex[size_t(k)]);
+    const V ey = load_lanes<V>(&n.ey[size_t(k)]), ez = load_lanes<V>(&n.ez[size_t(k)]);
+    const V d = (ex * X + ey * Y) + ez * Z;
+    vx += a * X + ex * d;
+    vy += a * Y + ey * d;
+    vz += a * Z + ez * d;
+  }
+  sx = vx[0] + vx[1];
+  sy = vy[0] + vy[1];
+  sz = vz[0] + vz[1];
+#endif
+  for (; k < end; ++k) {
+    const double* p = x + 3 * std::size_t(n.nb[size_t(k)]);
+    const double d = (n.ex[size_t(k)] * p[0] + n.ey[size_t(k)] * p[1]) + n.ez[size_t(k)] * p[2];
+    sx += n.a[size_t(k)] * p[0] + n.ex[size_t(k)] * d;
+    sy += n.a[size_t(k)] * p[1] + n.ey[size_t(k)] * d;
+    sz += n.a[size_t(k)] * p[2] + n.ez[size_t(k)] * d;
+  }
+  return Vec3(sx, sy, sz);
+}
+
 // sum_{j in nb(i)} A_ij x_j over the neighbours j of the free vertex i, negated: springs give
 // -B_s, triangles J_t. kLower / kUpper: only j < i / j > i.
 enum class Side { kAll, kLower, kUpper };
 template <Side side>
 inline Vec3 minus_offdiagonal(const ClothTopology& topo, const ClothSystem& A, const MatX3& x, Index i) {
-  auto take = [i](Index j) { return side == Side::kAll ? j != i : side == Side::kLower ? j < i : j > i; };
-  Vec3 acc = Vec3::Zero();
-  for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k) {
-    const int32_t j = topo.adj_other[k];
-    if (side == Side::kAll || take(j)) acc += A.B[topo.adj_spring[k]].apply(x.row(j));
-  }
-  if (!A.J.empty())
+  const NeighbourBlocks& n = A.off;
+  const int32_t begin = side == Side::kUpper ? n.lower_end[size_t(i)] : topo.adj_offset[size_t(i)];
+  const int32_t end = side == Side::kLower ? n.lower_end[size_t(i)] : topo.adj_offset[size_t(i) + 1];
+  Vec3 acc = spring_blocks_times(n, x.data(), begin, end);
+  if (!A.J.empty()) {
+    auto take = [i](Index j) { return side == Side::kAll ? j != i : side == Side::kLower ? j < i : j > i; };
     for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k) {
       const int32_t t = topo.tri_adj[k];
       Vec3 sum = Vec3::Zero();
@@ -39,6 +73,7 @@ inline Vec3 minus_offdiagonal(const ClothTopology& topo, const ClothSystem& A, c
         if (take(topo.triangles(t, q))) sum += x.row(topo.triangles(t, q));
       acc.noalias() -= A.J[t] * sum;
     }
+  }
   return acc;
 }
 
@@ -184,35 +219,45 @@ void finish_level(MultigridLevel& L) {
 
 }  // namespace
 
-void apply_system(const ClothTopology& topo, const ClothSystem& A, const MatX3& p, MatX3& out,
-                  MatX3& spring_terms) {
-  // Each spring's term y_s = B_s (p_i - p_j), s = (i, j), once; vertex i adds y_s and j adds -y_s,
-  // which is B_s (p_j - p_i) to the last bit (negation is exact), so the sums are those of
-  // computing every term from both ends, at half the cost.
-  const Index S = topo.num_springs();
-  parallel_for(S, [&](Index s) {
-    spring_terms.row(s) =
-        A.B[s].apply(Vec3(p.row(topo.springs(s, 0))) - Vec3(p.row(topo.springs(s, 1)))).transpose();
+void NeighbourBlocks::build(const ClothTopology& topo) {
+  const Index N = topo.num_vertices();
+  const size_t slots = topo.adj_other.size();
+  entry.resize(slots);
+  nb.resize(slots);
+  lower_end.resize(size_t(N));
+  for (auto* v : {&a, &ex, &ey, &ez}) v->assign(slots, 0.0);
+  for (Index i = 0; i < N; ++i) {
+    const int32_t b = topo.adj_offset[size_t(i)], e = topo.adj_offset[size_t(i) + 1];
+    std::iota(entry.begin() + b, entry.begin() + e, b);
+    std::sort(entry.begin() + b, entry.begin() + e, [&](int32_t p, int32_t q) {
+      return std::make_pair(topo.adj_other[size_t(p)], p) < std::make_pair(topo.adj_other[size_t(q)], q);
+    });
+    lower_end[size_t(i)] = e;
+    for (int32_t k = b; k < e; ++k) {
+      nb[size_t(k)] = topo.adj_other[size_t(entry[size_t(k)])];
+      if (nb[size_t(k)] > i && lower_end[size_t(i)] == e) lower_end[size_t(i)] = k;
+    }
+  }
+}
+
+void NeighbourBlocks::fill(const ClothTopology& topo, const std::vector<SpringBlock>& B) {
+  parallel_for(Index(entry.size()), [&](Index k) {
+    const SpringBlock& s = B[size_t(topo.adj_spring[size_t(entry[size_t(k)])])];
+    a[size_t(k)] = s.a;
+    ex[size_t(k)] = s.e[0];
+    ey[size_t(k)] = s.e[1];
+    ez[size_t(k)] = s.e[2];
   });
-  const bool tri = !A.J.empty();
+}
+
+void apply_system(const ClothTopology& topo, const ClothSystem& A, const MatX3& p, MatX3& out) {
+  // (A p)_i = diag_i p_i + sum_{j != i} A_ij p_j: the smoother's kernel plus the diagonal block.
   parallel_for(topo.num_vertices(), [&](Index i) {
     if (!free_vertex(topo, i)) {
       out.row(i).setZero();
       return;
     }
-    Vec3 acc = A.D[i] * Vec3(p.row(i));
-    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k) {
-      const int32_t s = topo.adj_spring[k];
-      if (topo.springs(s, 0) == i) acc += Vec3(spring_terms.row(s));
-      else acc -= Vec3(spring_terms.row(s));
-    }
-    if (tri)
-      for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k) {
-        const int32_t t = topo.tri_adj[k];
-        acc.noalias() += A.J[t] * Vec3(p.row(topo.triangles(t, 0)) + p.row(topo.triangles(t, 1)) +
-                                       p.row(topo.triangles(t, 2)));
-      }
-    out.row(i) = acc.transpose();
+    out.row(i) = (A.diag[size_t(i)] * Vec3(p.row(i)) - minus_offdiagonal<Side::kAll>(topo, A, p, i)).transpose();
   });
 }
 

@@ -10,6 +10,19 @@
 
 namespace flagsim {
 
+/// A's spring blocks by vertex, as the products and the smoother read them: the neighbours j of
+/// vertex i in increasing order in slots [topo.adj_offset[i], topo.adj_offset[i + 1]) (those below
+/// i first, up to lower_end[i]), each block B_s = a I + e e^T of the spring (i, j) in four arrays.
+/// The shape is fixed by the topology (build); fill copies a step's blocks in.
+struct NeighbourBlocks {
+  std::vector<int32_t> nb;         ///< (2 S) the neighbour j
+  std::vector<int32_t> entry;      ///< (2 S) the topology's adjacency slot (adj_spring) it holds
+  std::vector<int32_t> lower_end;  ///< (N)
+  std::vector<double> a, ex, ey, ez;  ///< (2 S)
+  void build(const ClothTopology& topo);
+  void fill(const ClothTopology& topo, const std::vector<SpringBlock>& B);
+};
+
 /// A = M - h df/dv - h^2 df/dx on the free vertices (Baraff-Witkin's filter drops pinned rows and
 /// columns): with 1_i the indicator of vertex i and (x) the Kronecker product,
 ///   A = sum_i D_i (x) 1_i 1_i^T + sum_s B_s (x) (1_i - 1_j)(1_i - 1_j)^T + sum_t J_t (x) 1_t 1_t^T
@@ -19,13 +32,13 @@ struct ClothSystem {
   std::vector<Mat3> D;         ///< (N)
   std::vector<SpringBlock> B;  ///< (S)
   std::vector<Mat3> J;         ///< (T) or empty
-  std::vector<Mat3> Pinv;      ///< (N) inverses of A's 3x3 diagonal blocks (block Jacobi)
+  std::vector<Mat3> diag;      ///< (N) A's 3x3 diagonal blocks
+  std::vector<Mat3> Pinv;      ///< (N) their inverses (block Jacobi, Gauss-Seidel)
+  NeighbourBlocks off;         ///< B by vertex (the off-diagonal blocks are -B)
 };
 
 /// out = A p (N x 3); rows of pinned vertices are zero, p's pinned rows must be zero.
-/// spring_terms (S x 3) is scratch.
-void apply_system(const ClothTopology& topo, const ClothSystem& A, const MatX3& p, MatX3& out,
-                  MatX3& spring_terms);
+void apply_system(const ClothTopology& topo, const ClothSystem& A, const MatX3& p, MatX3& out);
 
 /// One coarse level: a rows x cols grid whose vertex (r, c) aggregates the 2 x 2 vertices
 /// (2r..2r+1, 2c..2c+1) of the level below. Its Galerkin operator P^T A P (P piecewise constant,
