@@ -93,12 +93,21 @@ void gauss_seidel_fine(const ClothTopology& topo, const ClothSystem& A, const Ma
 }
 
 // b_v - sum over the 9-point stencil of vertex v = (r, c) of A_vw x_w, the centre included or not.
+// Interior vertices (all 8 neighbours inside) skip the bounds tests; same sums, same order.
 template <bool with_centre>
 inline Vec3 b_minus_stencil(const MultigridLevel& L, int r, int c) {
   const int R = L.rows, C = L.cols;
   const Index v = Index(r) * C + c;
   Vec3 acc = L.b.row(v);
   const Mat3* a = &L.A[9 * v];
+  if (r > 0 && r + 1 < R && c > 0 && c + 1 < C) {
+    for (int dr = -1; dr <= 1; ++dr)
+      for (int dc = -1; dc <= 1; ++dc) {
+        if (!with_centre && dr == 0 && dc == 0) continue;
+        acc.noalias() -= a[slot(dr, dc)] * Vec3(L.x.row(v + dr * C + dc));
+      }
+    return acc;
+  }
   for (int dr = -1; dr <= 1; ++dr) {
     if (r + dr < 0 || r + dr >= R) continue;
     for (int dc = -1; dc <= 1; ++dc) {
