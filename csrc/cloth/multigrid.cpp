@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <type_traits>
 
 #include "common/parallel.h"
 #include "common/simd.h"
@@ -23,6 +24,30 @@ inline int slot(int dr, int dc) { return 3 * (dr + 1) + (dc + 1); }
 
 inline bool free_vertex(const ClothTopology& topo, Index i) { return topo.inv_mass[i] != 0.0; }
 
+// Adds B x_{nb} of the slots k.. (one per lane of S: double, or a 16-byte vector) to (sx, sy, sz).
+template <class S>
+FLAGSIM_INLINE void add_spring_blocks(const NeighbourBlocks& n, const double* x, size_t k, S& sx, S& sy,
+                                      S& sz) {
+  const double* p = x + 3 * std::size_t(n.nb[k]);
+  S X, Y, Z;
+  if constexpr (std::is_same<S, double>::value) {
+    X = p[0];
+    Y = p[1];
+    Z = p[2];
+  } else {
+    const double* q = x + 3 * std::size_t(n.nb[k + 1]);
+    X = S{p[0], q[0]};
+    Y = S{p[1], q[1]};
+    Z = S{p[2], q[2]};
+  }
+  const S a = load_lanes<S>(&n.a[k]), ex = load_lanes<S>(&n.ex[k]);
+  const S ey = load_lanes<S>(&n.ey[k]), ez = load_lanes<S>(&n.ez[k]);
+  const S d = (ex * X + ey * Y) + ez * Z;
+  sx += a * X + ex * d;
+  sy += a * Y + ey * d;
+  sz += a * Z + ez * d;
+}
+
 // sum of B_k x_{nb_k} over the slots [k, end) of NeighbourBlocks: two slots per step on 16-byte
 // vectors (every x86-64), the odd one in scalars. One kernel for the CG product and the smoother.
 inline Vec3 spring_blocks_times(const NeighbourBlocks& n, const double* x, int32_t k, int32_t end) {
@@ -30,28 +55,12 @@ inline Vec3 spring_blocks_times(const NeighbourBlocks& n, const double* x, int32
 #ifdef FLAGSIM_HAVE_VECTORS
   using V = Lanes16<double>::V;
   V vx{}, vy{}, vz{};
-  for (; k + 2 <= end; k += 2) {
-    const double* p = x + 3 * std::size_t(n.nb[size_t(k)]);
-    const double* q = x + 3 * std::size_t(n.nb[size_t(k) + 1]);
-    const V X = {p[0], q[0]}, Y = {p[1], q[1]}, Z = {p[2], q[2]};
-    const V a = load_lanes<V>(&n.a[size_t(k)]), ex = load_lanes<V>(&n.ex[size_t(k)]);
-    const V ey = load_lanes<V>(&n.ey[size_t(k)]), ez = load_lanes<V>(&n.ez[size_t(k)]);
-    const V d = (ex * X + ey * Y) + ez * Z;
-    vx += a * X + ex * d;
-    vy += a * Y + ey * d;
-    vz += a * Z + ez * d;
-  }
+  for (; k + 2 <= end; k += 2) add_spring_blocks(n, x, size_t(k), vx, vy, vz);
   sx = vx[0] + vx[1];
   sy = vy[0] + vy[1];
   sz = vz[0] + vz[1];
 #endif
-  for (; k < end; ++k) {
-    const double* p = x + 3 * std::size_t(n.nb[size_t(k)]);
-    const double d = (n.ex[size_t(k)] * p[0] + n.ey[size_t(k)] * p[1]) + n.ez[size_t(k)] * p[2];
-    sx += n.a[size_t(k)] * p[0] + n.ex[size_t(k)] * d;
-    sy += n.a[size_t(k)] * p[1] + n.ey[size_t(k)] * d;
-    sz += n.a[size_t(k)] * p[2] + n.ez[size_t(k)] * d;
-  }
+  for (; k < end; ++k) add_spring_blocks(n, x, size_t(k), sx, sy, sz);
   return Vec3(sx, sy, sz);
 }
 
@@ -93,29 +102,28 @@ void gauss_seidel_fine(const ClothTopology& topo, const ClothSystem& A, const Ma
 }
 
 // b_v - sum over the 9-point stencil of vertex v = (r, c) of A_vw x_w, the centre included or not.
-// Interior vertices (all 8 neighbours inside) skip the bounds tests; same sums, same order.
-template <bool with_centre>
-inline Vec3 b_minus_stencil(const MultigridLevel& L, int r, int c) {
+// `interior` (all 8 neighbours inside) compiles the bounds tests out and lets the 3 x 3 loop
+// unroll; same sums, same order either way.
+template <bool with_centre, bool interior>
+FLAGSIM_INLINE Vec3 b_minus_stencil_at(const MultigridLevel& L, int r, int c) {
   const int R = L.rows, C = L.cols;
   const Index v = Index(r) * C + c;
   Vec3 acc = L.b.row(v);
   const Mat3* a = &L.A[9 * v];
-  if (r > 0 && r + 1 < R && c > 0 && c + 1 < C) {
-    for (int dr = -1; dr <= 1; ++dr)
-      for (int dc = -1; dc <= 1; ++dc) {
-        if (!with_centre && dr == 0 && dc == 0) continue;
-        acc.noalias() -= a[slot(dr, dc)] * Vec3(L.x.row(v + dr * C + dc));
-      }
-    return acc;
-  }
   for (int dr = -1; dr <= 1; ++dr) {
-    if (r + dr < 0 || r + dr >= R) continue;
+    if (!interior && (r + dr < 0 || r + dr >= R)) continue;
     for (int dc = -1; dc <= 1; ++dc) {
-      if (c + dc < 0 || c + dc >= C || (!with_centre && dr == 0 && dc == 0)) continue;
+      if ((!interior && (c + dc < 0 || c + dc >= C)) || (!with_centre && dr == 0 && dc == 0)) continue;
       acc.noalias() -= a[slot(dr, dc)] * Vec3(L.x.row(v + dr * C + dc));
     }
   }
   return acc;
+}
+
+template <bool with_centre>
+inline Vec3 b_minus_stencil(const MultigridLevel& L, int r, int c) {
+  return r > 0 && r + 1 < L.rows && c > 0 && c + 1 < L.cols ? b_minus_stencil_at<with_centre, true>(L, r, c)
+                                                           : b_minus_stencil_at<with_centre, false>(L, r, c);
 }
 
 // Coarse-level block Gauss-Seidel sweep with the 9-point block stencil.
