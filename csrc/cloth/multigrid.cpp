@@ -24,7 +24,8 @@ inline int slot(int dr, int dc) { return 3 * (dr + 1) + (dc + 1); }
 
 inline bool free_vertex(const ClothTopology& topo, Index i) { return topo.inv_mass[i] != 0.0; }
 
-// Adds B x_{nb} of the slots k.. (one per lane of S: double, or a 16-byte vector) to (sx, sy, sz).
+// Adds B x_{nb} of the slots k.. (one per lane of S: double, or a 16- or 32-byte vector) to
+// (sx, sy, sz).
 template <class S>
 FLAGSIM_INLINE void add_spring_blocks(const NeighbourBlocks& n, const double* x, size_t k, S& sx, S& sy,
                                       S& sz) {
@@ -34,11 +35,18 @@ FLAGSIM_INLINE void add_spring_blocks(const NeighbourBlocks& n, const double* x,
     X = p[0];
     Y = p[1];
     Z = p[2];
-  } else {
+  } else if constexpr (sizeof(S) == 16) {
     const double* q = x + 3 * std::size_t(n.nb[k + 1]);
     X = S{p[0], q[0]};
     Y = S{p[1], q[1]};
     Z = S{p[2], q[2]};
+  } else {
+    const double* q = x + 3 * std::size_t(n.nb[k + 1]);
+    const double* r = x + 3 * std::size_t(n.nb[k + 2]);
+    const double* t = x + 3 * std::size_t(n.nb[k + 3]);
+    X = S{p[0], q[0], r[0], t[0]};
+    Y = S{p[1], q[1], r[1], t[1]};
+    Z = S{p[2], q[2], r[2], t[2]};
   }
   const S a = load_lanes<S>(&n.a[k]), ex = load_lanes<S>(&n.ex[k]);
   const S ey = load_lanes<S>(&n.ey[k]), ez = load_lanes<S>(&n.ez[k]);
@@ -48,18 +56,40 @@ FLAGSIM_INLINE void add_spring_blocks(const NeighbourBlocks& n, const double* x,
   sz += a * Z + ez * d;
 }
 
-// sum of B_k x_{nb_k} over the slots [k, end) of NeighbourBlocks: two slots per step on 16-byte
-// vectors (every x86-64), the odd one in scalars. One kernel for the CG product and the smoother.
-inline Vec3 spring_blocks_times(const NeighbourBlocks& n, const double* x, int32_t k, int32_t end) {
+// sum of B_k x_{nb_k} over the slots [k, end) of NeighbourBlocks. Four slots per step in four
+// running sums (lanes), one 32-byte vector (L = Lanes32, AVX), two 16-byte ones (Lanes16) or four
+// scalars (void); the sums are added as (0 + 1) + (2 + 3), then the last < 4 slots in scalars. The
+// same operations on every lane type, so every width gives the same bits. One kernel for the CG
+// product and the smoother.
+template <class L>
+FLAGSIM_INLINE Vec3 spring_blocks_times(const NeighbourBlocks& n, const double* x, int32_t k, int32_t end) {
   double sx = 0, sy = 0, sz = 0;
-#ifdef FLAGSIM_HAVE_VECTORS
-  using V = Lanes16<double>::V;
-  V vx{}, vy{}, vz{};
-  for (; k + 2 <= end; k += 2) add_spring_blocks(n, x, size_t(k), vx, vy, vz);
-  sx = vx[0] + vx[1];
-  sy = vy[0] + vy[1];
-  sz = vz[0] + vz[1];
-#endif
+  if (k + 4 <= end) {
+    if constexpr (std::is_void<L>::value) {
+      double ax[4] = {}, ay[4] = {}, az[4] = {};
+      for (; k + 4 <= end; k += 4)
+        for (int lane = 0; lane < 4; ++lane) add_spring_blocks(n, x, size_t(k + lane), ax[lane], ay[lane], az[lane]);
+      sx = (ax[0] + ax[1]) + (ax[2] + ax[3]);
+      sy = (ay[0] + ay[1]) + (ay[2] + ay[3]);
+      sz = (az[0] + az[1]) + (az[2] + az[3]);
+    } else if constexpr (L::W == 2) {
+      typename L::V ax{}, ay{}, az{}, bx{}, by{}, bz{};
+      for (; k + 4 <= end; k += 4) {
+        add_spring_blocks(n, x, size_t(k), ax, ay, az);
+        add_spring_blocks(n, x, size_t(k + 2), bx, by, bz);
+      }
+      sx = (ax[0] + ax[1]) + (bx[0] + bx[1]);
+      sy = (ay[0] + ay[1]) + (by[0] + by[1]);
+      sz = (az[0] + az[1]) + (bz[0] + bz[1]);
+    } else {
+      static_assert(L::W == 4, "four lanes of double");
+      typename L::V ax{}, ay{}, az{};
+      for (; k + 4 <= end; k += 4) add_spring_blocks(n, x, size_t(k), ax, ay, az);
+      sx = (ax[0] + ax[1]) + (ax[2] + ax[3]);
+      sy = (ay[0] + ay[1]) + (ay[2] + ay[3]);
+      sz = (az[0] + az[1]) + (az[2] + az[3]);
+    }
+  }
   for (; k < end; ++k) add_spring_blocks(n, x, size_t(k), sx, sy, sz);
   return Vec3(sx, sy, sz);
 }
@@ -67,12 +97,12 @@ inline Vec3 spring_blocks_times(const NeighbourBlocks& n, const double* x, int32
 // sum_{j in nb(i)} A_ij x_j over the neighbours j of the free vertex i, negated: springs give
 // -B_s, triangles J_t. kLower / kUpper: only j < i / j > i.
 enum class Side { kAll, kLower, kUpper };
-template <Side side>
-inline Vec3 minus_offdiagonal(const ClothTopology& topo, const ClothSystem& A, const MatX3& x, Index i) {
+template <class L, Side side>
+FLAGSIM_INLINE Vec3 minus_offdiagonal(const ClothTopology& topo, const ClothSystem& A, const MatX3& x, Index i) {
   const NeighbourBlocks& n = A.off;
   const int32_t begin = side == Side::kUpper ? n.lower_end[size_t(i)] : topo.adj_offset[size_t(i)];
   const int32_t end = side == Side::kLower ? n.lower_end[size_t(i)] : topo.adj_offset[size_t(i) + 1];
-  Vec3 acc = spring_blocks_times(n, x.data(), begin, end);
+  Vec3 acc = spring_blocks_times<L>(n, x.data(), begin, end);
   if (!A.J.empty()) {
     auto take = [i](Index j) { return side == Side::kAll ? j != i : side == Side::kLower ? j < i : j > i; };
     for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k) {
@@ -86,19 +116,86 @@ inline Vec3 minus_offdiagonal(const ClothTopology& topo, const ClothSystem& A, c
   return acc;
 }
 
-// Fine-level block Gauss-Seidel: x_i <- D_i^-1 (b_i - sum_{j != i} A_ij x_j), D_i A's diagonal
-// block, over the free vertices in increasing (forward) or decreasing order. from_zero: the
-// forward sweep that starts from x = 0 reads only the j < i it has already set.
+// The fine-level passes over the neighbour blocks, on lane type L (see spring_blocks_times).
+template <class L>
+struct FinePasses {
+  // Block Gauss-Seidel: x_i <- D_i^-1 (b_i - sum_{j != i} A_ij x_j), D_i A's diagonal block, over
+  // the free vertices in increasing (forward) or decreasing order. from_zero: the forward sweep
+  // that starts from x = 0 reads only the j < i it has already set.
+  FLAGSIM_INLINE static void gauss_seidel(const ClothTopology& topo, const ClothSystem& A, const MatX3& b, MatX3& x,
+                                          bool forward, bool from_zero) {
+    const Index N = topo.num_vertices();
+    for (Index n = 0; n < N; ++n) {
+      const Index i = forward ? n : N - 1 - n;
+      if (!free_vertex(topo, i)) continue;
+      const Vec3 acc = Vec3(b.row(i)) + (from_zero ? minus_offdiagonal<L, Side::kLower>(topo, A, x, i)
+                                                   : minus_offdiagonal<L, Side::kAll>(topo, A, x, i));
+      x.row(i) = (A.Pinv[i] * acc).transpose();
+    }
+  }
+  // out_i = (A p)_i = diag_i p_i + sum_{j != i} A_ij p_j for the vertices [begin, end).
+  FLAGSIM_INLINE static void product(const ClothTopology& topo, const ClothSystem& A, const MatX3& p, MatX3& out,
+                                     Index begin, Index end) {
+    for (Index i = begin; i < end; ++i) {
+      if (!free_vertex(topo, i)) {
+        out.row(i).setZero();
+        continue;
+      }
+      out.row(i) = (A.diag[size_t(i)] * Vec3(p.row(i)) - minus_offdiagonal<L, Side::kAll>(topo, A, p, i)).transpose();
+    }
+  }
+  // out_i = -sum_{j > i} A_ij x_j (zero on pinned rows).
+  FLAGSIM_INLINE static void upper_half(const ClothTopology& topo, const ClothSystem& A, const MatX3& x, MatX3& out) {
+    for (Index i = 0; i < topo.num_vertices(); ++i)
+      if (free_vertex(topo, i)) out.row(i) = minus_offdiagonal<L, Side::kUpper>(topo, A, x, i).transpose();
+      else out.row(i).setZero();
+  }
+};
+
+#ifdef FLAGSIM_HAVE_VECTORS
+using FineNarrow = FinePasses<Lanes16<double>>;
+#else
+using FineNarrow = FinePasses<void>;
+#endif
+
+// The same passes compiled for AVX (32-byte lanes), chosen at run time by vector_bytes().
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+using FineWide = FinePasses<Lanes32<double>>;
+FLAGSIM_TARGET_AVX void gauss_seidel_wide(const ClothTopology& topo, const ClothSystem& A, const MatX3& b,
+                                          MatX3& x, bool forward, bool from_zero) {
+  FineWide::gauss_seidel(topo, A, b, x, forward, from_zero);
+}
+FLAGSIM_TARGET_AVX void product_wide(const ClothTopology& topo, const ClothSystem& A, const MatX3& p,
+                                     MatX3& out, Index begin, Index end) {
+  FineWide::product(topo, A, p, out, begin, end);
+}
+FLAGSIM_TARGET_AVX void upper_half_wide(const ClothTopology& topo, const ClothSystem& A, const MatX3& x,
+                                        MatX3& out) {
+  FineWide::upper_half(topo, A, x, out);
+}
+#endif
+
+inline bool wide() {
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+  return vector_bytes() == 32;
+#else
+  return false;
+#endif
+}
+
 void gauss_seidel_fine(const ClothTopology& topo, const ClothSystem& A, const MatX3& b, MatX3& x,
                        bool forward, bool from_zero) {
-  const Index N = topo.num_vertices();
-  for (Index n = 0; n < N; ++n) {
-    const Index i = forward ? n : N - 1 - n;
-    if (!free_vertex(topo, i)) continue;
-    const Vec3 acc = Vec3(b.row(i)) + (from_zero ? minus_offdiagonal<Side::kLower>(topo, A, x, i)
-                                                 : minus_offdiagonal<Side::kAll>(topo, A, x, i));
-    x.row(i) = (A.Pinv[i] * acc).transpose();
-  }
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+  if (wide()) return gauss_seidel_wide(topo, A, b, x, forward, from_zero);
+#endif
+  FineNarrow::gauss_seidel(topo, A, b, x, forward, from_zero);
+}
+
+void upper_half(const ClothTopology& topo, const ClothSystem& A, const MatX3& x, MatX3& out) {
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+  if (wide()) return upper_half_wide(topo, A, x, out);
+#endif
+  FineNarrow::upper_half(topo, A, x, out);
 }
 
 // b_v - sum over the 9-point stencil of vertex v = (r, c) of A_vw x_w, the centre included or not.
@@ -268,14 +365,16 @@ void NeighbourBlocks::fill(const ClothTopology& topo, const std::vector<SpringBl
 }
 
 void apply_system(const ClothTopology& topo, const ClothSystem& A, const MatX3& p, MatX3& out) {
-  // (A p)_i = diag_i p_i + sum_{j != i} A_ij p_j: the smoother's kernel plus the diagonal block.
-  parallel_for(topo.num_vertices(), [&](Index i) {
-    if (!free_vertex(topo, i)) {
-      out.row(i).setZero();
-      return;
-    }
-    out.row(i) = (A.diag[size_t(i)] * Vec3(p.row(i)) - minus_offdiagonal<Side::kAll>(topo, A, p, i)).transpose();
-  });
+  // (A p)_i = diag_i p_i + sum_{j != i} A_ij p_j: the smoother's kernel plus the diagonal block,
+  // in chunks of vertices (the wide kernel is a call, not inlined into the loop's body).
+  constexpr Index kChunk = 256;
+  const Index N = topo.num_vertices(), chunks = (N + kChunk - 1) / kChunk;
+  void (*rows)(const ClothTopology&, const ClothSystem&, const MatX3&, MatX3&, Index, Index) = &FineNarrow::product;
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+  if (wide()) rows = &product_wide;
+#endif
+  parallel_for_if(N >= kParallelGrain, chunks,
+                  [&](Index c) { rows(topo, A, p, out, c * kChunk, std::min(N, (c + 1) * kChunk)); });
 }
 
 bool multigrid_applies(const ClothTopology& topo) {
@@ -411,10 +510,7 @@ void multigrid_vcycle(const ClothTopology& topo, const ClothSystem& A, Multigrid
   gauss_seidel_fine(topo, A, r, z, true, true);
   // After a forward sweep x_i solves row i against the x_j, j < i, it had: the residual of row i
   // is what the j > i contribute, r_i - (A x)_i = -sum_{j > i} A_ij x_j (half a product).
-  const Index N = topo.num_vertices();
-  for (Index i = 0; i < N; ++i)
-    if (free_vertex(topo, i)) mg.fine_r.row(i) = minus_offdiagonal<Side::kUpper>(topo, A, z, i).transpose();
-    else mg.fine_r.row(i).setZero();
+  upper_half(topo, A, z, mg.fine_r);
   restrict_to(topo.rows, topo.cols, mg.fine_r, mg.levels.front());
   cycle_level(mg, 0);
   prolong_add(topo.rows, topo.cols, mg.levels.front(), [&](Index v) { return free_vertex(topo, v); }, z);
