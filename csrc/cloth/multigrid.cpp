@@ -198,47 +198,126 @@ void upper_half(const ClothTopology& topo, const ClothSystem& A, const MatX3& x,
   FineNarrow::upper_half(topo, A, x, out);
 }
 
-// b_v - sum over the 9-point stencil of vertex v = (r, c) of A_vw x_w, the centre included or not.
-// `interior` (all 8 neighbours inside) compiles the bounds tests out and lets the 3 x 3 loop
-// unroll; same sums, same order either way.
-template <bool with_centre, bool interior>
+// A 3-vector running sum s -= a y (a a column-major 3 x 3 block), each row as
+// (a_r0 y_0 + a_r1 y_1) + a_r2 y_2 and then subtracted: on three scalars (void), a 16-byte vector
+// and a scalar, or one 32-byte vector whose fourth lane reads the next column and is dropped (the
+// caller keeps a readable double after every block). The same bits at every width.
+template <class L>
+struct BlockSum {
+  double s0, s1, s2;
+  FLAGSIM_INLINE explicit BlockSum(const double* b) : s0(b[0]), s1(b[1]), s2(b[2]) {}
+  FLAGSIM_INLINE void sub(const double* a, const double* y) {
+    s0 -= (a[0] * y[0] + a[3] * y[1]) + a[6] * y[2];
+    s1 -= (a[1] * y[0] + a[4] * y[1]) + a[7] * y[2];
+    s2 -= (a[2] * y[0] + a[5] * y[1]) + a[8] * y[2];
+  }
+  FLAGSIM_INLINE Vec3 get() const { return Vec3(s0, s1, s2); }
+};
+#ifdef FLAGSIM_HAVE_VECTORS
+template <>
+struct BlockSum<Lanes16<double>> {
+  using V = Lanes16<double>::V;
+  V s01;
+  double s2;
+  FLAGSIM_INLINE explicit BlockSum(const double* b) : s01(V{b[0], b[1]}), s2(b[2]) {}
+  FLAGSIM_INLINE void sub(const double* a, const double* y) {
+    s01 -= (load_lanes<V>(a) * y[0] + load_lanes<V>(a + 3) * y[1]) + load_lanes<V>(a + 6) * y[2];
+    s2 -= (a[2] * y[0] + a[5] * y[1]) + a[8] * y[2];
+  }
+  FLAGSIM_INLINE Vec3 get() const { return Vec3(s01[0], s01[1], s2); }
+};
+template <>
+struct BlockSum<Lanes32<double>> {
+  using V = Lanes32<double>::V;
+  V s;
+  FLAGSIM_INLINE explicit BlockSum(const double* b) : s(V{b[0], b[1], b[2], 0.0}) {}
+  FLAGSIM_INLINE void sub(const double* a, const double* y) {
+    s -= (load_lanes<V>(a) * y[0] + load_lanes<V>(a + 3) * y[1]) + load_lanes<V>(a + 6) * y[2];
+  }
+  FLAGSIM_INLINE Vec3 get() const { return Vec3(s[0], s[1], s[2]); }
+};
+#endif
+
+// b_v - sum over the 9-point stencil of vertex v = (r, c) of A_vw x_w, the centre included or not
+// (BlockSum<Lanes>), the neighbour (0, last) (-1: the one a forward sweep has just set, +1:
+// backward; 0: none) after all the others, so that a sweep's next vertex waits for one block
+// product only. `interior` (all 8 neighbours inside) compiles the bounds tests out and lets the
+// 3 x 3 loop unroll; same sums, same order either way.
+template <class Lanes, bool with_centre, bool interior, int last>
 FLAGSIM_INLINE Vec3 b_minus_stencil_at(const MultigridLevel& L, int r, int c) {
   const int R = L.rows, C = L.cols;
   const Index v = Index(r) * C + c;
-  Vec3 acc = L.b.row(v);
-  const Mat3* a = &L.A[9 * v];
+  const double* a = L.A[9 * size_t(v)].data();
+  BlockSum<Lanes> acc(L.b.data() + 3 * v);
   for (int dr = -1; dr <= 1; ++dr) {
     if (!interior && (r + dr < 0 || r + dr >= R)) continue;
     for (int dc = -1; dc <= 1; ++dc) {
       if ((!interior && (c + dc < 0 || c + dc >= C)) || (!with_centre && dr == 0 && dc == 0)) continue;
-      acc.noalias() -= a[slot(dr, dc)] * Vec3(L.x.row(v + dr * C + dc));
+      if (last != 0 && dr == 0 && dc == last) continue;
+      acc.sub(a + 9 * slot(dr, dc), L.x.data() + 3 * (v + dr * C + dc));
     }
   }
-  return acc;
+  if (last != 0 && (interior || (c + last >= 0 && c + last < C)))
+    acc.sub(a + 9 * slot(0, last), L.x.data() + 3 * (v + last));
+  return acc.get();
 }
 
-template <bool with_centre>
-inline Vec3 b_minus_stencil(const MultigridLevel& L, int r, int c) {
-  return r > 0 && r + 1 < L.rows && c > 0 && c + 1 < L.cols ? b_minus_stencil_at<with_centre, true>(L, r, c)
-                                                           : b_minus_stencil_at<with_centre, false>(L, r, c);
-}
-
-// Coarse-level block Gauss-Seidel sweep with the 9-point block stencil.
-void gauss_seidel_level(MultigridLevel& L, bool forward) {
-  const int R = L.rows, C = L.cols;
-  const Index n = Index(R) * C;
-  for (Index m = 0; m < n; ++m) {
-    const Index v = forward ? m : n - 1 - m;
-    if (!L.active[v]) continue;
-    L.x.row(v) = (L.Dinv[v] * b_minus_stencil<false>(L, int(v / C), int(v % C))).transpose();
+// The coarse levels' passes, on lane type Lanes (BlockSum).
+template <class Lanes>
+struct CoarsePasses {
+  template <bool with_centre, int last>
+  FLAGSIM_INLINE static Vec3 b_minus_stencil(const MultigridLevel& L, int r, int c) {
+    return r > 0 && r + 1 < L.rows && c > 0 && c + 1 < L.cols
+               ? b_minus_stencil_at<Lanes, with_centre, true, last>(L, r, c)
+               : b_minus_stencil_at<Lanes, with_centre, false, last>(L, r, c);
   }
+  // Block Gauss-Seidel sweep with the 9-point block stencil.
+  template <bool forward>
+  FLAGSIM_INLINE static void sweep(MultigridLevel& L) {
+    const int C = L.cols;
+    const Index n = Index(L.rows) * C;
+    for (Index m = 0; m < n; ++m) {
+      const Index v = forward ? m : n - 1 - m;
+      if (!L.active[v]) continue;
+      L.x.row(v) = (L.Dinv[v] * b_minus_stencil<false, forward ? -1 : 1>(L, int(v / C), int(v % C))).transpose();
+    }
+  }
+  FLAGSIM_INLINE static void gauss_seidel(MultigridLevel& L, bool forward) {
+    if (forward) sweep<true>(L);
+    else sweep<false>(L);
+  }
+  // L.r = L.b - A L.x
+  FLAGSIM_INLINE static void residual(MultigridLevel& L) {
+    const int R = L.rows, C = L.cols;
+    for (int r = 0; r < R; ++r)
+      for (int c = 0; c < C; ++c) L.r.row(Index(r) * C + c) = b_minus_stencil<true, 0>(L, r, c).transpose();
+  }
+};
+
+#ifdef FLAGSIM_HAVE_VECTORS
+using CoarseNarrow = CoarsePasses<Lanes16<double>>;
+#else
+using CoarseNarrow = CoarsePasses<void>;
+#endif
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+FLAGSIM_TARGET_AVX void gauss_seidel_level_wide(MultigridLevel& L, bool forward) {
+  CoarsePasses<Lanes32<double>>::gauss_seidel(L, forward);
+}
+FLAGSIM_TARGET_AVX void residual_level_wide(MultigridLevel& L) { CoarsePasses<Lanes32<double>>::residual(L); }
+#endif
+
+void gauss_seidel_level(MultigridLevel& L, bool forward) {
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+  if (wide()) return gauss_seidel_level_wide(L, forward);
+#endif
+  CoarseNarrow::gauss_seidel(L, forward);
 }
 
-// L.r = L.b - A L.x
 void residual_level(MultigridLevel& L) {
-  const int R = L.rows, C = L.cols;
-  for (int r = 0; r < R; ++r)
-    for (int c = 0; c < C; ++c) L.r.row(Index(r) * C + c) = b_minus_stencil<true>(L, r, c).transpose();
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+  if (wide()) return residual_level_wide(L);
+#endif
+  CoarseNarrow::residual(L);
 }
 
 // out.b = P^T r: each coarse vertex sums the residuals of its 2 x 2 fine vertices.
@@ -393,7 +472,7 @@ void multigrid_build(const ClothTopology& topo, Multigrid& mg) {
     L.rows = (R + 1) / 2;
     L.cols = (C + 1) / 2;
     const Index n = Index(L.rows) * L.cols;
-    L.A.assign(9 * n, Mat3::Zero());
+    L.A.assign(9 * n + 1, Mat3::Zero());  // + 1: padding for b_minus_stencil_at's wide loads
     L.Dinv.assign(n, Mat3::Identity());
     L.active.assign(n, 0);
     for (int r = 0; r < R; ++r)

@@ -45,7 +45,8 @@ void apply_system(const ClothTopology& topo, const ClothSystem& A, const MatX3& 
 /// 3x3 identity blocks) couples each vertex to its 8 neighbours at most.
 struct MultigridLevel {
   int rows = 0, cols = 0;
-  std::vector<Mat3> A;           ///< (9 rows cols): A[9 v + 3 (dr + 1) + dc + 1] couples v, v + (dr, dc)
+  std::vector<Mat3> A;           ///< (9 rows cols + 1): A[9 v + 3 (dr + 1) + dc + 1] couples v, v + (dr, dc);
+                                 ///< the last block is padding (zero) for the vector loads
   std::vector<Mat3> Dinv;        ///< (rows cols) inverse diagonal blocks (identity if inactive)
   std::vector<uint8_t> active;   ///< (rows cols) 1 if it aggregates at least one free vertex
   MatX3 x, b, r;                 ///< (rows cols x 3) solution, right-hand side, residual
