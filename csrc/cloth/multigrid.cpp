@@ -152,11 +152,7 @@ struct FinePasses {
   }
 };
 
-#ifdef FLAGSIM_HAVE_VECTORS
-using FineNarrow = FinePasses<Lanes16<double>>;
-#else
-using FineNarrow = FinePasses<void>;
-#endif
+using FineNarrow = FinePasses<NarrowLanes<double>>;
 
 // The same passes compiled for AVX (32-byte lanes), chosen at run time by vector_bytes().
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
@@ -294,11 +290,7 @@ struct CoarsePasses {
   }
 };
 
-#ifdef FLAGSIM_HAVE_VECTORS
-using CoarseNarrow = CoarsePasses<Lanes16<double>>;
-#else
-using CoarseNarrow = CoarsePasses<void>;
-#endif
+using CoarseNarrow = CoarsePasses<NarrowLanes<double>>;
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
 FLAGSIM_TARGET_AVX void gauss_seidel_level_wide(MultigridLevel& L, bool forward) {
   CoarsePasses<Lanes32<double>>::gauss_seidel(L, forward);

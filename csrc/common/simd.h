@@ -37,6 +37,16 @@ struct Lanes32 {
 #define FLAGSIM_INLINE inline
 #endif
 
+/// The narrow lane type a kernel runs on without AVX: 16-byte vectors of T where the compiler has
+/// generic vectors, else void (the kernels' scalar loops).
+#ifdef FLAGSIM_HAVE_VECTORS
+template <class T>
+using NarrowLanes = Lanes16<T>;
+#else
+template <class T>
+using NarrowLanes = void;
+#endif
+
 /// *p as a scalar S == T, or the vector S of T loaded (unaligned) from p.
 template <class S, class T>
 FLAGSIM_INLINE S load_lanes(const T* p) {

@@ -486,11 +486,7 @@ FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
 
 template <int C, class T>
 bool sl_row_16(const SlRow<T>& w, int n2) {
-#ifdef FLAGSIM_HAVE_VECTORS
-  return sl_row_body<C, Lanes16<T>>(w, n2);
-#else
-  return sl_row_body<C, void>(w, n2);
-#endif
+  return sl_row_body<C, NarrowLanes<T>>(w, n2);
 }
 
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH

@@ -358,11 +358,7 @@ FLAGSIM_INLINE void spectral_row_body(const SpectralRow<T>& w, int nzc) {
 
 template <class T>
 void spectral_row_16(const SpectralRow<T>& w, int nzc) {
-#ifdef FLAGSIM_HAVE_VECTORS
-  spectral_row_body<Lanes16<double>>(w, nzc);
-#else
-  spectral_row_body<void>(w, nzc);
-#endif
+  spectral_row_body<NarrowLanes<double>>(w, nzc);
 }
 
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
