@@ -266,6 +266,19 @@ def test_bench_is_a_flagsim_sub_command(capsys):
     assert "cloth/flagsim/implicit/8x11/t1" in capsys.readouterr().out
 
 
+def test_cloth_workloads_keep_the_papers_thickness_to_spacing_ratio():
+    # Every size is the same problem meshed finer (the self-collision slope compares them): the
+    # paper's own thickness at the paper's mesh, and the same ratio to the spacing at the others.
+    paper = engines.plain_paper_scene()
+    ratio = paper.self_collision.thickness / engines._spacing(paper.flag)
+    for rows, cols in [(8, 11), (32, 32), (64, 64), (128, 128)]:
+        s = engines.cloth_scene(rows, cols, "implicit", self_collision=True)
+        assert s.self_collision.thickness / engines._spacing(s.flag) == pytest.approx(ratio, rel=1e-12)
+        assert s.self_collision.thickness < 0.5 * engines._spacing(s.flag)
+    assert engines.cloth_scene(8, 11, self_collision=True).self_collision.thickness == pytest.approx(
+        paper.self_collision.thickness, rel=1e-12)
+
+
 @pytest.mark.parametrize("rows, cols", [(8, 11), (128, 128)])
 def test_cloth_workloads_build_at_every_size_with_self_collision(rows, cols):
     if not engines.features()["self_collision"][0]:
