@@ -213,7 +213,12 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
         break;
       }
       const double rz_new = precondition(topo, s, multigrid, s.r, s.z);
-      s.p = s.z + (rz_new / rz) * s.p;
+      // Multigrid's K-cycle is not quite linear: flexible CG (Polak-Ribiere, Notay 2000),
+      // beta = z_new . (r_new - r_old) / rz_old with r_new - r_old = -alpha q. Equal to
+      // rz_new / rz_old in exact arithmetic for a fixed preconditioner (block Jacobi keeps that).
+      const double beta =
+          multigrid ? -alpha * (s.z.array() * s.q.array()).sum() / rz : rz_new / rz;
+      s.p = s.z + beta * s.p;
       rz = rz_new;
     }
     stats.cg_iterations += it;

@@ -50,7 +50,7 @@ struct MultigridLevel {
   std::vector<Mat3> Dinv;        ///< (rows cols) inverse diagonal blocks (identity if inactive)
   std::vector<uint8_t> active;   ///< (rows cols) 1 if it aggregates at least one free vertex
   MatX3 x, b, r;                 ///< (rows cols x 3) solution, right-hand side, residual
-  MatX3 x_sum, b_in;             ///< (rows cols x 3) W-cycle: first pass's x, the level's b
+  MatX3 x_sum, b_in, v1;         ///< (rows cols x 3) K-cycle: first pass's x, the level's b, A x
 };
 
 /// Levels are sized once per topology (multigrid_build); no allocation afterwards.
@@ -70,8 +70,10 @@ void multigrid_build(const ClothTopology& topo, Multigrid& mg);
 /// Galerkin operators of every level from A, and the coarsest level's Cholesky factor.
 void multigrid_setup(const ClothTopology& topo, const ClothSystem& A, Multigrid& mg);
 
-/// z = V(r): one symmetric V-cycle (forward block Gauss-Seidel before, backward after the coarse
-/// correction, exact coarsest solve), a symmetric positive definite approximation of A^-1.
+/// z = V(r): one symmetric cycle (forward block Gauss-Seidel before, backward after the coarse
+/// correction, K-cycles below the first level, exact coarsest solve), an approximation of A^-1
+/// that is positive definite but, through the K-cycle's weights, not exactly linear: use it in
+/// flexible CG.
 /// r, z (N x 3); r's pinned rows must be zero, z's come out zero.
 void multigrid_vcycle(const ClothTopology& topo, const ClothSystem& A, Multigrid& mg, const MatX3& r,
                       MatX3& z);

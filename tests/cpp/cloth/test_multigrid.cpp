@@ -1,5 +1,5 @@
-// Multigrid preconditioner of the implicit cloth solve: an SPD operator, the same answer as block
-// Jacobi to the CG tolerance, and far fewer CG iterations on fine flags.
+// Multigrid preconditioner of the implicit cloth solve: a positive, contracting cycle, the same
+// answer as block Jacobi to the CG tolerance, and far fewer CG iterations on fine flags.
 #include <gtest/gtest.h>
 
 #include <cstring>
@@ -52,27 +52,45 @@ struct MovingFlagSystem {
 
 class Multigrid32 : public ::testing::TestWithParam<const char*> {};
 
-// x^T V y = y^T V x and x^T V x > 0 for the V-cycle V, on the system of a flag moving in wind
-// (with "triangle" drag, the triangle coupling terms J_t too).
-TEST_P(Multigrid32, CycleIsSymmetricPositiveDefinite) {
+// The cycle V as a preconditioner of flexible CG, on the system of a flag moving in wind (with
+// "triangle" drag, the triangle coupling terms J_t too): positive (x^T V x > 0), homogeneous
+// (V(c x) = c V(x): the K-cycle's weights do not depend on the scale), zero on pinned rows, and
+// as one step of a solver, e <- e - V(A e), it contracts the slowest error's A-norm below 0.8
+// (here 0.68; a W-cycle gives 0.71, Gauss-Seidel without the coarse correction 0.93). The K-cycle
+// makes V slightly nonlinear, so symmetry holds only approximately.
+TEST_P(Multigrid32, CycleIsPositiveHomogeneousAndContracts) {
   MovingFlagSystem m(32, "multigrid", GetParam());
   const ClothTopology& topo = m.sim.topology();
   IntegratorScratch& s = m.s;
   ASSERT_FALSE(s.mg.levels.empty());
   multigrid_setup(topo, s.sys, s.mg);
+  auto dot = [](const MatX3& a, const MatX3& b) { return (a.array() * b.array()).sum(); };
   std::mt19937 rng(7);
   for (int trial = 0; trial < 5; ++trial) {
-    const MatX3 x = random_rows(topo, rng), y = random_rows(topo, rng);
-    MatX3 vx(x.rows(), 3), vy(y.rows(), 3);
+    const MatX3 x = random_rows(topo, rng);
+    MatX3 vx(x.rows(), 3), v3x(x.rows(), 3);
     multigrid_vcycle(topo, s.sys, s.mg, x, vx);
-    multigrid_vcycle(topo, s.sys, s.mg, y, vy);
-    const double xvy = (x.array() * vy.array()).sum(), yvx = (y.array() * vx.array()).sum();
-    const double scale = x.norm() * vy.norm();
-    EXPECT_LE(std::abs(xvy - yvx), 1e-12 * scale);
-    EXPECT_GT((x.array() * vx.array()).sum(), 0.0);
+    EXPECT_GT(dot(x, vx), 0.0);
+    multigrid_vcycle(topo, s.sys, s.mg, MatX3(-3.0 * x), v3x);
+    EXPECT_LE((v3x + 3.0 * vx).norm(), 1e-12 * v3x.norm());
     for (Index i = 0; i < topo.num_vertices(); ++i)
       if (topo.pinned(i)) EXPECT_EQ(vx.row(i).norm(), 0.0);
   }
+  // As a solver, e <- e - V(A e): the A-norm contraction of the slowest error, found by repeating
+  // the step (power iteration from a random e). Gauss-Seidel alone takes a random error down by
+  // ~7x in one step but leaves the smooth ones: this measures the coarse correction.
+  MatX3 e = random_rows(topo, rng), Ae(e.rows(), 3), ve(e.rows(), 3);
+  apply_system(topo, s.sys, e, Ae);
+  double contraction = 1;
+  for (int it = 0; it < 15; ++it) {
+    const double before = std::sqrt(dot(e, Ae));
+    multigrid_vcycle(topo, s.sys, s.mg, Ae, ve);
+    e = (e - ve) / before;  // A-norm 1 before the step
+    apply_system(topo, s.sys, e, Ae);
+    contraction = std::sqrt(dot(e, Ae));
+  }
+  RecordProperty("contraction", std::to_string(contraction));
+  EXPECT_LT(contraction, 0.8);
 }
 
 // apply_system (the CG product, which shares the smoother's neighbour-block kernel) against A
