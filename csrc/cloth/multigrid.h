@@ -59,6 +59,12 @@ struct Multigrid {
   Eigen::MatrixXd coarse_L;  ///< (3n x 3n) Cholesky factor of the coarsest level (n vertices)
   VecX coarse_y;             ///< (3n)
   MatX3 fine_r;              ///< (N x 3) fine residual
+  /// Where level 0's setup adds the system's terms, indices into levels[0].A or -1 (fixed by the
+  /// topology): per vertex, its aggregate's diagonal block (-1 if pinned); per spring, +B_s at
+  /// the two aggregates' diagonal blocks and -B_s at their coupling in the stencil's upper half
+  /// (the lower half is its mirror image: every term is symmetric).
+  std::vector<int32_t> vertex_block;  ///< (N)
+  std::vector<int32_t> spring_block;  ///< (3 S)
 };
 
 /// True when topo is a rows x cols grid (vertex r cols + c) that multigrid_build can coarsen.
