@@ -46,6 +46,7 @@ struct IntegratorStats {
 /// Scratch for both integrators, sized once for a topology (no allocation inside a step).
 struct IntegratorScratch {
   MatX3 f, x0, v0, dv, r, z, p, q, b, tmp;
+  MatX3 dv_prev;    ///< implicit: the solve's dv one step before dv (for the warm start)
   ClothSystem sys;  ///< the implicit system of the current step
   Multigrid mg;     ///< levels built when the topology is a grid (multigrid_applies)
   double unused_timer = 0;
