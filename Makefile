@@ -28,12 +28,13 @@ system-deps:
 	  fi; \
 	fi
 
-$(VENV)/.deps: pyproject.toml | system-deps
+# The requirement lists live in pyproject.toml; tools/requirements.py prints them (it reads the
+# file with tomllib, or tomli on Python 3.10, installed first).
+$(VENV)/.deps: pyproject.toml tools/requirements.py | system-deps
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q "scikit-build-core>=0.10" "pybind11>=2.12" cmake ninja
-	$(PY) -m pip install -q "numpy>=1.24" "tqdm>=4.60" "tomli>=2.0; python_version < '3.11'" \
-	    "pytest>=7.4" "hypothesis>=6.80" "imageio>=2.20" "matplotlib>=3.6"
+	$(PY) -m pip install -q "tomli>=2.0; python_version < '3.11'" cmake ninja
+	$(PY) -m pip install -q -r <($(PY) tools/requirements.py build project test)
 	@touch $@
 
 # Incremental: scikit-build-core reuses build/ and ninja rebuilds only what changed.
@@ -60,9 +61,9 @@ demo: build
 	    --width 480 --height 360 --overwrite
 
 # The engines the benchmark compares with: pyproject's [bench] extra (pip install .[bench]),
-# installed here by name so the editable build is left as it is. One that fails is skipped.
+# installed here from its list so the editable build is left as it is. One that fails is skipped.
 bench-deps: $(VENV)/.deps
-	$(PY) -m pip install -q pybullet mujoco pypbd || echo "some peers did not install: the benchmark skips them"
+	$(PY) -m pip install -q -r <($(PY) tools/requirements.py bench) || echo "some peers did not install: the benchmark skips them"
 
 # Regenerates docs/performance.md (run it on a quiet machine: other processes skew the figures).
 bench: build bench-deps
