@@ -146,7 +146,7 @@ void assemble_implicit_system(const ClothTopology& topo, const ForceSet& fs, dou
 
 namespace {
 
-// Preconditioner z = P^-1 r: one multigrid V-cycle, or block Jacobi z_i = D_i^-1 r_i. Returns r.z.
+// Preconditioner z = P^-1 r: one multigrid cycle, or block Jacobi z_i = D_i^-1 r_i. Returns r.z.
 double precondition(const ClothTopology& topo, IntegratorScratch& s, bool multigrid, const MatX3& r,
                     MatX3& z) {
   if (multigrid) {

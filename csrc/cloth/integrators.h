@@ -1,6 +1,6 @@
 // Time integration of the cloth: symplectic Euler with adaptive substepping, and linearised
 // backward Euler (Baraff-Witkin 1998 §4-5) solved by CG preconditioned by block Jacobi or an
-// aggregation multigrid V-cycle (cloth/multigrid.h).
+// aggregation multigrid cycle (flexible CG then; cloth/multigrid.h).
 #pragma once
 #include <vector>
 

@@ -1,5 +1,5 @@
 // The implicit cloth system (Baraff-Witkin 1998 eq. 16) in compact form, and an aggregation
-// multigrid V-cycle that preconditions its CG solve on grid flags.
+// multigrid cycle (K-cycle below the first level) that preconditions its CG solve on grid flags.
 #pragma once
 #include <cstdint>
 #include <vector>

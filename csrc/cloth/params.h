@@ -47,7 +47,7 @@ struct IntegratorParams {
                                       ///< the paper flag by 4e-8 m after 1 s vs 1e-10: far below
                                       ///< backward Euler's own error of ~3 mm; docs/design.md)
   std::string preconditioner = "auto";  ///< implicit CG: "jacobi" (3x3 block Jacobi) |
-                                      ///< "multigrid" (aggregation V-cycle, grid flags) | "auto"
+                                      ///< "multigrid" (aggregation K-cycle, grid flags) | "auto"
                                       ///< (multigrid from 200 masses up; docs/design.md)
   int cg_max_iterations = 1000;       ///< implicit: per solve; on failure the step is halved
   int max_halvings = 10;              ///< implicit: step halvings before DivergenceError("cg")
