@@ -151,7 +151,7 @@ double precondition(const ClothTopology& topo, IntegratorScratch& s, bool multig
                     MatX3& z) {
   if (multigrid) {
     multigrid_vcycle(topo, s.sys, s.mg, r, z);
-    return (r.array() * z.array()).sum();
+    return dot(r, z);
   }
   double rz = 0;
   const Index N = topo.num_vertices();
@@ -194,9 +194,9 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   s.z = s.dv - s.dv_prev;  // d (zero rows where pinned: both are filtered)
   s.dv_prev = s.dv;
   apply_system(topo, A, s.z, s.p);
-  const double dAd = (s.z.array() * s.p.array()).sum();
+  const double dAd = dot(s.z, s.p);
   if (dAd > 0) {
-    const double theta = (s.r.array() * s.z.array()).sum() / dAd;
+    const double theta = dot(s.r, s.z) / dAd;
     s.dv += theta * s.z;
     s.r -= theta * s.p;
   }
@@ -214,7 +214,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     }
     for (; !converged && it < ip.cg_max_iterations; ++it) {
       apply_system(topo, A, s.p, s.q);
-      const double pq = (s.p.array() * s.q.array()).sum();
+      const double pq = dot(s.p, s.q);
       if (!(pq > 0)) break;  // not SPD along p (or NaN): give up, the caller halves h
       const double alpha = rz / pq;
       s.dv += alpha * s.p;
@@ -228,8 +228,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
       // Multigrid's K-cycle is not quite linear: flexible CG (Polak-Ribiere, Notay 2000),
       // beta = z_new . (r_new - r_old) / rz_old with r_new - r_old = -alpha q. Equal to
       // rz_new / rz_old in exact arithmetic for a fixed preconditioner (block Jacobi keeps that).
-      const double beta =
-          multigrid ? -alpha * (s.z.array() * s.q.array()).sum() / rz : rz_new / rz;
+      const double beta = multigrid ? -alpha * dot(s.z, s.q) / rz : rz_new / rz;
       s.p = s.z + beta * s.p;
       rz = rz_new;
     }

@@ -360,7 +360,6 @@ void coarse_correction(Multigrid& mg, size_t l) {
   MultigridLevel& Lc = mg.levels[l + 1];
   cycle_level(mg, l + 1);  // c1 in Lc.x
   if (l + 2 == mg.levels.size()) return;  // the coarsest level is solved exactly
-  auto dot = [](const MatX3& a, const MatX3& b) { return (a.array() * b.array()).sum(); };
   Lc.b_in = Lc.b;
   residual_level(Lc);
   Lc.v1 = Lc.b_in - Lc.r;  // A c1
@@ -400,10 +399,14 @@ void cycle_level(Multigrid& mg, size_t l) {
   gauss_seidel_level(L, false);
 }
 
-// The 2 x 2 aggregate of level below's vertex (r, c) relative to that of (r + dr, c + dc).
-inline Mat3& coarse_block(MultigridLevel& Lc, int r, int c, int r2, int c2) {
+// Index into Lc.A of the block coupling the 2 x 2 aggregates of the level below's vertices (r, c)
+// and (r2, c2) (neighbours or the same aggregate), in the first one's stencil.
+inline Index coarse_index(const MultigridLevel& Lc, int r, int c, int r2, int c2) {
   const int R = r / 2, C = c / 2;
-  return Lc.A[9 * (Index(R) * Lc.cols + C) + slot(r2 / 2 - R, c2 / 2 - C)];
+  return 9 * (Index(R) * Lc.cols + C) + slot(r2 / 2 - R, c2 / 2 - C);
+}
+inline Mat3& coarse_block(MultigridLevel& Lc, int r, int c, int r2, int c2) {
+  return Lc.A[size_t(coarse_index(Lc, r, c, r2, c2))];
 }
 
 // The stencil's lower half from its upper half: block (v, w) = block (w, v), all blocks symmetric.
@@ -510,8 +513,8 @@ void multigrid_build(const ClothTopology& topo, Multigrid& mg) {
   // Level 0's block indices (see Multigrid).
   const MultigridLevel& L0 = mg.levels.front();
   auto block = [&](Index i, Index j) -> int32_t {  // the aggregates of fine vertices i and j
-    const int ri = int(i / topo.cols), ci = int(i % topo.cols), rj = int(j / topo.cols), cj = int(j % topo.cols);
-    return int32_t(9 * (Index(ri / 2) * L0.cols + ci / 2) + slot(rj / 2 - ri / 2, cj / 2 - ci / 2));
+    const int C = topo.cols;
+    return int32_t(coarse_index(L0, int(i / C), int(i % C), int(j / C), int(j % C)));
   };
   mg.vertex_block.assign(size_t(topo.num_vertices()), -1);
   for (Index i = 0; i < topo.num_vertices(); ++i)
@@ -571,7 +574,8 @@ void multigrid_setup(const ClothTopology& topo, const ClothSystem& A, Multigrid&
         if (!free_vertex(topo, j)) continue;
         int rj, cj;
         rc(j, rj, cj);
-        if (slot(rj / 2 - ri / 2, cj / 2 - ci / 2) >= kCenter) coarse_block(L0, ri, ci, rj, cj) += A.J[t];
+        const Index k = coarse_index(L0, ri, ci, rj, cj);
+        if (k % 9 >= kCenter) L0.A[size_t(k)] += A.J[t];  // the upper half; mirrored below
       }
     }
   mirror_lower_half(L0);

@@ -40,6 +40,9 @@ struct ClothSystem {
 /// out = A p (N x 3); rows of pinned vertices are zero, p's pinned rows must be zero.
 void apply_system(const ClothTopology& topo, const ClothSystem& A, const MatX3& p, MatX3& out);
 
+/// sum_ik a_ik b_ik: the inner product of two N x 3 fields (the CG and K-cycle dot products).
+inline double dot(const MatX3& a, const MatX3& b) { return (a.array() * b.array()).sum(); }
+
 /// One coarse level: a rows x cols grid whose vertex (r, c) aggregates the 2 x 2 vertices
 /// (2r..2r+1, 2c..2c+1) of the level below. Its Galerkin operator P^T A P (P piecewise constant,
 /// 3x3 identity blocks) couples each vertex to its 8 neighbours at most.

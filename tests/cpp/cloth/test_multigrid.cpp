@@ -64,7 +64,6 @@ TEST_P(Multigrid32, CycleIsPositiveHomogeneousAndContracts) {
   IntegratorScratch& s = m.s;
   ASSERT_FALSE(s.mg.levels.empty());
   multigrid_setup(topo, s.sys, s.mg);
-  auto dot = [](const MatX3& a, const MatX3& b) { return (a.array() * b.array()).sum(); };
   std::mt19937 rng(7);
   for (int trial = 0; trial < 5; ++trial) {
     const MatX3 x = random_rows(topo, rng);
