@@ -274,6 +274,7 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
         d["frozen"] = st->frozen;
         d["sweeps"] = st->sweeps;
         d["broad_phases"] = st->broad_phases;
+        d["tree_queries"] = st->tree_queries;
         return d;
       },
       "the last step's self-collision counts (None when self_collision is off): candidate pairs, "

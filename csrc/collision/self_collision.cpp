@@ -1,6 +1,7 @@
 #include "collision/self_collision.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 
 #include "collision/edge_edge.h"
@@ -28,6 +29,14 @@ int thread_id() {
   return omp_get_thread_num();
 #else
   return 0;
+#endif
+}
+
+int team_size() {
+#ifdef _OPENMP
+  return omp_get_num_threads();
+#else
+  return 1;
 #endif
 }
 
@@ -73,6 +82,8 @@ SelfCollision::SelfCollision(const MatX3i& triangles, Index num_vertices,
       thi_(triangles.rows(), 3),
       elo_(edges_.rows(), 3),
       ehi_(edges_.rows(), 3),
+      ref_lo_(num_vertices, 3),
+      ref_hi_(num_vertices, 3),
       x_sweep_(num_vertices, 3),
       dv_(num_vertices, 3),
       count_v_(static_cast<size_t>(num_vertices), 0),
@@ -88,6 +99,7 @@ SelfCollision::SelfCollision(const MatX3i& triangles, Index num_vertices,
   for (auto& buffer : thread_pairs_) buffer.reserve(expected);
   for (auto& buffer : thread_edge_pairs_) buffer.reserve(expected_edges);
   pairs_.reserve(expected + expected_edges);
+  list_.reserve(3 * (expected + expected_edges));
   flag_.reserve(expected + expected_edges);
   contacts_.reserve(expected + expected_edges);
   start_gap_.reserve(expected + expected_edges);
@@ -102,6 +114,204 @@ void SelfCollision::corners(const Pair& pr, int32_t idx[4]) const {
   }
 }
 
+// Whether the list still holds every pair the trees could give now: each vertex box, less the
+// mean start position, within skin_ of its box when the list was built (a common translation
+// cannot bring two boxes together). Then a vertex box, and with it every triangle or edge box,
+// has grown by at most skin_ on each side, and the list was collected 2 skin_ wider.
+bool SelfCollision::list_covers(const Vec3& centre) const {
+  if (!list_valid_) return false;
+  // Round-off of the coordinates (~1e-16 of their size) must not decide: keep a guard.
+  const double guard = 1e-12 * (1 + centre.cwiseAbs().maxCoeff() + ref_scale_);
+  const double s = skin_ - guard;
+  for (Index i = 0; i < n_; ++i)
+    for (int d = 0; d < 3; ++d)
+      if (vlo_(i, d) - centre[d] < ref_lo_(i, d) - s || vhi_(i, d) - centre[d] > ref_hi_(i, d) + s)
+        return false;
+  return true;
+}
+
+// The skin of the next list, and the reference boxes it is measured from. The skin is
+// kSkinSteps times the step's largest relative motion (the largest vertex box), at least the
+// thickness and at most the query's reach (a sheet's list grows as the square of its width).
+// A list pays only while it is about as short as its candidates and serves several broad
+// phases: that is a cloth whose close pairs are its mesh neighbours, thickness well below the
+// spacing, as in the paper's flag. One that came out longer than kListRatio times its
+// candidates, or served one broad phase only, missed: the next kDirectBuilds queries go straight
+// to the candidates, twice as many after each further miss up to kMaxDirectBuilds. The first
+// queries are direct too (a cloth let go moves fastest). Deterministic, and it decides only
+// which pairs get tested, never which are candidates.
+double SelfCollision::next_skin(const Vec3& centre) {
+  if (skin_ > 0) {
+    if (served_ <= 1)
+      miss();
+    else
+      direct_streak_ = kDirectBuilds;
+  }
+  served_ = 1;
+  if (direct_left_ > 0) {
+    --direct_left_;
+    skin_ = 0;
+    list_valid_ = false;
+    return skin_;
+  }
+  double motion = 0, size = 0;
+  for (Index i = 0; i < n_; ++i) {
+    motion = std::max(motion, (vhi_.row(i) - vlo_.row(i)).maxCoeff());
+    size = std::max(size, std::max(vlo_.row(i).cwiseAbs().maxCoeff(), vhi_.row(i).cwiseAbs().maxCoeff()));
+  }
+  const double h = params_.thickness;
+  skin_ = std::min(std::max(kSkinSteps * motion, h), 4 * h);
+  list_valid_ = true;
+  ref_scale_ = size;
+  ref_lo_ = vlo_.rowwise() - centre.transpose();
+  ref_hi_ = vhi_.rowwise() - centre.transpose();
+  return skin_;
+}
+
+void SelfCollision::miss() {
+  direct_left_ = direct_streak_;
+  direct_streak_ = std::min(2 * direct_streak_, kMaxDirectBuilds);
+}
+
+// A list longer than kListRatio times the last candidates does not pay (see next_skin).
+size_t SelfCollision::list_budget() const {
+  return static_cast<size_t>(kListRatio * double(last_candidates_)) + 64;
+}
+
+// Box-tree queries (the trees refitted to the current boxes), every query `wide` wider, into out:
+// vertex-triangle pairs by vertex, then edge-edge pairs by edge, each group by its second item.
+// With inv_mass, pairs with no free vertex are left out. Returns false, with out incomplete, as
+// soon as out would hold more than `budget` pairs (each thread stops at its share).
+bool SelfCollision::query_trees(double wide, const VecX* inv_mass, std::vector<Pair>& out,
+                                size_t budget) {
+  const double h = params_.thickness, reach = 2 * params_.thickness;
+  // The trees take their shape from the first query's boxes and are refitted after that.
+  if (tri_tree_.built()) {
+    tri_tree_.refit(tlo_, thi_);
+    edge_tree_.refit(elo_, ehi_);
+  } else {
+    tri_tree_.build(tlo_, thi_);
+    edge_tree_.build(elo_, ehi_);
+  }
+  const size_t threads = static_cast<size_t>(max_threads());
+  if (thread_pairs_.size() < threads) {
+    thread_pairs_.resize(threads);
+    thread_edge_pairs_.resize(threads);
+  }
+  for (auto& buffer : thread_pairs_) buffer.clear();
+  for (auto& buffer : thread_edge_pairs_) buffer.clear();
+  auto pinned = [&](int32_t a, int32_t b, int32_t c, int32_t d) {
+    return inv_mass && (*inv_mass)[a] == 0 && (*inv_mass)[b] == 0 && (*inv_mass)[c] == 0 &&
+           (*inv_mass)[d] == 0;
+  };
+  auto by_b = [](const Pair& p, const Pair& q) { return p.b < q.b; };
+  auto collect_vertex = [&](Index i, std::vector<Pair>& buffer) {
+    const Vec3 qlo = vlo_.row(i).transpose().array() - (reach + wide);
+    const Vec3 qhi = vhi_.row(i).transpose().array() + (reach + wide);
+    const size_t begin = buffer.size();
+    const auto vi = static_cast<int32_t>(i);
+    tri_tree_.query(tlo_, thi_, qlo, qhi, [&](int32_t t) {
+      const int32_t a = tris_(t, 0), b = tris_(t, 1), c = tris_(t, 2);
+      if (a == vi || b == vi || c == vi) return;  // never against its own triangles
+      if (pinned(vi, a, b, c)) return;
+      buffer.push_back({vi, t, false});
+    });
+    std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(), by_b);
+  };
+  auto collect_edge = [&](Index e, std::vector<Pair>& buffer) {
+    const Vec3 qlo = elo_.row(e).transpose().array() - (h + wide);
+    const Vec3 qhi = ehi_.row(e).transpose().array() + (h + wide);
+    const size_t begin = buffer.size();
+    const int32_t a = edges_(e, 0), b = edges_(e, 1);
+    edge_tree_.query(elo_, ehi_, qlo, qhi, [&](int32_t f) {  // f > e: each pair once
+      const int32_t c = edges_(f, 0), d = edges_(f, 1);
+      if (a == c || a == d || b == c || b == d) return;  // edges sharing a vertex never cross
+      if (pinned(a, b, c, d)) return;
+      buffer.push_back({static_cast<int32_t>(e), f, true});
+    }, static_cast<int32_t>(e));
+    std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(), by_b);
+  };
+  const Index E = edges_.rows();
+  bool within = true;
+  if (use_team(n_ >= kParallelGrain)) {
+    std::atomic<bool> over{false};
+#pragma omp parallel
+    {
+      const size_t id = static_cast<size_t>(thread_id());
+      const size_t share = budget / static_cast<size_t>(team_size()) + 1;
+      std::vector<Pair>& pv = thread_pairs_[id];
+      std::vector<Pair>& pe = thread_edge_pairs_[id];
+      auto full = [&] {
+        if (pv.size() + pe.size() > share) over.store(true, std::memory_order_relaxed);
+        return over.load(std::memory_order_relaxed);
+      };
+      // Static schedule: thread k gets the k-th contiguous block, so concatenating the buffers
+      // in thread order lists pairs by vertex (edge) whatever the thread count.
+#pragma omp for schedule(static)
+      for (Index i = 0; i < n_; ++i)
+        if (!full()) collect_vertex(i, pv);
+#pragma omp for schedule(static)
+      for (Index e = 0; e < E; ++e)
+        if (!full()) collect_edge(e, pe);
+    }
+    within = !over.load();
+  } else {
+    std::vector<Pair>& pv = thread_pairs_[0];
+    std::vector<Pair>& pe = thread_edge_pairs_[0];
+    for (Index i = 0; i < n_ && within; ++i) {
+      collect_vertex(i, pv);
+      within = pv.size() <= budget;
+    }
+    for (Index e = 0; e < E && within; ++e) {
+      collect_edge(e, pe);
+      within = pv.size() + pe.size() <= budget;
+    }
+  }
+  out.clear();
+  append(thread_pairs_, out);
+  append(thread_edge_pairs_, out);
+  return within;
+}
+
+// pairs_ = the list's pairs the trees would give now: a free vertex, and boxes that overlap by the
+// trees' own test on the same numbers (so the same pairs, in the list's order, which is theirs).
+void SelfCollision::filter_list(const VecX& inv_mass) {
+  const double h = params_.thickness, reach = 2 * params_.thickness;
+  auto keep = [&](const Pair& p) {
+    int32_t i[4];
+    corners(p, i);
+    if (inv_mass[i[0]] == 0 && inv_mass[i[1]] == 0 && inv_mass[i[2]] == 0 && inv_mass[i[3]] == 0)
+      return false;
+    const double r = p.edge_pair ? h : reach;
+    const double* q0 = (p.edge_pair ? elo_ : vlo_).data() + 3 * Index(p.a);
+    const double* q1 = (p.edge_pair ? ehi_ : vhi_).data() + 3 * Index(p.a);
+    const double* l = (p.edge_pair ? elo_ : tlo_).data() + 3 * Index(p.b);
+    const double* u = (p.edge_pair ? ehi_ : thi_).data() + 3 * Index(p.b);
+    return l[0] <= q1[0] + r && u[0] >= q0[0] - r && l[1] <= q1[1] + r && u[1] >= q0[1] - r &&
+           l[2] <= q1[2] + r && u[2] >= q0[2] - r;
+  };
+  const auto L = static_cast<Index>(list_.size());
+  pairs_.clear();
+  if (use_team(L >= kPairGrain)) {
+    for (auto& buffer : thread_pairs_) buffer.clear();
+#pragma omp parallel
+    {
+      std::vector<Pair>& buffer = thread_pairs_[static_cast<size_t>(thread_id())];
+#pragma omp for schedule(static)
+      for (Index k = 0; k < L; ++k)
+        if (keep(list_[size_t(k)])) buffer.push_back(list_[size_t(k)]);
+    }
+    append(thread_pairs_, pairs_);  // static blocks in thread order: the list's order
+  } else {
+    for (const Pair& p : list_)
+      if (keep(p)) pairs_.push_back(p);
+  }
+  // Too long to pay (see next_skin) at its first use; long later (it came from a fast
+  // transient and the motion has calmed): build it again.
+  const double ratio = served_ == 1 ? kListRatio : 4;
+  if (double(list_.size()) > ratio * double(pairs_.size()) + 64) list_valid_ = false;
+}
+
 void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv_mass,
                                 bool shifted) {
   const double h = params_.thickness, margin = params_.thickness;
@@ -111,11 +321,14 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
     for (Index i = 0; i < n_; ++i) shift_ += row(x, i) - row(x0, i);
     shift_ /= static_cast<double>(std::max<Index>(n_, 1));
   }
+  Vec3 centre = Vec3::Zero();
   for (Index i = 0; i < n_; ++i) {
     const Vec3 a = row(x0, i), b = row(x, i) - shift_;
     vlo_.row(i) = a.cwiseMin(b).transpose();
     vhi_.row(i) = a.cwiseMax(b).transpose();
+    centre += a;
   }
+  centre /= static_cast<double>(std::max<Index>(n_, 1));
   const Index T = tris_.rows(), E = edges_.rows();
   for (Index t = 0; t < T; ++t) {
     const int32_t a = tris_(t, 0), b = tris_(t, 1), c = tris_(t, 2);
@@ -127,72 +340,27 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
     elo_.row(e) = vlo_.row(a).cwiseMin(vlo_.row(b)).array() - margin;
     ehi_.row(e) = vhi_.row(a).cwiseMax(vhi_.row(b)).array() + margin;
   }
-  // The trees take their shape from the first step's boxes and are refitted after that.
-  if (tri_tree_.built()) {
-    tri_tree_.refit(tlo_, thi_);
-    edge_tree_.refit(elo_, ehi_);
+  // The candidates: from the pair list while it covers the motion, else from the trees.
+  const bool listed = list_covers(centre);
+  stats_.tree_queries += !listed;
+  if (listed) {
+    ++served_;
+    filter_list(inv_mass);
+  } else if (const double skin = next_skin(centre);
+             skin > 0 && query_trees(2 * skin, nullptr, list_, list_budget())) {
+    filter_list(inv_mass);
   } else {
-    tri_tree_.build(tlo_, thi_);
-    edge_tree_.build(elo_, ehi_);
-  }
-
-  const size_t threads = static_cast<size_t>(max_threads());
-  if (thread_pairs_.size() < threads) {
-    thread_pairs_.resize(threads);
-    thread_edge_pairs_.resize(threads);
-  }
-  for (auto& buffer : thread_pairs_) buffer.clear();
-  for (auto& buffer : thread_edge_pairs_) buffer.clear();
-  const double reach = h + margin;
-  auto by_b = [](const Pair& p, const Pair& q) { return p.b < q.b; };
-  auto collect_vertex = [&](Index i, std::vector<Pair>& buffer) {
-    const Vec3 qlo = vlo_.row(i).transpose().array() - reach;
-    const Vec3 qhi = vhi_.row(i).transpose().array() + reach;
-    const size_t begin = buffer.size();
-    const auto vi = static_cast<int32_t>(i);
-    tri_tree_.query(tlo_, thi_, qlo, qhi, [&](int32_t t) {
-      const int32_t a = tris_(t, 0), b = tris_(t, 1), c = tris_(t, 2);
-      if (a == vi || b == vi || c == vi) return;  // never against its own triangles
-      if (inv_mass[i] == 0 && inv_mass[a] == 0 && inv_mass[b] == 0 && inv_mass[c] == 0) return;
-      buffer.push_back({vi, t, false});
-    });
-    std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(), by_b);
-  };
-  auto collect_edge = [&](Index e, std::vector<Pair>& buffer) {
-    const Vec3 qlo = elo_.row(e).transpose().array() - h;
-    const Vec3 qhi = ehi_.row(e).transpose().array() + h;
-    const size_t begin = buffer.size();
-    const int32_t a = edges_(e, 0), b = edges_(e, 1);
-    edge_tree_.query(elo_, ehi_, qlo, qhi, [&](int32_t f) {  // f > e: each pair once
-      const int32_t c = edges_(f, 0), d = edges_(f, 1);
-      if (a == c || a == d || b == c || b == d) return;  // edges sharing a vertex never cross
-      if (inv_mass[a] == 0 && inv_mass[b] == 0 && inv_mass[c] == 0 && inv_mass[d] == 0) return;
-      buffer.push_back({static_cast<int32_t>(e), f, true});
-    }, static_cast<int32_t>(e));
-    std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(), by_b);
-  };
-  if (use_team(n_ >= kParallelGrain)) {
-#pragma omp parallel
-    {
-      const size_t id = static_cast<size_t>(thread_id());
-      // Static schedule: thread k gets the k-th contiguous block, so concatenating the buffers
-      // in thread order lists pairs by vertex (edge) whatever the thread count.
-#pragma omp for schedule(static)
-      for (Index i = 0; i < n_; ++i) collect_vertex(i, thread_pairs_[id]);
-#pragma omp for schedule(static)
-      for (Index e = 0; e < E; ++e) collect_edge(e, thread_edge_pairs_[id]);
+    if (skin_ > 0) {  // the list outgrew its budget before it was complete: a miss
+      list_valid_ = false;
+      skin_ = 0;
+      miss();
     }
-  } else {
-    for (Index i = 0; i < n_; ++i) collect_vertex(i, thread_pairs_[0]);
-    for (Index e = 0; e < E; ++e) collect_edge(e, thread_edge_pairs_[0]);
+    query_trees(0, &inv_mass, pairs_);
   }
-  pairs_.clear();
-  append(thread_pairs_, pairs_);
-  append(thread_edge_pairs_, pairs_);
   flag_.resize(pairs_.size());
   contacts_.resize(pairs_.size());
   start_gap_.resize(pairs_.size());
-  stats_.candidates = static_cast<Index>(pairs_.size());
+  stats_.candidates = last_candidates_ = static_cast<Index>(pairs_.size());
   // Each pair's distance at the start of the step: with it, a pair whose points cannot have
   // closed that gap (see reach()) needs no test at all.
   const auto P = static_cast<Index>(pairs_.size());

@@ -13,7 +13,11 @@
 //   broad phase: swept boxes of vertices and triangles over the step in a frame moving with the
 //     cloth's mean displacement (crossings are invariant under a common translation, so a 30 m/s
 //     gust does not stretch the boxes) -> box trees (box_tree.h) -> candidate pairs: (vertex, triangle),
-//     the vertex not in the triangle, and (edge, edge) sharing no vertex;
+//     the vertex not in the triangle, and (edge, edge) sharing no vertex. The trees are queried
+//     wider than needed (a skin) into a pair list that later broad phases filter by the same
+//     box test for as long as no vertex box has left its box at the list's build by more than
+//     the skin (a Verlet list): the same candidates, in the same order, without the queries.
+//     Used only while it pays (see next_skin);
 //   sweeps (<= params.iterations), each detecting on one state (in parallel), then answering in
 //     pair order:
 //     - a crossing of the trajectory x0 -> x (roots of the coplanarity cubic, Provot 1997,
@@ -65,6 +69,7 @@ struct SelfCollisionStats {
   Index frozen = 0;      ///< vertices sent back to x0 by the fallback
   int sweeps = 0;        ///< response sweeps run
   int broad_phases = 0;  ///< broad phases run (1 unless a sweep moved a vertex out of its box)
+  int tree_queries = 0;  ///< of those, how many queried the box trees (the rest filtered the list)
 };
 
 class SelfCollision {
@@ -110,6 +115,13 @@ class SelfCollision {
   double separation(const Pair& pr, const MatX3& x0, const MatX3& x, double t) const;
   double reach(const Pair& pr, const MatX3& x0, const MatX3& x) const;
   void broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv_mass, bool shifted);
+  bool list_covers(const Vec3& centre) const;
+  double next_skin(const Vec3& centre);
+  bool query_trees(double wide, const VecX* inv_mass, std::vector<Pair>& out,
+                   size_t budget = SIZE_MAX);
+  void miss();
+  size_t list_budget() const;
+  void filter_list(const VecX& inv_mass);
   bool find_violations(const MatX3& x0, const MatX3& x, const VecX& inv_mass,
                        const PoleParams* pole);
   bool within_boxes(const MatX3& x) const;
@@ -135,6 +147,19 @@ class SelfCollision {
   MatX3 elo_, ehi_;              // E x 3 swept edge boxes, grown by the margin
   std::vector<std::vector<Pair>> thread_pairs_, thread_edge_pairs_;
   std::vector<Pair> pairs_;      // vertex-triangle pairs by vertex, then edge-edge pairs by edge
+  // The pair list (a Verlet list): every pair whose boxes come within 2 skin_ of the query, from
+  // the vertex boxes ref_lo_/ref_hi_ (less their mean position) of the step that built it.
+  std::vector<Pair> list_;       // ordered as pairs_
+  MatX3 ref_lo_, ref_hi_;        // N x 3
+  double skin_ = 0;              // m; 0: no list yet
+  double ref_scale_ = 0;         // m, largest coordinate of those boxes (round-off guard)
+  bool list_valid_ = false;      // false: the next broad phase builds the list
+  int served_ = 0;               // broad phases the list has served
+  Index last_candidates_ = 0;    // candidates of the last broad phase
+  int direct_left_ = kDirectBuilds;  // queries still to make without a list
+  int direct_streak_ = kDirectBuilds;  // how many after the next miss (doubles per miss)
+  static constexpr double kSkinSteps = 6, kListRatio = 1.5;
+  static constexpr int kDirectBuilds = 8, kMaxDirectBuilds = 512;
   std::vector<uint8_t> flag_;    // per pair: violation found by the parallel pass
   std::vector<double> start_gap_;  // per pair: distance at x0, m
   std::vector<Contact> contacts_;  // per pair, in a sweep

@@ -258,6 +258,68 @@ TEST(SelfCollision, ResultsDoNotDependOnTheThreadCount) {
   EXPECT_EQ(one, two);  // bitwise
 }
 
+// The pair list kept from step to step (a Verlet list) must give exactly the candidates a fresh
+// query gives. A 12 x 16 sheet (5 cm, thickness 5 mm: the paper's ratio) is driven through a
+// travelling wave with a sideways drift, with a burst of fast motion (steps 60-80: the list
+// misses and the object falls back to direct queries); then the wave fades while a 3 x 3 patch
+// (part of the same mesh) comes down from 10 cm to 4 mm above the sheet (steps 100-140) and
+// slides along it (to step 300: contacts every step). Each step, one SelfCollision kept for the
+// whole run and one made for that step alone (its first queries are direct) answer the same
+// input: same positions, velocities and statistics, bit for bit.
+TEST(SelfCollision, PairListGivesWhatAFreshQueryGives) {
+  const int rows = 12, cols = 16;
+  const double s = 0.05, dt = 0.01, pi = 3.14159265358979323846;
+  MatX3 rest(0, 3);
+  MatX3i tris(0, 3);
+  make_grid(rows, cols, Vec3::Zero(), Vec3(s, 0, 0), Vec3(0, s, 0), rest, tris);
+  const Index sheet = rest.rows();
+  make_grid(3, 3, Vec3(0.2, 0.2, 0.1), Vec3(0.04, 0, 0), Vec3(0, 0.04, 0), rest, tris);
+  const VecX w = VecX::Ones(rest.rows());
+  auto target = [&](int step) {
+    const double t = step * dt;
+    const double phase = step < 60 ? 1.5 * t : step < 80 ? 1.5 * 0.6 + 12 * (t - 0.6) : 1.5 * (t - 0.2) + 9.6 * 0.2;
+    const double wave = step < 100 ? 0.03 : std::max(0.0, 1 - (step - 100) / 40.0) * 0.03;
+    const double height = step < 100 ? 0.1 : 0.004 + std::max(0.0, 1 - (step - 100) / 40.0) * 0.096;
+    const double slide = step < 140 ? 0.0 : 0.1 * (step - 140) * dt;
+    MatX3 x = rest;
+    for (Index i = 0; i < x.rows(); ++i) {
+      const double u = rest(i, 0);
+      const Vec3 p = i < sheet ? Vec3(u, rest(i, 1), wave * std::sin(2 * pi * (u / 0.4 - phase)) * u / (cols * s))
+                               : Vec3(u + slide, rest(i, 1), height);
+      x.row(i) = (p + Vec3(0, 0.5 * t, 0)).transpose();
+    }
+    return x;
+  };
+  SelfCollision kept(tris, rest.rows(), params());
+  MatX3 x = target(0), v = MatX3::Zero(x.rows(), 3);
+  int listed_steps = 0, listed_contacts = 0, direct_later = 0;
+  for (int step = 1; step <= 300; ++step) {
+    const MatX3 x0 = x;
+    v = (target(step) - x0) / dt;
+    x = x0 + dt * v;
+    MatX3 xf = x, vf = v;
+    SelfCollision fresh(tris, rest.rows(), params());
+    const SelfCollisionStats sf = fresh.resolve(x0, xf, vf, w);
+    const SelfCollisionStats sk = kept.resolve(x0, x, v, w);
+    ASSERT_EQ(sk.candidates, sf.candidates) << "step " << step;
+    ASSERT_EQ(sk.contacts, sf.contacts) << "step " << step;
+    ASSERT_EQ(sk.crossings, sf.crossings) << "step " << step;
+    ASSERT_EQ(sk.frozen, sf.frozen) << "step " << step;
+    ASSERT_EQ(sk.broad_phases, sf.broad_phases) << "step " << step;
+    ASSERT_EQ(x, xf) << "step " << step;  // bitwise
+    ASSERT_EQ(v, vf) << "step " << step;
+    EXPECT_EQ(sf.tree_queries, sf.broad_phases);  // a new object queries the trees
+    if (sk.tree_queries < sk.broad_phases) {
+      ++listed_steps;
+      listed_contacts += sk.contacts + sk.crossings > 0;
+    }
+    direct_later += step > 20 && sk.tree_queries > 0;
+  }
+  EXPECT_GT(listed_steps, 100);   // the list served most steps
+  EXPECT_GT(listed_contacts, 10);  // including steps with contacts
+  EXPECT_GT(direct_later, 10);     // and was rebuilt, or skipped for direct queries, later on
+}
+
 TEST(SelfCollision, PoleAndSelfCollisionTogether) {
   // The folded sheet thrown sideways into a pole standing in its way.
   MatX3 x, v;
