@@ -258,6 +258,23 @@ TEST(SelfCollision, ResultsDoNotDependOnTheThreadCount) {
   EXPECT_EQ(one, two);  // bitwise
 }
 
+constexpr double kPi = 3.14159265358979323846;
+
+// The driven tests' mesh: a rows x cols sheet of spacing s in z = 0.
+void flat_sheet(int rows, int cols, double s, MatX3& rest, MatX3i& tris) {
+  rest.resize(0, 3);
+  tris.resize(0, 3);
+  make_grid(rows, cols, Vec3::Zero(), Vec3(s, 0, 0), Vec3(0, s, 0), rest, tris);
+}
+
+// A step's input driven to a target: v = (target - x0) / dt, x = x0 + dt v. Returns x0.
+MatX3 drive(const MatX3& target, double dt, MatX3& x, MatX3& v) {
+  const MatX3 x0 = x;
+  v = (target - x0) / dt;
+  x = x0 + dt * v;
+  return x0;
+}
+
 // The pair list kept from step to step (a Verlet list) must give exactly the candidates a fresh
 // query gives. A 12 x 16 sheet (5 cm, thickness 5 mm: the paper's ratio) is driven through a
 // travelling wave with a sideways drift, with a burst of fast motion (steps 60-80: the list
@@ -268,10 +285,10 @@ TEST(SelfCollision, ResultsDoNotDependOnTheThreadCount) {
 // input: same positions, velocities and statistics, bit for bit.
 TEST(SelfCollision, PairListGivesWhatAFreshQueryGives) {
   const int rows = 12, cols = 16;
-  const double s = 0.05, dt = 0.01, pi = 3.14159265358979323846;
-  MatX3 rest(0, 3);
-  MatX3i tris(0, 3);
-  make_grid(rows, cols, Vec3::Zero(), Vec3(s, 0, 0), Vec3(0, s, 0), rest, tris);
+  const double s = 0.05, dt = 0.01;
+  MatX3 rest;
+  MatX3i tris;
+  flat_sheet(rows, cols, s, rest, tris);
   const Index sheet = rest.rows();
   make_grid(3, 3, Vec3(0.2, 0.2, 0.1), Vec3(0.04, 0, 0), Vec3(0, 0.04, 0), rest, tris);
   const VecX w = VecX::Ones(rest.rows());
@@ -284,7 +301,7 @@ TEST(SelfCollision, PairListGivesWhatAFreshQueryGives) {
     MatX3 x = rest;
     for (Index i = 0; i < x.rows(); ++i) {
       const double u = rest(i, 0);
-      const Vec3 p = i < sheet ? Vec3(u, rest(i, 1), wave * std::sin(2 * pi * (u / 0.4 - phase)) * u / (cols * s))
+      const Vec3 p = i < sheet ? Vec3(u, rest(i, 1), wave * std::sin(2 * kPi * (u / 0.4 - phase)) * u / (cols * s))
                                : Vec3(u + slide, rest(i, 1), height);
       x.row(i) = (p + Vec3(0, 0.5 * t, 0)).transpose();
     }
@@ -294,9 +311,7 @@ TEST(SelfCollision, PairListGivesWhatAFreshQueryGives) {
   MatX3 x = target(0), v = MatX3::Zero(x.rows(), 3);
   int listed_steps = 0, listed_contacts = 0, direct_later = 0;
   for (int step = 1; step <= 300; ++step) {
-    const MatX3 x0 = x;
-    v = (target(step) - x0) / dt;
-    x = x0 + dt * v;
+    const MatX3 x0 = drive(target(step), dt, x, v);
     MatX3 xf = x, vf = v;
     SelfCollision fresh(tris, rest.rows(), params());
     const SelfCollisionStats sf = fresh.resolve(x0, xf, vf, w);
@@ -325,15 +340,14 @@ TEST(SelfCollision, PairListGivesWhatAFreshQueryGives) {
 // candidates (counted each step) and the same positions. There are no contacts here, so the
 // candidates' order is left to ResultsDoNotDependOnTheThreadCount's shared concatenation.
 TEST(SelfCollision, PairListResultsDoNotDependOnTheThreadCount) {
-  const int rows = 64, cols = 96;
-  const double s = 0.01, dt = 0.01, pi = 3.14159265358979323846;
-  MatX3 rest(0, 3);
-  MatX3i tris(0, 3);
-  make_grid(rows, cols, Vec3::Zero(), Vec3(s, 0, 0), Vec3(0, s, 0), rest, tris);
+  const double dt = 0.01;
+  MatX3 rest;
+  MatX3i tris;
+  flat_sheet(64, 96, 0.01, rest, tris);
   const VecX w = VecX::Ones(rest.rows());
   auto target = [&](int step) {
     MatX3 x = rest;
-    for (Index i = 0; i < x.rows(); ++i) x(i, 2) = 0.02 * std::sin(2 * pi * (rest(i, 0) / 0.3 - 0.5 * step * dt));
+    for (Index i = 0; i < x.rows(); ++i) x(i, 2) = 0.02 * std::sin(2 * kPi * (rest(i, 0) / 0.3 - 0.5 * step * dt));
     return x;
   };
   auto run_with = [&](int threads, int& listed, Index& most, std::vector<Index>& cands) {
@@ -344,9 +358,7 @@ TEST(SelfCollision, PairListResultsDoNotDependOnTheThreadCount) {
     listed = 0;
     most = 0;
     for (int step = 1; step <= 40; ++step) {
-      const MatX3 x0 = x;
-      v = (target(step) - x0) / dt;
-      x = x0 + dt * v;
+      const MatX3 x0 = drive(target(step), dt, x, v);
       const SelfCollisionStats& st = collide.resolve(x0, x, v, w);
       listed += st.tree_queries < st.broad_phases;
       most = std::max(most, st.candidates);
