@@ -99,7 +99,7 @@ SelfCollision::SelfCollision(const MatX3i& triangles, Index num_vertices,
   for (auto& buffer : thread_pairs_) buffer.reserve(expected);
   for (auto& buffer : thread_edge_pairs_) buffer.reserve(expected_edges);
   pairs_.reserve(expected + expected_edges);
-  list_.reserve(3 * (expected + expected_edges));
+  list_.reserve(expected + expected_edges);  // a list that pays is at most 1.5x the candidates
   flag_.reserve(expected + expected_edges);
   contacts_.reserve(expected + expected_edges);
   start_gap_.reserve(expected + expected_edges);
