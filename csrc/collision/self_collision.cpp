@@ -42,6 +42,11 @@ int team_size() {
 
 inline Vec3 row(const MatX3& m, Index i) { return m.row(i).transpose(); }
 
+// A pair with no free vertex (all four inverse masses 0) is never a candidate: nothing to move.
+inline bool none_free(const VecX& inv_mass, int32_t a, int32_t b, int32_t c, int32_t d) {
+  return inv_mass[a] == 0 && inv_mass[b] == 0 && inv_mass[c] == 0 && inv_mass[d] == 0;
+}
+
 // Pair loops parallelise above this many pairs: a pair costs about a vertex update, and waking a
 // thread team on a loaded machine costs far more than a few thousand of them.
 constexpr Index kPairGrain = 4 * kParallelGrain;
@@ -132,7 +137,8 @@ bool SelfCollision::list_covers(const Vec3& centre) const {
 
 // The skin of the next list, and the reference boxes it is measured from. The skin is
 // kSkinSteps times the step's largest relative motion (the largest vertex box), at least the
-// thickness and at most the query's reach (a sheet's list grows as the square of its width).
+// thickness and at most 4 times it, twice the query's own reach (a sheet's list grows as the
+// square of its width).
 // A list pays only while it is about as short as its candidates and serves several broad
 // phases: that is a cloth whose close pairs are its mesh neighbours, thickness well below the
 // spacing, as in the paper's flag. One that came out longer than kListRatio times its
@@ -200,10 +206,6 @@ bool SelfCollision::query_trees(double wide, const VecX* inv_mass, std::vector<P
   }
   for (auto& buffer : thread_pairs_) buffer.clear();
   for (auto& buffer : thread_edge_pairs_) buffer.clear();
-  auto pinned = [&](int32_t a, int32_t b, int32_t c, int32_t d) {
-    return inv_mass && (*inv_mass)[a] == 0 && (*inv_mass)[b] == 0 && (*inv_mass)[c] == 0 &&
-           (*inv_mass)[d] == 0;
-  };
   auto by_b = [](const Pair& p, const Pair& q) { return p.b < q.b; };
   auto collect_vertex = [&](Index i, std::vector<Pair>& buffer) {
     const Vec3 qlo = vlo_.row(i).transpose().array() - (reach + wide);
@@ -213,7 +215,7 @@ bool SelfCollision::query_trees(double wide, const VecX* inv_mass, std::vector<P
     tri_tree_.query(tlo_, thi_, qlo, qhi, [&](int32_t t) {
       const int32_t a = tris_(t, 0), b = tris_(t, 1), c = tris_(t, 2);
       if (a == vi || b == vi || c == vi) return;  // never against its own triangles
-      if (pinned(vi, a, b, c)) return;
+      if (inv_mass && none_free(*inv_mass, vi, a, b, c)) return;
       buffer.push_back({vi, t, false});
     });
     std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(), by_b);
@@ -226,7 +228,7 @@ bool SelfCollision::query_trees(double wide, const VecX* inv_mass, std::vector<P
     edge_tree_.query(elo_, ehi_, qlo, qhi, [&](int32_t f) {  // f > e: each pair once
       const int32_t c = edges_(f, 0), d = edges_(f, 1);
       if (a == c || a == d || b == c || b == d) return;  // edges sharing a vertex never cross
-      if (pinned(a, b, c, d)) return;
+      if (inv_mass && none_free(*inv_mass, a, b, c, d)) return;
       buffer.push_back({static_cast<int32_t>(e), f, true});
     }, static_cast<int32_t>(e));
     std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(), by_b);
@@ -280,8 +282,7 @@ void SelfCollision::filter_list(const VecX& inv_mass) {
   auto keep = [&](const Pair& p) {
     int32_t i[4];
     corners(p, i);
-    if (inv_mass[i[0]] == 0 && inv_mass[i[1]] == 0 && inv_mass[i[2]] == 0 && inv_mass[i[3]] == 0)
-      return false;
+    if (none_free(inv_mass, i[0], i[1], i[2], i[3])) return false;
     const double r = p.edge_pair ? h : reach;
     const double* q0 = (p.edge_pair ? elo_ : vlo_).data() + 3 * Index(p.a);
     const double* q1 = (p.edge_pair ? ehi_ : vhi_).data() + 3 * Index(p.a);

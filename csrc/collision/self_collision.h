@@ -151,7 +151,7 @@ class SelfCollision {
   // the vertex boxes ref_lo_/ref_hi_ (less their mean position) of the step that built it.
   std::vector<Pair> list_;       // ordered as pairs_
   MatX3 ref_lo_, ref_hi_;        // N x 3
-  double skin_ = 0;              // m; 0: no list yet
+  double skin_ = 0;              // m; 0: no list (direct queries)
   double ref_scale_ = 0;         // m, largest coordinate of those boxes (round-off guard)
   bool list_valid_ = false;      // false: the next broad phase builds the list
   int served_ = 0;               // broad phases the list has served

@@ -337,8 +337,9 @@ TEST(SelfCollision, PairListGivesWhatAFreshQueryGives) {
 
 // The pair list filtered on the OpenMP team: a 64 x 96 sheet (1 cm, thickness 0.5 mm) in a slow
 // travelling wave, 40 steps on 1 and on 2 threads, serves the same broad phases with the same
-// candidates (counted each step) and the same positions. There are no contacts here, so the
-// candidates' order is left to ResultsDoNotDependOnTheThreadCount's shared concatenation.
+// candidates (counted each step) and the same positions. There are no contacts here, so this
+// test cannot see the candidates' order; the filter keeps it by concatenating static blocks in
+// thread order, as the direct query does (whose order ResultsDoNotDependOnTheThreadCount checks).
 TEST(SelfCollision, PairListResultsDoNotDependOnTheThreadCount) {
   const double dt = 0.01;
   MatX3 rest;
