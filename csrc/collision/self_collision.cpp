@@ -8,6 +8,7 @@
 #include "collision/pole.h"
 #include "collision/vertex_triangle.h"
 #include "common/parallel.h"
+#include "common/simd.h"
 #ifdef _OPENMP
 #include <omp.h>
 #endif
@@ -94,7 +95,8 @@ SelfCollision::SelfCollision(const MatX3i& triangles, Index num_vertices,
       count_v_(static_cast<size_t>(num_vertices), 0),
       on_pole_(static_cast<size_t>(num_vertices), 0),
       moved_(static_cast<size_t>(num_vertices), 0),
-      frozen_(static_cast<size_t>(num_vertices), 0) {
+      frozen_(static_cast<size_t>(num_vertices), 0),
+      motion_(num_vertices) {
   const size_t threads = static_cast<size_t>(max_threads());
   thread_pairs_.resize(threads);
   thread_edge_pairs_.resize(threads);
@@ -110,7 +112,7 @@ SelfCollision::SelfCollision(const MatX3i& triangles, Index num_vertices,
   start_gap_.reserve(expected + expected_edges);
 }
 
-void SelfCollision::corners(const Pair& pr, int32_t idx[4]) const {
+FLAGSIM_INLINE void SelfCollision::corners(const Pair& pr, int32_t idx[4]) const {
   if (pr.edge_pair) {
     idx[0] = edges_(pr.a, 0), idx[1] = edges_(pr.a, 1);
     idx[2] = edges_(pr.b, 0), idx[3] = edges_(pr.b, 1);
@@ -315,7 +317,7 @@ void SelfCollision::filter_list(const VecX& inv_mass) {
 
 void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv_mass,
                                 bool shifted) {
-  const double h = params_.thickness, margin = params_.thickness;
+  const double margin = params_.thickness;
   ++stats_.broad_phases;
   shift_.setZero();
   if (shifted) {
@@ -363,21 +365,49 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
   start_gap_.resize(pairs_.size());
   stats_.candidates = last_candidates_ = static_cast<Index>(pairs_.size());
   // Each pair's distance at the start of the step: with it, a pair whose points cannot have
-  // closed that gap (see reach()) needs no test at all.
+  // closed that gap (see out_of_reach) needs no test at all.
   const auto P = static_cast<Index>(pairs_.size());
-  parallel_for_if(P >= kPairGrain, P, [&](Index k) {
-    int32_t i[4];
-    corners(pairs_[k], i);
-    const Vec3 p = row(x0, i[0]), a = row(x0, i[1]), b = row(x0, i[2]), c = row(x0, i[3]);
-    if (pairs_[k].edge_pair) {
-      const Vec2 su = closest_segment_parameters(p, a, b, c);
-      start_gap_[k] = ((p + su[0] * (a - p)) - (b + su[1] * (c - b))).norm();
-    } else {
-      bool interior;
-      const Vec3 w = closest_point_barycentric(p, a, b, c, interior);
-      start_gap_[k] = (p - (w[0] * a + w[1] * b + w[2] * c)).norm();
-    }
-  });
+  parallel_for_if(P >= kPairGrain, P, [&](Index k) { start_gap_[k] = start_distance(pairs_[k], x0); });
+}
+
+// The distance between the pair's two sides at x0.
+double SelfCollision::start_distance(const Pair& pr, const MatX3& x0) const {
+  int32_t i[4];
+  corners(pr, i);
+  const Vec3 p = row(x0, i[0]), a = row(x0, i[1]), b = row(x0, i[2]), c = row(x0, i[3]);
+  if (pr.edge_pair) {
+    const Vec2 su = closest_segment_parameters(p, a, b, c);
+    return ((p + su[0] * (a - p)) - (b + su[1] * (c - b))).norm();
+  }
+  bool interior;
+  const Vec3 w = closest_point_barycentric(p, a, b, c, interior);
+  return (p - (w[0] * a + w[1] * b + w[2] * c)).norm();
+}
+
+// motion_ = each vertex's displacement over the step less the broad phase's common one (any
+// common vector would do: two points approach by at most the sum of theirs), and the round-off
+// guard of the bounds built on it.
+void SelfCollision::measure_motion(const MatX3& x0, const MatX3& x) {
+  double scale = 0;
+  for (Index i = 0; i < n_; ++i) {
+    motion_[i] = (row(x, i) - row(x0, i) - shift_).norm();
+    scale = std::max(scale, std::max(x.row(i).cwiseAbs().maxCoeff(), x0.row(i).cwiseAbs().maxCoeff()));
+  }
+  motion_guard_ = 1e-12 * (1 + scale + shift_.norm());
+}
+
+// Whether pair k's sides stay at least `need` apart over the whole step: start gap - reach >=
+// need, with reach() computed only when the cheap bound above it (the sum of two motions, grown
+// by the guard) leaves that open, so the answer is always the exact one.
+bool SelfCollision::out_of_reach(Index k, const MatX3& x0, const MatX3& x, double need) const {
+  const Pair& pr = pairs_[k];
+  int32_t i[4];
+  corners(pr, i);
+  const double* m = motion_.data();
+  const double bound = (pr.edge_pair ? std::max(m[i[0]], m[i[1]]) + std::max(m[i[2]], m[i[3]])
+                                     : m[i[0]] + std::max({m[i[1]], m[i[2]], m[i[3]]})) +
+                       motion_guard_;
+  return start_gap_[k] - bound >= need || start_gap_[k] - reach(pr, x0, x) >= need;
 }
 
 // How far the pair's two sides can have approached over the step: the largest displacement of a
@@ -442,7 +472,6 @@ void SelfCollision::detect(const Pair& pr, const MatX3& x0, const MatX3& x, Cont
   int32_t i[4];
   corners(pr, i);
   ct.kind = Contact::kNone;
-  if (start_gap_[&pr - pairs_.data()] - reach(pr, x0, x) >= h) return;  // never within reach
   const Vec3 p0 = row(x0, i[0]), a0 = row(x0, i[1]), b0 = row(x0, i[2]), c0 = row(x0, i[3]);
   const Vec3 p1 = row(x, i[0]), a1 = row(x, i[1]), b1 = row(x, i[2]), c1 = row(x, i[3]);
   double t;
@@ -577,6 +606,7 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
   // Detection in parallel on one state; after the first sweep only pairs with a vertex the last
   // sweep moved can have changed.
   const auto P = static_cast<Index>(pairs_.size());
+  measure_motion(x0, x);
   parallel_for_if(P >= kPairGrain, P, [&](Index k) {
     contacts_[k].kind = Contact::kNone;
     if (!first) {
@@ -584,6 +614,7 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
       corners(pairs_[k], i);
       if (!moved_[i[0]] && !moved_[i[1]] && !moved_[i[2]] && !moved_[i[3]]) return;
     }
+    if (out_of_reach(k, x0, x, h)) return;  // never within the thickness
     detect(pairs_[k], x0, x, contacts_[k]);
   });
   // Response, in pair order. A crossing moves the pair's four points back along their paths to
@@ -640,13 +671,14 @@ bool SelfCollision::find_violations(const MatX3& x0, const MatX3& x, const VecX&
   const double floor = 0.5 * params_.thickness;
   auto still = [&](int32_t i) { return frozen_[i] || inv_mass[i] == 0; };
   const auto P = static_cast<Index>(pairs_.size());
+  measure_motion(x0, x);
   parallel_for_if(P >= kPairGrain, P, [&](Index k) {
     const Pair& pr = pairs_[k];
     int32_t i[4];
     corners(pr, i);
     flag_[k] = 0;
     if (still(i[0]) && still(i[1]) && still(i[2]) && still(i[3])) return;  // nothing to undo
-    if (start_gap_[k] - reach(pr, x0, x) >= floor) return;  // cannot have crossed or closed in
+    if (out_of_reach(k, x0, x, floor)) return;  // cannot have crossed or closed in
     double t;
     if (crossing(pr, x0, x, t)) {
       flag_[k] = 1;

@@ -114,6 +114,9 @@ class SelfCollision {
   bool crossing(const Pair& pr, const MatX3& x0, const MatX3& x, double& t) const;
   double separation(const Pair& pr, const MatX3& x0, const MatX3& x, double t) const;
   double reach(const Pair& pr, const MatX3& x0, const MatX3& x) const;
+  double start_distance(const Pair& pr, const MatX3& x0) const;
+  void measure_motion(const MatX3& x0, const MatX3& x);
+  bool out_of_reach(Index k, const MatX3& x0, const MatX3& x, double need) const;
   void broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv_mass, bool shifted);
   bool list_covers(const Vec3& centre) const;
   double next_skin(const Vec3& centre);
@@ -169,6 +172,8 @@ class SelfCollision {
   std::vector<uint8_t> on_pole_;   // per vertex: resting on the pole in this sweep
   std::vector<uint8_t> moved_;     // per vertex: moved by the last sweep
   std::vector<uint8_t> frozen_;    // per vertex
+  VecX motion_;                    // per vertex: displacement less shift_ (measure_motion), m
+  double motion_guard_ = 0;        // m, round-off guard of the bounds on motion_
   SelfCollisionStats stats_;
 };
 
