@@ -43,6 +43,10 @@ int team_size() {
 
 inline Vec3 row(const MatX3& m, Index i) { return m.row(i).transpose(); }
 
+// The margin by which a cheap test on coordinates of magnitude up to `size` (m) must clear its
+// bound so that round-off (~1e-16 of the size) never decides: far above it, far below any gap.
+inline double roundoff_guard(double size) { return 1e-12 * (1 + size); }
+
 // A pair with no free vertex (all four inverse masses 0) is never a candidate: nothing to move.
 inline bool none_free(const VecX& inv_mass, int32_t a, int32_t b, int32_t c, int32_t d) {
   return inv_mass[a] == 0 && inv_mass[b] == 0 && inv_mass[c] == 0 && inv_mass[d] == 0;
@@ -127,9 +131,7 @@ FLAGSIM_INLINE void SelfCollision::corners(const Pair& pr, int32_t idx[4]) const
 // has grown by at most skin_ on each side, and the list was collected 2 skin_ wider.
 bool SelfCollision::list_covers(const Vec3& centre) const {
   if (!list_valid_) return false;
-  // Round-off of the coordinates (~1e-16 of their size) must not decide: keep a guard.
-  const double guard = 1e-12 * (1 + centre.cwiseAbs().maxCoeff() + ref_scale_);
-  const double s = skin_ - guard;
+  const double s = skin_ - roundoff_guard(centre.cwiseAbs().maxCoeff() + ref_scale_);
   for (Index i = 0; i < n_; ++i)
     for (int d = 0; d < 3; ++d)
       if (vlo_(i, d) - centre[d] < ref_lo_(i, d) - s || vhi_(i, d) - centre[d] > ref_hi_(i, d) + s)
@@ -393,7 +395,7 @@ void SelfCollision::measure_motion(const MatX3& x0, const MatX3& x) {
     motion_[i] = (row(x, i) - row(x0, i) - shift_).norm();
     scale = std::max(scale, std::max(x.row(i).cwiseAbs().maxCoeff(), x0.row(i).cwiseAbs().maxCoeff()));
   }
-  motion_guard_ = 1e-12 * (1 + scale + shift_.norm());
+  motion_guard_ = roundoff_guard(scale + shift_.norm());
 }
 
 // Whether pair k's sides stay at least `need` apart over the whole step: start gap - reach >=
