@@ -291,17 +291,21 @@ void PaddedComponent<T>::fill(const T* src) {
   const int n0 = n[0], n1 = n[1], n2 = n[2];
   // i in [-G, n + G): one conditional add or subtract when n >= G, a modulo otherwise.
   auto wrap = [](int i, int n) { return n >= G ? (i < 0 ? i + n : i >= n ? i - n : i) : ((i % n) + n) % n; };
-  const long rows = long(n0 + 2 * G) * (n1 + 2 * G);
-  parallel_for_if(data.size() > 32768, rows, [&](Index r) {
-    const int a = int(r / (n1 + 2 * G)) - G, b = int(r % (n1 + 2 * G)) - G;
-    const T* s = src + (std::size_t(wrap(a, n0)) * n1 + std::size_t(wrap(b, n1))) * n2;
-    T* d = data.data() + index(a, b, -G);
-    if (n2 >= G) {
-      std::copy(s + n2 - G, s + n2, d);
-      std::copy(s, s + n2, d + G);
-      std::copy(s, s + G, d + G + n2);
-    } else {
-      for (int k = -G; k < n2 + G; ++k) d[k + G] = s[wrap(k, n2)];
+  parallel_for_if(data.size() > 32768, n0 + 2 * G, [&](Index plane) {
+    const int a = int(plane) - G;
+    const T* s_plane = src + std::size_t(wrap(a, n0)) * n1 * n2;
+    T* d = data.data() + index(a, -G, -G);
+    for (int b = -G; b < n1 + G; ++b, d += p2) {
+      const T* s = s_plane + std::size_t(wrap(b, n1)) * n2;
+      if (n2 >= G) {
+        for (int g = 0; g < G; ++g) {  // the ghosts inline: a memmove call of G values costs more
+          d[g] = s[n2 - G + g];
+          d[G + n2 + g] = s[g];
+        }
+        std::copy(s, s + n2, d + G);
+      } else {
+        for (int k = -G; k < n2 + G; ++k) d[k + G] = s[wrap(k, n2)];
+      }
     }
   });
 }
@@ -406,28 +410,56 @@ inline void padded_velocity(const std::array<PaddedComponent<T>, 3>& u, std::siz
 
 /// Semi-Lagrangian sample at node k of one row when the departure is within one cell of the node
 /// on every axis (|d| < 1): the departure point lies in the cell on the upwind side of the node,
-/// so each axis interpolates between the node and its upwind neighbour, lerp(node, upwind, |d|),
-/// written as node + max(d, 0) (lower - node) + max(-d, 0) (upper - node): no computed index, every
-/// load contiguous along k. S is T (scalar) or a vector of T (one node per lane); rows[3 (a + 1) +
-/// (b + 1)] is the padded row at x offset a, y offset b (a, b in -1..1) from the node's row. A
-/// uniform field comes out exactly.
+/// so each axis interpolates between the node and its upwind neighbour, node + |d| (upwind - node),
+/// the upwind neighbour being the lower one where d > 0 and the upper one where d < 0. Loads are
+/// contiguous along k and the neighbour is picked per lane by a select, so the interpolation
+/// touches only the 4 rows of the upwind cell: z, then y, then x (the order and the bits of
+/// Interpolator). S is T (scalar) or a vector of T (one node per lane); rows[3 (a + 1) + (b + 1)]
+/// is the padded row at x offset a, y offset b (a, b in -1..1) from the node's row. A uniform
+/// field comes out exactly.
 template <class S, class T>
 FLAGSIM_INLINE S upwind_sample(const T* const rows[9], int k, S d0, S d1, S d2) {
   const S zero = S{};  // 0 in every lane
-  const S l0 = d0 > zero ? d0 : zero, h0 = d0 < zero ? -d0 : zero;
-  const S l1 = d1 > zero ? d1 : zero, h1 = d1 < zero ? -d1 : zero;
-  const S l2 = d2 > zero ? d2 : zero, h2 = d2 < zero ? -d2 : zero;
-  S vy[3];
-  for (int a = -1; a <= 1; ++a) {
-    S vz[3];
-    for (int b = -1; b <= 1; ++b) {
-      const T* row = rows[3 * (a + 1) + (b + 1)] + k;
-      const S mid = load_lanes<S>(row);
-      vz[b + 1] = mid + l2 * (load_lanes<S>(row - 1) - mid) + h2 * (load_lanes<S>(row + 1) - mid);
-    }
-    vy[a + 1] = vz[1] + l1 * (vz[0] - vz[1]) + h1 * (vz[2] - vz[1]);
+  const auto lo0 = d0 > zero, lo1 = d1 > zero, lo2 = d2 > zero;  // upwind is the lower neighbour
+  const S w0 = lo0 ? d0 : (d0 < zero ? -d0 : zero);              // |d|, 0 for NaN
+  const S w1 = lo1 ? d1 : (d1 < zero ? -d1 : zero);
+  const S w2 = lo2 ? d2 : (d2 < zero ? -d2 : zero);
+  // Row r at the node (mid) and at its upwind neighbour along z (up).
+  auto at = [&](const T* row, S& mid, S& up) {
+    row += k;
+    mid = load_lanes<S>(row);
+    const S below = load_lanes<S>(row - 1), above = load_lanes<S>(row + 1);
+    up = lo2 ? below : above;
+  };
+  auto pick = [](auto mask, S a, S b) { return mask ? a : b; };
+  S m00, u00, m0b, u0b, ma0, ua0, mab, uab;  // rows (0, 0), (0, y up), (x up, 0), (x up, y up)
+  at(rows[4], m00, u00);
+  {
+    S ml, ul, mh, uh;
+    at(rows[3], ml, ul);
+    at(rows[5], mh, uh);
+    m0b = pick(lo1, ml, mh);
+    u0b = pick(lo1, ul, uh);
+    at(rows[1], ml, ul);
+    at(rows[7], mh, uh);
+    ma0 = pick(lo0, ml, mh);
+    ua0 = pick(lo0, ul, uh);
   }
-  return vy[1] + l0 * (vy[0] - vy[1]) + h0 * (vy[2] - vy[1]);
+  {
+    S m_ll, u_ll, m_lh, u_lh, m_hl, u_hl, m_hh, u_hh;  // (x, y) = (-1, -1), (-1, 1), (1, -1), (1, 1)
+    at(rows[0], m_ll, u_ll);
+    at(rows[2], m_lh, u_lh);
+    at(rows[6], m_hl, u_hl);
+    at(rows[8], m_hh, u_hh);
+    const S ml = pick(lo1, m_ll, m_lh), ul = pick(lo1, u_ll, u_lh);
+    const S mh = pick(lo1, m_hl, m_hh), uh = pick(lo1, u_hl, u_hh);
+    mab = pick(lo0, ml, mh);
+    uab = pick(lo0, ul, uh);
+  }
+  const S c00 = m00 + w2 * (u00 - m00), c0b = m0b + w2 * (u0b - m0b);
+  const S ca0 = ma0 + w2 * (ua0 - ma0), cab = mab + w2 * (uab - mab);
+  const S y0 = c00 + w1 * (c0b - c00), ya = ca0 + w1 * (cab - ca0);
+  return y0 + w0 * (ya - y0);
 }
 
 /// One row (i, j) of padded_sl's fast path, node by node from k = 0: what the row needs.
