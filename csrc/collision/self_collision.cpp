@@ -321,6 +321,7 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
                                 bool shifted) {
   const double margin = params_.thickness;
   ++stats_.broad_phases;
+  quiet_ = false;  // new candidates: no sweep has looked at them yet
   shift_.setZero();
   if (shifted) {
     for (Index i = 0; i < n_; ++i) shift_ += row(x, i) - row(x0, i);
@@ -483,7 +484,10 @@ void SelfCollision::detect(const Pair& pr, const MatX3& x0, const MatX3& x, Cont
     if (edge_edge_ccd(p0, a0, b0, c0, p1, a1, b1, c1, t, su)) {
       const Vec3 n = ((1 - t) * (a0 - p0) + t * (a1 - p1)).cross((1 - t) * (c0 - b0) + t * (c1 - b1));
       const double len = n.norm();
-      if (!(len > 0)) return;
+      if (!(len > 0)) {
+        ct.kind = Contact::kDegenerate;
+        return;
+      }
       const Vec3 gap0 = (p0 + su[0] * (a0 - p0)) - (b0 + su[1] * (c0 - b0));
       ct.n = gap0.dot(n) >= 0 ? Vec3(n / len) : Vec3(-n / len);
       ct.g[0] = 1 - su[0], ct.g[1] = su[0], ct.g[2] = -(1 - su[1]), ct.g[3] = -su[1];
@@ -506,7 +510,10 @@ void SelfCollision::detect(const Pair& pr, const MatX3& x0, const MatX3& x, Cont
   if (vertex_triangle_ccd(p0, a0, b0, c0, p1, a1, b1, c1, t, bary)) {
     const Vec3 n = ((1 - t) * (b0 - a0) + t * (b1 - a1)).cross((1 - t) * (c0 - a0) + t * (c1 - a1));
     const double len = n.norm();
-    if (!(len > 0)) return;  // a degenerate triangle: left to the fallback
+    if (!(len > 0)) {  // a degenerate triangle: left to the fallback
+      ct.kind = Contact::kDegenerate;
+      return;
+    }
     const double f0 = (b0 - a0).cross(c0 - a0).dot(p0 - a0);
     const double f1 = (b1 - a1).cross(c1 - a1).dot(p1 - a1);
     ct.n = (f0 > 0 || (f0 == 0 && f1 >= 0)) ? Vec3(n / len) : Vec3(-n / len);
@@ -524,7 +531,10 @@ void SelfCollision::detect(const Pair& pr, const MatX3& x0, const MatX3& x, Cont
     ct.n = r / d;
   } else {  // on the triangle: its normal, towards the side the vertex started on
     const Vec3 n = (b1 - a1).cross(c1 - a1);
-    if (!(n.norm() > 0)) return;
+    if (!(n.norm() > 0)) {
+      ct.kind = Contact::kDegenerate;
+      return;
+    }
     const double f0 = (b0 - a0).cross(c0 - a0).dot(p0 - a0);
     ct.n = f0 < 0 ? Vec3(-n.normalized()) : Vec3(n.normalized());
   }
@@ -629,10 +639,14 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
   // edge, a triangle on two pinned bumps) neither add up nor bounce it.
   dv_.setZero();
   std::fill(count_v_.begin(), count_v_.end(), 0);
-  bool responded = false;
+  bool responded = false, degenerate = false;
   for (Index k = 0; k < P; ++k) {
     const Contact& ct = contacts_[k];
     if (ct.kind == Contact::kNone) continue;
+    if (ct.kind == Contact::kDegenerate) {
+      degenerate = true;
+      continue;
+    }
     responded = true;
     int32_t idx[4];
     corners(pairs_[k], idx);
@@ -659,11 +673,14 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
   // a stretched cloth stretched).
   if (constraints && responded) (*constraints)(x, v);
   // The pole last: no sweep leaves a vertex inside it.
+  Index pushed = 0;
   if (pole) {
     double largest = 0;
-    stats_.pole += collide_pole(*pole, x0, x, v, inv_mass, &largest);
+    pushed = collide_pole(*pole, x0, x, v, inv_mass, &largest);
+    stats_.pole += pushed;
     changed = changed || largest > 1e-2 * h;
   }
+  quiet_ = first && !responded && !degenerate && pushed == 0;
   for (Index i = 0; i < n_; ++i) moved_[i] = x.row(i) != x_sweep_.row(i);
   return changed;
 }
@@ -673,25 +690,29 @@ bool SelfCollision::find_violations(const MatX3& x0, const MatX3& x, const VecX&
   const double floor = 0.5 * params_.thickness;
   auto still = [&](int32_t i) { return frozen_[i] || inv_mass[i] == 0; };
   const auto P = static_cast<Index>(pairs_.size());
-  measure_motion(x0, x);
-  parallel_for_if(P >= kPairGrain, P, [&](Index k) {
-    const Pair& pr = pairs_[k];
-    int32_t i[4];
-    corners(pr, i);
-    flag_[k] = 0;
-    if (still(i[0]) && still(i[1]) && still(i[2]) && still(i[3])) return;  // nothing to undo
-    if (out_of_reach(k, x0, x, floor)) return;  // cannot have crossed or closed in
-    double t;
-    if (crossing(pr, x0, x, t)) {
-      flag_[k] = 1;
-    } else if (!pr.edge_pair) {
-      const Vec3 p = row(x, i[0]), a = row(x, i[1]), b = row(x, i[2]), c = row(x, i[3]);
-      if (beyond_reach(p, a, b, c, floor)) return;
-      bool interior;
-      const Vec3 bary = closest_point_barycentric(p, a, b, c, interior);
-      flag_[k] = (p - (bary[0] * a + bary[1] * b + bary[2] * c)).norm() < floor;
-    }
-  });
+  if (quiet_) {  // the last sweep saw every pair at this x and found none within the thickness
+    std::fill(flag_.begin(), flag_.end(), uint8_t{0});
+  } else {
+    measure_motion(x0, x);
+    parallel_for_if(P >= kPairGrain, P, [&](Index k) {
+      const Pair& pr = pairs_[k];
+      int32_t i[4];
+      corners(pr, i);
+      flag_[k] = 0;
+      if (still(i[0]) && still(i[1]) && still(i[2]) && still(i[3])) return;  // nothing to undo
+      if (out_of_reach(k, x0, x, floor)) return;  // cannot have crossed or closed in
+      double t;
+      if (crossing(pr, x0, x, t)) {
+        flag_[k] = 1;
+      } else if (!pr.edge_pair) {
+        const Vec3 p = row(x, i[0]), a = row(x, i[1]), b = row(x, i[2]), c = row(x, i[3]);
+        if (beyond_reach(p, a, b, c, floor)) return;
+        bool interior;
+        const Vec3 bary = closest_point_barycentric(p, a, b, c, interior);
+        flag_[k] = (p - (bary[0] * a + bary[1] * b + bary[2] * c)).norm() < floor;
+      }
+    });
+  }
   bool any = std::find(flag_.begin(), flag_.end(), uint8_t{1}) != flag_.end();
   if (pole)
     for (Index i = 0; i < n_ && !any; ++i)

@@ -102,7 +102,8 @@ class SelfCollision {
     bool edge_pair;
   };
   struct Contact {  // one pair's response in a sweep
-    enum Kind : uint8_t { kNone, kCrossing, kProximity } kind;
+    // kDegenerate: a crossing or touch with no usable normal, left to the fallback.
+    enum Kind : uint8_t { kNone, kCrossing, kProximity, kDegenerate } kind;
     // The constraint C = (sum_k g_k x_k) . n - thickness >= 0 on the pair's four points:
     // vertex-triangle g = (1, -b_a, -b_b, -b_c), edge-edge g = (1 - s, s, -(1 - u), -u).
     double g[4];
@@ -174,6 +175,10 @@ class SelfCollision {
   std::vector<uint8_t> frozen_;    // per vertex
   VecX motion_;                    // per vertex: displacement less shift_ (measure_motion), m
   double motion_guard_ = 0;        // m, round-off guard of the bounds on motion_
+  // The last sweep detected every candidate pair (the first of its broad phase) and found nothing
+  // to do: no contact, no degenerate one, no pole push. Every candidate is then at least the
+  // thickness apart along the whole step, so find_violations has no pair to flag at that x.
+  bool quiet_ = false;
   SelfCollisionStats stats_;
 };
 

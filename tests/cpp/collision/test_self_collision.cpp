@@ -51,6 +51,21 @@ TEST(SelfCollision, VertexDrivenThroughATriangleAt30MetresPerSecondStopsAtTheThi
   EXPECT_EQ(stats.frozen, 0);
 }
 
+// A triangle that collapses to a point over the step, onto which the vertex lands: no contact
+// has a normal to push along (detect leaves it), so the fallback must still see the vertex on
+// the triangle and freeze the four of them at x0.
+TEST(SelfCollision, VertexLandingOnATriangleCollapsedToAPointIsFrozen) {
+  OneTriangle s;
+  s.w.setOnes();
+  for (int i = 0; i < 4; ++i) s.x.row(i) << 0.2, 0.3, 0.0;
+  s.v = (s.x - s.x0) / 0.01;
+  SelfCollision collide(s.tris, 4, params());
+  const auto& stats = collide.resolve(s.x0, s.x, s.v, s.w);
+  EXPECT_EQ(stats.contacts + stats.crossings, 0);  // nothing detect could respond to
+  EXPECT_EQ(stats.frozen, 4);
+  EXPECT_EQ(s.x, s.x0);
+}
+
 TEST(SelfCollision, FreeTriangleSharesThePushByMassAndKeepsMomentum) {
   OneTriangle s;
   s.w << 1.0, 2.0, 2.0, 2.0;  // vertex 1 kg, triangle corners 0.5 kg
