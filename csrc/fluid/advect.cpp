@@ -516,25 +516,41 @@ FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
   return near;
 }
 
+/// The fast path over the n1 rows of a plane, w set for its row j = 0. Returns false if some
+/// node's departure is a cell or more away (or not finite).
+template <int C, class L, class T>
+FLAGSIM_INLINE bool sl_plane_body(SlRow<T> w, int n1, int n2, std::ptrdiff_t sy) {
+  bool near = true;
+  for (int j = 0; j < n1; ++j) {
+    near = sl_row_body<C, L>(w, n2) && near;
+    w.own += sy;
+    w.e1 += sy;
+    w.e2 += sy;
+    for (const T*& row : w.rows9) row += sy;
+    w.dst += n2;
+  }
+  return near;
+}
+
 template <int C, class T>
-bool sl_row_16(const SlRow<T>& w, int n2) {
-  return sl_row_body<C, NarrowLanes<T>>(w, n2);
+bool sl_plane_16(const SlRow<T>& w, int n1, int n2, std::ptrdiff_t sy) {
+  return sl_plane_body<C, NarrowLanes<T>>(w, n1, n2, sy);
 }
 
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
 template <int C, class T>
-FLAGSIM_TARGET_AVX bool sl_row_32(const SlRow<T>& w, int n2) {
-  return sl_row_body<C, Lanes32<T>>(w, n2);
+FLAGSIM_TARGET_AVX bool sl_plane_32(const SlRow<T>& w, int n1, int n2, std::ptrdiff_t sy) {
+  return sl_plane_body<C, Lanes32<T>>(w, n1, n2, sy);
 }
 #endif
 
 /// Semi-Lagrangian pass of component C: out (unpadded) from padded u^n.
 ///
-/// Each row first takes the fast path: upwind_sample on vectors (32 bytes with AVX, else 16: SSE2
-/// on any x86-64, GCC and Clang generic vectors), the row's tail in scalars. Nodes whose
-/// departure is a cell or more away on some axis (CFL >= 1) or not finite are then redone by the
-/// general sampler (any_corner: floor, wrap). The two agree to round-off
-/// (tests/cpp/fluid/test_advect.cpp).
+/// Each plane i first takes the fast path, row by row: upwind_sample on vectors (32 bytes with
+/// AVX, else 16: SSE2 on any x86-64, GCC and Clang generic vectors), each row's tail in scalars.
+/// In a plane with a node whose departure is a cell or more away on some axis (CFL >= 1) or not
+/// finite, those nodes are then redone by the general sampler (any_corner: floor, wrap). The two
+/// agree to round-off (tests/cpp/fluid/test_advect.cpp).
 template <int C, class T>
 void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, double s, T* out) {
   const PaddedSampler<T> q(sc.u[C]);
@@ -545,14 +561,13 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
   const std::ptrdiff_t sx = stride[0], sy = stride[1];
   const T st = T(s);
   const int n1 = geo.ny, n2 = geo.nz;
-  const long rows = long(geo.nx) * n1;
-  bool (*row_fn)(const SlRow<T>&, int) = &sl_row_16<C, T>;
+  bool (*plane_fn)(const SlRow<T>&, int, int, std::ptrdiff_t) = &sl_plane_16<C, T>;
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
-  if (vector_bytes() == 32) row_fn = &sl_row_32<C, T>;
+  if (vector_bytes() == 32) plane_fn = &sl_plane_32<C, T>;
 #endif
-  parallel_for_if(rows * n2 > 16384, rows, [&](Index r) {
-    const int i = int(r / n1), j = int(r % n1);
-    const std::size_t idx0 = p.index(i, j, 0);
+  parallel_for_if(long(geo.nx) * n1 * n2 > 16384, geo.nx, [&](Index plane) {
+    const int i = int(plane);
+    const std::size_t idx0 = p.index(i, 0, 0);
     SlRow<T> w;
     w.own = sc.u[C].data.data() + idx0;
     w.e1 = sc.u[E1].data.data() + idx0;
@@ -563,18 +578,21 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
     w.d1s = stride[E1];
     w.d2s = stride[E2];
     w.st = st;
-    w.dst = out + std::size_t(r) * n2;
-    if (row_fn(w, n2)) return;
+    w.dst = out + std::size_t(i) * n1 * n2;
+    if (plane_fn(w, n1, n2, sy)) return;
     // Departures of a cell or more (or not finite): those nodes again, by the general sampler.
-    std::size_t idx = idx0;
-    for (int k = 0; k < n2; ++k, ++idx) {
-      double vel[3];  // each exactly a T: the fast path's velocity, summed in the same order
-      padded_velocity<C>(sc.u, idx, stride, vel);
-      if (std::fabs(st * T(vel[0])) < 1 && std::fabs(st * T(vel[1])) < 1 && std::fabs(st * T(vel[2])) < 1)
-        continue;  // the fast path's departure (same T arithmetic): its value stands
-      const double e0 = s * vel[0], e1v = s * vel[1], e2v = s * vel[2];
-      const double px = i + o0 - e0, py = j + o1 - e1v, pz = k + o2 - e2v;
-      w.dst[k] = q.value(q.any_corner(p, idx, i, j, k, e0, e1v, e2v, px - o0, py - o1, pz - o2));
+    for (int j = 0; j < n1; ++j) {
+      std::size_t idx = p.index(i, j, 0);
+      T* dst = w.dst + std::size_t(j) * n2;
+      for (int k = 0; k < n2; ++k, ++idx) {
+        double vel[3];  // each exactly a T: the fast path's velocity, summed in the same order
+        padded_velocity<C>(sc.u, idx, stride, vel);
+        if (std::fabs(st * T(vel[0])) < 1 && std::fabs(st * T(vel[1])) < 1 && std::fabs(st * T(vel[2])) < 1)
+          continue;  // the fast path's departure (same T arithmetic): its value stands
+        const double e0 = s * vel[0], e1v = s * vel[1], e2v = s * vel[2];
+        const double px = i + o0 - e0, py = j + o1 - e1v, pz = k + o2 - e2v;
+        dst[k] = q.value(q.any_corner(p, idx, i, j, k, e0, e1v, e2v, px - o0, py - o1, pz - o2));
+      }
     }
   });
 }
