@@ -356,15 +356,32 @@ FLAGSIM_INLINE void spectral_row_body(const SpectralRow<T>& w, int nzc) {
   for (; k < nzc; ++k) spectral_modes<double>(w, k);
 }
 
+/// The n1 rows j of a plane i, w set for j = 0; the y symbols per j from (ayr, ayi, lamy).
+template <class L, class T>
+FLAGSIM_INLINE void spectral_plane_body(SpectralRow<T> w, const double* ayr, const double* ayi, const double* lamy,
+                                        double lamx, int n1, int nzc) {
+  for (int j = 0; j < n1; ++j) {
+    w.ayr = ayr[j];
+    w.ayi = ayi[j];
+    w.lxy = lamx + lamy[j];
+    spectral_row_body<L>(w, nzc);
+    w.p0 += 2 * nzc;
+    w.p1 += 2 * nzc;
+    w.p2 += 2 * nzc;
+  }
+}
+
 template <class T>
-void spectral_row_16(const SpectralRow<T>& w, int nzc) {
-  spectral_row_body<NarrowLanes<double>>(w, nzc);
+void spectral_plane_16(const SpectralRow<T>& w, const double* ayr, const double* ayi, const double* lamy,
+                       double lamx, int n1, int nzc) {
+  spectral_plane_body<NarrowLanes<double>>(w, ayr, ayi, lamy, lamx, n1, nzc);
 }
 
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
 template <class T>
-FLAGSIM_TARGET_AVX void spectral_row_32(const SpectralRow<T>& w, int nzc) {
-  spectral_row_body<Lanes32<double>>(w, nzc);
+FLAGSIM_TARGET_AVX void spectral_plane_32(const SpectralRow<T>& w, const double* ayr, const double* ayi,
+                                          const double* lamy, double lamx, int n1, int nzc) {
+  spectral_plane_body<Lanes32<double>>(w, ayr, ayi, lamy, lamx, n1, nzc);
 }
 #endif
 
@@ -378,13 +395,12 @@ void FftProjector<T>::diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec
   std::complex<T>* h0 = m.cplx(0);
   std::complex<T>* h1 = m.cplx(1);
   std::complex<T>* h2 = m.cplx(2);
-  void (*row_fn)(const SpectralRow<T>&, int) = &spectral_row_16<T>;
+  auto plane_fn = &spectral_plane_16<T>;
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
-  if (vector_bytes() == 32) row_fn = &spectral_row_32<T>;
+  if (vector_bytes() == 32) plane_fn = &spectral_plane_32<T>;
 #endif
-  parallel_for_if(m.n_cplx > 16384, long(g.nx) * g.ny, [&](Index r) {
-    const int i = int(r / g.ny), j = int(r % g.ny);
-    const std::size_t base = std::size_t(r) * m.nzc;
+  parallel_for_if(m.n_cplx > 16384, g.nx, [&](Index i) {  // one call per plane: rows are short
+    const std::size_t base = std::size_t(i) * g.ny * m.nzc;
     SpectralRow<T> w;
     w.p0 = reinterpret_cast<T*>(h0 + base);
     w.p1 = reinterpret_cast<T*>(h1 + base);
@@ -394,12 +410,9 @@ void FftProjector<T>::diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec
     w.lamz = m.lam[2].data();
     w.axr = m.ar[0][i];
     w.axi = m.ai[0][i];
-    w.ayr = m.ar[1][j];
-    w.ayi = m.ai[1][j];
-    w.lxy = m.lam[0][i] + m.lam[1][j];
     w.scale = 1.0 / double(m.n_real);
     w.nu_dt = nu_dt;
-    row_fn(w, m.nzc);
+    plane_fn(w, m.ar[1].data(), m.ai[1].data(), m.lam[1].data(), m.lam[0][i], g.ny, m.nzc);
   });
   if (mean) {
     h0[0] = std::complex<T>(T((*mean)[0]));
