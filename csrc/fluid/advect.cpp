@@ -414,9 +414,9 @@ inline void padded_velocity(const std::array<PaddedComponent<T>, 3>& u, std::siz
 /// the upwind neighbour being the lower one where d > 0 and the upper one where d < 0. Loads are
 /// contiguous along k and the neighbour is picked per lane by a select, so the interpolation
 /// touches only the 4 rows of the upwind cell: z, then y, then x (Interpolator's order; the same
-/// to round-off, measured from the node rather than from the lower corner). S is T (scalar) or a vector of T (one node per lane); rows[3 (a + 1) + (b + 1)]
-/// is the padded row at x offset a, y offset b (a, b in -1..1) from the node's row. A uniform
-/// field comes out exactly.
+/// to round-off, measured from the node rather than from the lower corner). S is T (scalar) or a
+/// vector of T (one node per lane); rows[3 (a + 1) + (b + 1)] is the padded row at x offset a,
+/// y offset b (a, b in -1..1) from the node's row. A uniform field comes out exactly.
 template <class S, class T>
 FLAGSIM_INLINE S upwind_sample(const T* const rows[9], int k, S d0, S d1, S d2) {
   const S zero = S{};  // 0 in every lane
