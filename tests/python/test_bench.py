@@ -105,6 +105,38 @@ def test_peer_flag_starts_where_flagsims_does(name):
     p.close()
 
 
+class TearingPeer(peers.PeerStepper):
+    """A peer whose cloth holds for `holds` steps and then has its free corner flung 1 m out."""
+
+    def __init__(self, holds):
+        self.spec = peers.cloth_spec(5, 7)
+        self.x, _ = peers.flag_mesh(self.spec)
+        self.holds, self.steps = holds, 0
+
+    def step(self, n):
+        self.steps += n
+        if self.steps > self.holds:
+            self.x[-1, 2] = 1.0
+
+    def positions(self):
+        return self.x.copy()
+
+
+@pytest.mark.parametrize("holds, ok", [(10**9, True), (1, False)])
+def test_a_peer_torn_after_the_timed_runs_fails_its_row(monkeypatch, holds, ok):
+    # A short stability try can pass a peer that blows up later (PyBullet at 128 x 128 did, with
+    # 16 substeps): its steps/s must not reach the table as a figure.
+    monkeypatch.setattr(peers, "make", lambda name, rows, cols: TearingPeer(holds))
+    spec = {"name": "peers/fake/5x7/t1", "threads": 1, "protocol": {"min_time": 0.0, "repeats": 2, "warmup": 3},
+            "params": {"kind": "peer", "peer": "fake", "rows": 5, "cols": 7}}
+    result = worker.run(spec)
+    assert result["ok"] is ok
+    strain = result["info"]["max_strain"]
+    assert (strain < 1e-12) if ok else (strain > peers.TORN_STRAIN)
+    if not ok:
+        assert result["error"] == f"state not finite or torn apart after the runs, max strain {strain:.2g}"
+
+
 def test_flag_mesh_matches_flagsim_topology():
     sim = flagsim.Simulation(engines.cloth_scene(6, 9))
     spec = peers.cloth_spec(6, 9)

@@ -102,7 +102,9 @@ def run(spec: dict[str, Any]) -> dict[str, Any]:
     check = getattr(stepper, "ok", None)
     out["ok"] = bool(check()) if check else True
     if not out["ok"]:
-        out["error"] = "state not finite (or torn apart) after the runs"
+        strain = out["info"].get("max_strain")
+        torn = f", max strain {strain:.2g}" if strain is not None else ""
+        out["error"] = f"state not finite or torn apart after the runs{torn}"
     return out
 
 
