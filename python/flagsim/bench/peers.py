@@ -8,7 +8,7 @@ rows x cols vertices, with the closest stiffness its model offers:
   triangle edges at flagsim's stretch stiffness, bending springs at its bend stiffness), the
   pole column anchored to the world. Its solver is unstable for this cloth at one substep, so the
   smallest stable number of substeps (1, 2, 4, ... 64, each tried for 1 s of simulated time or
-  20 s of wall time, outside the timing) is used and reported. A try that short can pass a count
+  20 s of wall time but at least 20 steps, outside the timing) is used and reported. A try that short can pass a count
   at which the cloth blows up later, so every peer's cloth is checked again after the timed runs
   and a torn one (strain >= ``TORN_STRAIN``) fails its row. No wind (PyBullet soft bodies have no
   air model).
@@ -139,11 +139,12 @@ class PyBulletCloth(PeerStepper):
             f.writelines(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in tris)
         self.client = pybullet.connect(pybullet.DIRECT)
         # Every try reloads the cloth (about 2 minutes at 128 x 128 in PyBullet 3.2.7). A bisection
-        # over SUBSTEPS was tried: it took 16 at 128 x 128, where a 20 s try runs only ~5 steps,
+        # over SUBSTEPS was tried: it took 16 at 128 x 128, where a 20 s try ran only ~5 steps,
         # and that cloth blew up in the timed runs (max strain 2.1); this upward search's 32 held.
+        # A try now runs at least 20 steps whatever they cost (~80 s there).
         for n in self.SUBSTEPS:
             self._load(n)
-            if self._stable(100, budget=20.0):
+            if self._stable(100, budget=20.0, min_steps=20):
                 break
         else:
             self._dir.cleanup()
@@ -169,14 +170,14 @@ class PyBulletCloth(PeerStepper):
         for i in pole_pins(s):
             p.createSoftBodyAnchor(self.body, i, -1, -1, physicsClientId=self.client)
 
-    def _stable(self, steps: int, budget: float) -> bool:
-        """Passes ok() for `steps` steps, or for as many as `budget` seconds allow (checked every
-        5 steps and at the end). A short try can pass a cloth that blows up later: ok() is checked
-        again after the timed runs, and a cloth torn by then fails its row."""
+    def _stable(self, steps: int, budget: float, min_steps: int) -> bool:
+        """Passes ok() for `steps` steps, or for as many as `budget` seconds allow but at least
+        `min_steps` (checked every 5 steps and at the end). A try can still pass a cloth that
+        blows up later: ok() is checked again after the timed runs, and a torn cloth fails its row."""
         t0 = time.perf_counter()
         for k in range(1, steps + 1):
             self._run(1)
-            last = k == steps or time.perf_counter() - t0 > budget
+            last = k == steps or (k >= min_steps and time.perf_counter() - t0 > budget)
             if (k % 5 == 0 or last) and not self.ok():
                 return False
             if last:
