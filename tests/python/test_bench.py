@@ -122,6 +122,34 @@ class TearingPeer(peers.PeerStepper):
         return self.x.copy()
 
 
+class SubstepPeer(TearingPeer):
+    """Holds only with at least `needs` substeps; load(n) rebuilds it from rest."""
+
+    def __init__(self, needs):
+        super().__init__(holds=10**9)
+        self.needs, self.loads = needs, []
+
+    def load(self, n):
+        self.loads.append(n)
+        self.x, _ = peers.flag_mesh(self.spec)
+        self.steps, self.holds = 0, (10**9 if n >= self.needs else 7)
+
+
+@pytest.mark.parametrize("needs, picked", [(1, 5), (5, 5), (11, 20), (80, 80)])
+def test_the_substep_search_picks_the_smallest_count_that_holds_and_restarts_from_rest(needs, picked):
+    p = SubstepPeer(needs)
+    assert p._smallest_stable((5, 10, 20, 40, 80), p.load) == picked
+    tried = [n for n in (5, 10, 20, 40, 80) if n <= picked]
+    assert p.loads == tried + [picked]  # the last load starts the timed runs from rest
+    assert p.steps == 0 and peers.structural_strain(p.spec, p.positions()) < 1e-12
+
+
+def test_the_substep_search_fails_when_no_count_holds():
+    p = SubstepPeer(needs=1000)
+    with pytest.raises(RuntimeError, match="unstable at every substep count up to 80"):
+        p._smallest_stable((5, 10, 20, 40, 80), p.load)
+
+
 @pytest.mark.parametrize("holds, ok", [(10**9, True), (1, False)])
 def test_a_peer_torn_after_the_timed_runs_fails_its_row(monkeypatch, holds, ok):
     # A short stability try can pass a peer that blows up later (PyBullet at 128 x 128 did, with

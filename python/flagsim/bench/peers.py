@@ -8,16 +8,18 @@ rows x cols vertices, with the closest stiffness its model offers:
   triangle edges at flagsim's stretch stiffness, bending springs at its bend stiffness), the
   pole column anchored to the world. Its solver is unstable for this cloth at one substep, so the
   smallest stable number of substeps (1, 2, 4, ... 64, each tried for 1 s of simulated time or
-  20 s of wall time but at least 20 steps, outside the timing) is used and reported. A try that short can pass a count
-  at which the cloth blows up later, so every peer's cloth is checked again after the timed runs
-  and a torn one (strain >= ``TORN_STRAIN``) fails its row. No wind (PyBullet soft bodies have no
-  air model).
+  20 s of wall time but at least 20 steps, outside the timing) is used and reported. A try that
+  short can pass a count at which the cloth blows up later, so every peer's cloth is checked
+  again after the timed runs and a torn one (strain >= ``TORN_STRAIN``) fails its row. No wind
+  (PyBullet soft bodies have no air model).
 * MuJoCo: a 2-D flexcomp grid with shell elasticity (``elastic2d="both"``), Young's modulus x
   thickness = flagsim's stretch stiffness (a square spring lattice's 2-D modulus is its spring
   stiffness), pole column pinned, ``integrator="discrete"`` (MuJoCo 4 integrates flex elasticity
   implicitly only there), wind and air density from the scene (``<option wind density>``).
 * pyPBD: a regular triangle model with XPBD distance constraints at flagsim's stretch stiffness
-  and XPBD isometric bending, 5 substeps (its default), pinned by zero mass. No wind.
+  and XPBD isometric bending, pinned by zero mass. No wind. At its default 5 substeps this cloth
+  tears from 32 x 32 up (strain 0.6 to 3.7), so, as for PyBullet, the smallest stable count of
+  5, 10, 20, 40, 80 is used and reported.
 
 Peer modules are imported only inside these functions; one that is not installed is reported,
 never an error.
@@ -28,7 +30,7 @@ import importlib.util
 import os
 import tempfile
 import time
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -115,6 +117,35 @@ class PeerStepper:
         x = self.positions()
         return bool(np.isfinite(x).all() and structural_strain(self.spec, x) < TORN_STRAIN)
 
+    def step(self, n: int) -> None:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _smallest_stable(self, counts: tuple[int, ...], load: Callable[[int], None]) -> int:
+        """The first substep count in `counts` whose cloth, built afresh by load(n), holds for a
+        try (1 s of simulated time, or 20 s of wall time but at least 20 steps), outside the
+        timing; load(n) is called once more for the chosen n so the timed runs start from rest.
+        A try can pass a count whose cloth blows up later: ok() is checked again after the timed
+        runs, and a torn cloth fails its row."""
+        for n in counts:
+            load(n)
+            if self._stable(100, budget=20.0, min_steps=20):
+                load(n)
+                return n
+        raise RuntimeError(f"the cloth is unstable at every substep count up to {counts[-1]}")
+
+    def _stable(self, steps: int, budget: float, min_steps: int) -> bool:
+        """Passes ok() for `steps` steps, or for as many as `budget` seconds allow but at least
+        `min_steps` (checked every 5 steps and at the end)."""
+        t0 = time.perf_counter()
+        for k in range(1, steps + 1):
+            self.step(1)
+            last = k == steps or (k >= min_steps and time.perf_counter() - t0 > budget)
+            if (k % 5 == 0 or last) and not self.ok():
+                return False
+            if last:
+                break
+        return True
+
     def info(self) -> dict[str, Any]:
         strain = structural_strain(self.spec, self.positions())
         return {"notes": f"{self.notes}; max strain {strain:.2g} after the runs", "max_strain": strain}
@@ -142,16 +173,11 @@ class PyBulletCloth(PeerStepper):
         # over SUBSTEPS was tried: it took 16 at 128 x 128, where a 20 s try ran only ~5 steps,
         # and that cloth blew up in the timed runs (max strain 2.1); this upward search's 32 held.
         # A try now runs at least 20 steps whatever they cost (~80 s there).
-        for n in self.SUBSTEPS:
-            self._load(n)
-            if self._stable(100, budget=20.0, min_steps=20):
-                break
-        else:
-            self._dir.cleanup()
-            raise RuntimeError(f"PyBullet's cloth is unstable at every substep count up to {n}")
+        try:
+            n = self._smallest_stable(self.SUBSTEPS, self._load)
+        finally:
+            self._dir.cleanup()  # loaded: PyBullet keeps no reference to the file
         self.substeps = n
-        self._load(n)
-        self._dir.cleanup()  # loaded: PyBullet keeps no reference to the file
         self.notes = f"mass-spring, {n} substep{'s' if n > 1 else ''} (smallest stable), no wind"
 
     def _load(self, substeps: int) -> None:
@@ -170,27 +196,10 @@ class PyBulletCloth(PeerStepper):
         for i in pole_pins(s):
             p.createSoftBodyAnchor(self.body, i, -1, -1, physicsClientId=self.client)
 
-    def _stable(self, steps: int, budget: float, min_steps: int) -> bool:
-        """Passes ok() for `steps` steps, or for as many as `budget` seconds allow but at least
-        `min_steps` (checked every 5 steps and at the end). A try can still pass a cloth that
-        blows up later: ok() is checked again after the timed runs, and a torn cloth fails its row."""
-        t0 = time.perf_counter()
-        for k in range(1, steps + 1):
-            self._run(1)
-            last = k == steps or (k >= min_steps and time.perf_counter() - t0 > budget)
-            if (k % 5 == 0 or last) and not self.ok():
-                return False
-            if last:
-                break
-        return True
-
-    def _run(self, n: int) -> None:
+    def step(self, n: int) -> None:
         step = self.p.stepSimulation
         for _ in range(n):
             step(physicsClientId=self.client)
-
-    def step(self, n: int) -> None:
-        self._run(n)
 
     def positions(self) -> np.ndarray:
         _, verts = self.p.getMeshData(self.body, -1, flags=self.p.MESH_DATA_SIMULATION_MESH,
@@ -253,13 +262,21 @@ class MujocoCloth(PeerStepper):
 
 
 class PbdCloth(PeerStepper):
-    SUBSTEPS = 5
+    #: 5 is pyPBD's default, at which this flag tears from 32 x 32 up (strain 0.6 to 3.7).
+    SUBSTEPS = (5, 10, 20, 40, 80)
 
     def __init__(self, spec: dict[str, Any]):
         import pypbd
 
         self.pbd = pypbd
         self.spec = spec
+        n = self._smallest_stable(self.SUBSTEPS, self._load)
+        self.substeps = n
+        self.notes = f"XPBD distance + isometric bending, {n} substeps (smallest stable), no wind"
+
+    def _load(self, substeps: int) -> None:
+        """A fresh simulation (initDefault drops the previous model) with `substeps` substeps."""
+        pypbd, spec = self.pbd, self.spec
         R, C = spec["rows"], spec["cols"]
         sim = pypbd.Simulation.getCurrent()
         sim.initDefault()
@@ -271,9 +288,8 @@ class PbdCloth(PeerStepper):
                                                  [spec["width"], spec["height"]])
         pd = self.model.getParticles()
         self.pd = pd
-        n = pd.size()
-        m = spec["areal_density"] * spec["width"] * spec["height"] / n
-        for i in range(n):
+        m = spec["areal_density"] * spec["width"] * spec["height"] / pd.size()
+        for i in range(pd.size()):
             pd.setMass(i, m)
         for i in pole_pins(spec):
             pd.setMass(i, 0.0)
@@ -283,8 +299,7 @@ class PbdCloth(PeerStepper):
         self.model.addBendingConstraints(tri, 3, spec["k_bend"])
         pypbd.TimeManager.getCurrent().setTimeStepSize(spec["dt"])
         self.ts = sim.getTimeStep()
-        self.ts.setValueUInt(pypbd.TimeStepController.NUM_SUB_STEPS, self.SUBSTEPS)
-        self.notes = f"XPBD distance + isometric bending, {self.SUBSTEPS} substeps, no wind"
+        self.ts.setValueUInt(pypbd.TimeStepController.NUM_SUB_STEPS, substeps)
 
     def step(self, n: int) -> None:
         step, model = self.ts.step, self.model

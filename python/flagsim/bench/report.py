@@ -371,8 +371,8 @@ def side_by_side(rows, comps) -> list[str]:
             failed = [r for r in rows if r["group"] == "peers" and r["engine"] == p and r["size"] == size
                       and not r["ok"]]
             if c:
-                sub = re.search(r"(\d+) substeps", c[0]["peer_notes"])
-                extra = f", {sub.group(1)} substeps" if sub and p == "pybullet" else ""
+                sub = re.search(r"(\d+) substeps \(smallest stable\)", c[0]["peer_notes"])
+                extra = f", {sub.group(1)} substeps" if sub else ""
                 line.append(f"{_fmt_rate(c[0]['peer_steps_per_s'])} (flagsim {c[0]['ratio']:.2g}x{extra})")
             else:
                 line.append("failed" if failed else "")
@@ -383,9 +383,10 @@ def side_by_side(rows, comps) -> list[str]:
             continue
         first = next((c["peer_notes"] for c in comps if c["peer"] == p and c["peer_notes"]), "")
         if first:
+            searched = "(smallest stable)" in first
             notes.append(f"- {PEER_NAMES[p]}: " + re.sub(r"(, )?\d+ substeps \(smallest stable\)|; max strain.*$",
                                                       "", first).strip(", ")
-                         + (", smallest stable substep count per size" if p == "pybullet" else ""))
+                         + (", smallest stable substep count per size" if searched else ""))
     for r in rows:
         if r["group"] == "peers" and not r["ok"]:
             notes.append(f"- {PEER_NAMES.get(r['engine'], r['engine'])} {r['size']} failed: {r['note']}")
