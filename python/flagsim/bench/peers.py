@@ -128,7 +128,7 @@ class PeerStepper:
         runs, and a torn cloth fails its row."""
         for n in counts:
             load(n)
-            if self._stable(100, budget=20.0, min_steps=20):
+            if self._stable(round(1.0 / self.spec["dt"]), budget=20.0, min_steps=20):
                 load(n)
                 return n
         raise RuntimeError(f"the cloth is unstable at every substep count up to {counts[-1]}")
@@ -177,7 +177,6 @@ class PyBulletCloth(PeerStepper):
             n = self._smallest_stable(self.SUBSTEPS, self._load)
         finally:
             self._dir.cleanup()  # loaded: PyBullet keeps no reference to the file
-        self.substeps = n
         self.notes = f"mass-spring, {n} substep{'s' if n > 1 else ''} (smallest stable), no wind"
 
     def _load(self, substeps: int) -> None:
@@ -271,7 +270,6 @@ class PbdCloth(PeerStepper):
         self.pbd = pypbd
         self.spec = spec
         n = self._smallest_stable(self.SUBSTEPS, self._load)
-        self.substeps = n
         self.notes = f"XPBD distance + isometric bending, {n} substeps (smallest stable), no wind"
 
     def _load(self, substeps: int) -> None:
