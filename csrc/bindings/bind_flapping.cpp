@@ -44,6 +44,9 @@ void bind_flapping(py::module_& m) {
             "a, parabola coefficient of the wave front, flag lengths");
   def_field(fp, "frequency", &FlappingParams::frequency, "flapping",
             "noise lattice cells per flag length");
+  def_field(fp, "ramp", &FlappingParams::ramp, "flapping",
+            "s, the wave fades in over this time from a flat flag at t = 0 (smoothstep); 0 = "
+            "the whole wave from the first step, as the paper");
   fp.def_property(
       "seed", [](const FlappingParams& p) { return p.seed; },
       [](FlappingParams& p, int64_t seed) { p.seed = checked_seed("flapping.seed", seed); },

@@ -240,6 +240,30 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
         return d;
       },
       "dict of kinetic, gravity (potential) and spring energies, J");
+  sim.def(
+      "energy_ledger",
+      [](const Simulation& s) {
+        const EnergyLedger l = s.energy_ledger();
+        py::dict d;
+        d["gravity"] = l.gravity;
+        d["drag"] = l.drag;
+        d["damping"] = l.damping;
+        d["flap"] = l.flap;
+        d["strain_limit"] = l.strain_limit;
+        d["pole"] = l.pole;
+        d["self_collision"] = l.self_collision;
+        d["pins"] = l.pins;
+        d["edits"] = l.edits;
+        d["integrator"] = l.integrator;
+        return d;
+      },
+      "dict of the energy each stage gave the flag since construction, J (docs/energy.md): "
+      "gravity, drag, damping, flap, strain_limit, pole, self_collision, pins, edits (state "
+      "written between steps) and integrator (the remainder). Their sum is the change of "
+      "kinetic + spring energy; without 'gravity', the change of the total of energy()");
+  sim.def_property_readonly("energy_scale", &Simulation::energy_scale,
+                            "J, m |g| H + m U^2 / 2: the scale integrator.energy_tolerance is a "
+                            "fraction of (m (1 m/s)^2 / 2 without gravity and wind)");
   sim.def("max_strain", &Simulation::max_strain, "largest spring strain (l - L) / L now");
   sim.def_property_readonly(
       "render_positions",
@@ -289,6 +313,7 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
         d["cg_iterations"] = st.cg_iterations;
         d["halvings"] = st.halvings;
         d["stable_step"] = st.stable_step;
+        d["energy_halvings"] = st.energy_halvings;
         d["air_samples_outside"] = s.air_outside_last_step();
         return d;
       },

@@ -1,5 +1,6 @@
 #include "cloth/integrators.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include "common/parallel.h"
@@ -10,7 +11,7 @@ namespace flagsim {
 
 IntegratorScratch::IntegratorScratch(const ClothTopology& topo) {
   const Index n = topo.num_vertices();
-  for (MatX3* m : {&f, &x0, &v0, &dv, &r, &z, &p, &q, &b, &tmp, &dv_prev}) m->setZero(n, 3);
+  for (MatX3* m : {&f, &fd, &x0, &v0, &dv, &r, &z, &p, &q, &b, &tmp, &dv_prev}) m->setZero(n, 3);
   sys.B.resize(topo.num_springs());
   sys.D.resize(n);
   sys.J.reserve(topo.triangles.rows());
@@ -21,7 +22,7 @@ IntegratorScratch::IntegratorScratch(const ClothTopology& topo) {
 }
 
 void compute_forces(const ClothTopology& topo, const ForceSet& fs, const MatX3& x, const MatX3& v,
-                    const MatX3& u, MatX3& f, ForceTimings* t) {
+                    const MatX3& u, MatX3& f, MatX3& drag, ForceTimings* t) {
   static thread_local ForceTimings unused;
   ForceTimings& tm = t ? *t : unused;
   f.setZero();
@@ -31,12 +32,15 @@ void compute_forces(const ClothTopology& topo, const ForceSet& fs, const MatX3& 
   }
   if (fs.drag) {
     ScopedTimer timer(tm.drag);
-    add_drag(topo, fs.drag_params, fs.rho, x, v, u, f);
+    drag.setZero();
+    add_drag(topo, fs.drag_params, fs.rho, x, v, u, drag);
+    f += drag;
   }
   if (fs.springs) {
     ScopedTimer timer(tm.springs);
     add_spring_forces(topo, x, v, f);
   }
+  if (fs.external) f += *fs.external;
 }
 
 namespace {
@@ -45,6 +49,58 @@ namespace {
 inline void filter_pinned(const ClothTopology& topo, MatX3& a) {
   for (Index i = 0; i < a.rows(); ++i)
     if (topo.inv_mass[i] == 0.0) a.row(i).setZero();
+}
+
+// The gravity the energy bookkeeping sees: none when the stage is not built.
+inline Vec3 gravity_of(const ForceSet& fs) { return fs.gravity ? fs.g : Vec3::Zero(); }
+
+// Work of forces f (N x 3) over the displacement h v (N x 3), J.
+double work_over(const MatX3& f, const MatX3& v, double h) {
+  double w = 0;
+  for (Index i = 0; i < f.rows(); ++i) w += f.row(i).dot(v.row(i));
+  return h * w;
+}
+
+// Work of spring damping k_d (a_j - a_i) (eq. 4, velocities a as the integrator applied it) over
+// the displacement h b, J: sum over springs of k_d (a_j - a_i) . h (b_i - b_j).
+double damping_work(const ClothTopology& topo, const MatX3& a, const MatX3& b, double h) {
+  double w = 0;
+  for (Index s = 0; s < topo.num_springs(); ++s) {
+    const double kd = topo.damping[s];
+    if (kd == 0) continue;
+    const int i = topo.springs(s, 0), j = topo.springs(s, 1);
+    w += kd * (a.row(j) - a.row(i)).dot(b.row(i) - b.row(j));
+  }
+  return h * w;
+}
+
+// Work of the pins on pinned vertices that move with velocity v over h: they hold the vertex
+// against the force f on it, so they do -f . h v, J. Zero for pins at rest.
+double pin_work(const ClothTopology& topo, const MatX3& f, const MatX3& v, double h) {
+  double w = 0;
+  for (Index i = 0; i < topo.num_vertices(); ++i)
+    if (topo.inv_mass[i] == 0.0) w -= f.row(i).dot(v.row(i));
+  return h * w;
+}
+
+// Minus the work of the conservative forces (springs, gravity) that the implicit solve applied,
+// f_c = M dv / h - applied drag - k_d (v'_j - v'_i) - external, over the drift's share h r of
+// the displacement, J. With these linearised end-of-step forces backward Euler's remainder
+// keeps its sign (docs/energy.md). Pinned rows have no drift.
+double implicit_drift_work(const ClothTopology& topo, const ForceSet& fs, double h,
+                           const MatX3& dv, const MatX3& v, const MatX3& fd) {
+  const MatX3& r = *fs.drift;
+  double w = 0;
+  for (Index i = 0; i < topo.num_vertices(); ++i) {
+    if (topo.inv_mass[i] == 0.0) continue;
+    Vec3 fc = (topo.mass[i] / h) * Vec3(dv.row(i));
+    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k)
+      fc -= topo.damping[topo.adj_spring[k]] * (Vec3(v.row(topo.adj_other[k])) - Vec3(v.row(i)));
+    if (fs.drag) fc -= Vec3(fd.row(i));
+    if (fs.external) fc -= Vec3(fs.external->row(i));
+    w -= fc.dot(Vec3(r.row(i)));
+  }
+  return h * w;
 }
 
 // Multigrid when asked for ("auto": on grids of at least kAutoMultigridVertices vertices, where it
@@ -61,7 +117,7 @@ bool use_multigrid(const ClothTopology& topo, const IntegratorParams& ip, const 
 IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
                               const IntegratorParams& ip, double h, const MatX3& u, MatX3& x,
                               MatX3& v, IntegratorScratch& s, IntegratorStats& stats,
-                              ForceTimings* t) {
+                              StepWork& work, ForceTimings* t) {
   const Index N = topo.num_vertices();
   double done = 0;
   long n = 0;
@@ -75,15 +131,26 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
       if (remaining_pieces + n > ip.max_substeps) return IntegrateStatus::kTooManySubsteps;
       hs = hs / remaining_pieces;  // even pieces of what is left, each below the stable step
     }
-    compute_forces(topo, fs, x, v, u, s.f, t);
+    compute_forces(topo, fs, x, v, u, s.f, s.fd, t);
+    s.v0 = v;
     // symplectic Euler: v <- v + h M^-1 f(x, v); x <- x + h v
     parallel_for(N, [&](Index i) {
       v.row(i) += (hs * topo.inv_mass[i]) * s.f.row(i);
       x.row(i) += hs * v.row(i);
     });
+    if (fs.drift) {
+      x += hs * *fs.drift;
+      work.drift += potential_change(topo, gravity_of(fs), x, hs, *fs.drift);
+    }
+    // The forces at the substep's start over its displacement hs v.
+    if (fs.drag) work.drag += work_over(s.fd, v, hs);
+    if (fs.external) work.external += work_over(*fs.external, v, hs);
+    work.damping += damping_work(topo, s.v0, v, hs);
+    work.pins += pin_work(topo, s.f, v, hs);
     if (ip.strain_limit > 0) {
       ScopedTimer timer(t ? t->strain_limit : s.unused_timer);
-      limit_strain(topo, ip.strain_limit, ip.strain_limit_iterations, hs, x, v);
+      work.strain_limit += limit_strain_work(topo, gravity_of(fs), ip.strain_limit,
+                                             ip.strain_limit_iterations, x, v);
     }
     ++n;
     done = (h - done <= hs) ? h : done + hs;
@@ -96,7 +163,8 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
 
 void assemble_implicit_system(const ClothTopology& topo, const ForceSet& fs, double h,
                               const MatX3& x, const MatX3& v, const MatX3& u, ClothSystem& A,
-                              MatX3& Kv) {
+                              MatX3& Kv, const MatX3* moving_velocity) {
+  const MatX3& moving = moving_velocity ? *moving_velocity : v;
   const Index N = topo.num_vertices();
   if (fs.springs) {
     spring_position_jacobians(topo, x, /*clamp_compression=*/true, A.B);
@@ -109,7 +177,7 @@ void assemble_implicit_system(const ClothTopology& topo, const ForceSet& fs, dou
     for (auto& d : A.D) d.setZero();
     A.J.clear();
   }
-  apply_position_jacobian(topo, A.B, v, Kv);
+  apply_position_jacobian(topo, A.B, moving, Kv);
   // Fold h and the masses into A's terms (see ClothSystem): B_s = h^2 K_s + h k_d I.
   const Index S = topo.num_springs();
   parallel_for(S, [&](Index sp) {
@@ -168,16 +236,36 @@ double precondition(const ClothTopology& topo, IntegratorScratch& s, bool multig
   return rz;
 }
 
+// fd (N x 3): the drag at the start of a piece becomes the drag the implicit solve applied,
+// fd + (d fd / d v) dv. A holds M + h D_drag (A.D) and h Jw / 9 (A.J), see
+// assemble_implicit_system, so D_drag = (A.D - m I) / h.
+void implicit_drag_applied(const ClothTopology& topo, const ClothSystem& A, double h,
+                           const MatX3& dv, MatX3& fd) {
+  for (Index i = 0; i < topo.num_vertices(); ++i) {
+    const Vec3 dvi = dv.row(i);
+    Vec3 df = -(A.D[i] * dvi - topo.mass[i] * dvi) / h;
+    if (!A.J.empty())
+      for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k) {
+        const int32_t tr = topo.tri_adj[k];
+        const Vec3 sum = dv.row(topo.triangles(tr, 0)) + dv.row(topo.triangles(tr, 1)) +
+                         dv.row(topo.triangles(tr, 2));
+        df -= A.J[tr] * sum / h;
+      }
+    fd.row(i) += df.transpose();
+  }
+}
+
 // One linearised backward Euler step (Baraff-Witkin eq. 16):
 // (M - h df/dv - h^2 df/dx) dv = h (f0 + h df/dx v0), then v += dv, x += h v.
 IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
                               const IntegratorParams& ip, double h, const MatX3& u, MatX3& x,
                               MatX3& v, IntegratorScratch& s, IntegratorStats& stats,
-                              ForceTimings* t) {
+                              StepWork& work, ForceTimings* t) {
   const Index N = topo.num_vertices();
   ClothSystem& A = s.sys;
-  compute_forces(topo, fs, x, v, u, s.f, t);
-  assemble_implicit_system(topo, fs, h, x, v, u, A, s.tmp);
+  compute_forces(topo, fs, x, v, u, s.f, s.fd, t);
+  if (fs.drift) s.p = v + *fs.drift;  // the positions move with v + drift: K sees both
+  assemble_implicit_system(topo, fs, h, x, v, u, A, s.tmp, fs.drift ? &s.p : nullptr);
   // b = h (f0 + h K v0)
   s.b = h * (s.f + h * s.tmp);
   filter_pinned(topo, s.b);
@@ -235,39 +323,76 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     stats.cg_iterations += it;
     if (!converged) return IntegrateStatus::kCgFailed;
   }
+  if (fs.drag) implicit_drag_applied(topo, A, h, s.dv, s.fd);
+  work.pins += pin_work(topo, s.f, v, h);  // pinned rows of dv are zero: v' = v there
   parallel_for(N, [&](Index i) {
     v.row(i) += s.dv.row(i);
     x.row(i) += h * v.row(i);
   });
+  if (fs.drift) {
+    x += h * *fs.drift;
+    work.drift += implicit_drift_work(topo, fs, h, s.dv, v, s.fd);
+  }
+  // The linearised end-of-step forces over the displacement h v'; damping is linear in v, so
+  // the applied damping is exactly k_d (v'_j - v'_i).
+  if (fs.drag) work.drag += work_over(s.fd, v, h);
+  if (fs.external) work.external += work_over(*fs.external, v, h);
+  work.damping += damping_work(topo, v, v, h);
   if (ip.strain_limit > 0) {
     ScopedTimer timer(t ? t->strain_limit : s.unused_timer);
-    limit_strain(topo, ip.strain_limit, ip.strain_limit_iterations, h, x, v);
+    work.strain_limit +=
+        limit_strain_work(topo, gravity_of(fs), ip.strain_limit, ip.strain_limit_iterations, x, v);
   }
   return IntegrateStatus::kOk;
 }
 
-// Implicit step of h; if CG fails, restart from the same state with two steps of h/2, and so on
-// down to ip.max_halvings levels.
+// Implicit step of h; if CG fails, or a piece makes more energy than fs.energy_guard beyond the
+// work of the forces, restart from the same state with two steps of h/2, and so on down to
+// ip.max_halvings levels. E: total_energy at (x, v) in, at the end out.
 IntegrateStatus implicit_step(const ClothTopology& topo, const ForceSet& fs,
                               const IntegratorParams& ip, double h, const MatX3& u, MatX3& x,
-                              MatX3& v, IntegratorScratch& s, IntegratorStats& stats,
-                              ForceTimings* t) {
+                              MatX3& v, IntegratorScratch& s, IntegratorStats& stats, double& E,
+                              StepWork& work, ForceTimings* t) {
+  IntegrateStatus failure = IntegrateStatus::kCgFailed;
   for (int level = 0; level <= ip.max_halvings; ++level) {
     const long pieces = 1L << level;
     const double hp = h / double(pieces);
     s.x0 = x;
     s.v0 = v;
-    bool ok = true;
-    for (long k = 0; k < pieces && ok; ++k)
-      ok = implicit_once(topo, fs, ip, hp, u, x, v, s, stats, t) == IntegrateStatus::kOk;
-    if (ok) return IntegrateStatus::kOk;
+    StepWork level_work;
+    double e = E;
+    failure = IntegrateStatus::kOk;
+    for (long k = 0; k < pieces && failure == IntegrateStatus::kOk; ++k) {
+      StepWork pw;
+      if (implicit_once(topo, fs, ip, hp, u, x, v, s, stats, pw, t) != IntegrateStatus::kOk) {
+        failure = IntegrateStatus::kCgFailed;
+        break;
+      }
+      const double e1 = total_energy(topo, gravity_of(fs), x, v);
+      pw.remainder =
+          e1 - e - pw.drag - pw.external - pw.drift - pw.damping - pw.pins - pw.strain_limit;
+      e = e1;
+      level_work += pw;
+      // Backward Euler should only dissipate and a projection only take energy out: what
+      // either makes is counted on its own, so that one cannot hide behind the other (a
+      // projection pumping the springs that the next solve damps).
+      if (fs.energy_guard > 0 &&
+          std::max(pw.remainder, 0.0) + std::max(pw.strain_limit, 0.0) > fs.energy_guard)
+        failure = IntegrateStatus::kEnergyGain;
+    }
+    if (failure == IntegrateStatus::kOk) {
+      work += level_work;
+      E = e;
+      return IntegrateStatus::kOk;
+    }
     x = s.x0;
     v = s.v0;
     s.dv.setZero();  // the extrapolation's steps were of another length
     s.dv_prev.setZero();
     ++stats.halvings;
+    if (failure == IntegrateStatus::kEnergyGain) ++stats.energy_halvings;
   }
-  return IntegrateStatus::kCgFailed;
+  return failure;
 }
 
 }  // namespace
@@ -276,26 +401,40 @@ IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const I
                           double h, const MatX3& u, MatX3& x, MatX3& v, IntegratorScratch& s,
                           IntegratorStats& stats, ForceTimings* t) {
   stats = IntegratorStats{};
+  double E = stats.energy_before = total_energy(topo, gravity_of(fs), x, v);
+  StepWork work;
   const double hs = h / double(ip.substeps);
   long explicit_substeps = 0;
   for (int k = 0; k < ip.substeps; ++k) {
     IntegrateStatus st;
     if (ip.method == "explicit") {
-      st = explicit_step(topo, fs, ip, hs, u, x, v, s, stats, t);
+      st = explicit_step(topo, fs, ip, hs, u, x, v, s, stats, work, t);
       explicit_substeps += stats.substeps;
     } else if (ip.method == "implicit") {
-      st = implicit_step(topo, fs, ip, hs, u, x, v, s, stats, t);
+      st = implicit_step(topo, fs, ip, hs, u, x, v, s, stats, E, work, t);
     } else {
       throw std::logic_error("integrate: unknown method '" + ip.method + "' (validate() lets none through)");
     }
     if (st != IntegrateStatus::kOk) return st;
   }
-  if (ip.method == "explicit") stats.substeps = explicit_substeps;
+  if (ip.method == "explicit") {
+    stats.substeps = explicit_substeps;
+    E = total_energy(topo, gravity_of(fs), x, v);
+    work.remainder = E - stats.energy_before - work.drag - work.external - work.drift -
+                     work.damping - work.pins - work.strain_limit;
+  }
+  stats.energy_after = E;
+  stats.work = work;
   return IntegrateStatus::kOk;
 }
 
-void limit_strain(const ClothTopology& topo, double limit, int iterations, double h, MatX3& x,
-                  MatX3& v) {
+void limit_strain(const ClothTopology& topo, double limit, int iterations, MatX3& x, MatX3& v) {
+  // Velocities: the limited pair loses the relative velocity along it that still stretches it
+  // (an inelastic, momentum-conserving impulse, as Bridson, Fedkiw, Anderson 2002 §7 limit
+  // strain rates), so a correction never adds kinetic energy. Turning the correction itself into
+  // velocity (v += correction / h, PBD-style) did: a violation the step inherited, corrected in
+  // a 1e-5 s substep, became thousands of m/s (docs/energy.md).
+  //
   // Long-range attachments first: one exact projection per vertex onto the ball of radius
   // (1 + limit) x rest distance around its nearest pin removes gross stretch in a single pass
   // (Gauss-Seidel over springs alone needs O(cols^2) sweeps for that).
@@ -306,9 +445,10 @@ void limit_strain(const ClothTopology& topo, double limit, int iterations, doubl
     const Vec3 d = x.row(i) - x.row(a);
     const double l = d.norm(), lmax = (1.0 + limit) * topo.tether_length[i];
     if (l <= lmax) continue;
-    const Vec3 corr = d * (lmax / l - 1.0);
-    x.row(i) += corr.transpose();
-    v.row(i) += corr.transpose() / h;
+    x.row(i) += (d * (lmax / l - 1.0)).transpose();
+    const Vec3 n = d / l;
+    const double vr = (v.row(i) - v.row(a)).dot(n.transpose());  // the pin does not move for it
+    if (vr > 0) v.row(i) -= (vr * n).transpose();
   }
   // Then Provot's local projection, Gauss-Seidel over springs in index order: deterministic.
   for (int it = 0; it < iterations; ++it) {
@@ -325,11 +465,38 @@ void limit_strain(const ClothTopology& topo, double limit, int iterations, doubl
       const Vec3 corr = (l - lmax) / l * d / (wa + wb);
       x.row(a) += wa * corr.transpose();
       x.row(b) -= wb * corr.transpose();
-      v.row(a) += (wa / h) * corr.transpose();
-      v.row(b) -= (wb / h) * corr.transpose();
+      const Vec3 n = d / l;
+      const double vr = (v.row(b) - v.row(a)).dot(n.transpose());
+      if (vr > 0) {
+        const Vec3 j = (vr / (wa + wb)) * n;  // impulse per unit inverse mass
+        v.row(a) += wa * j.transpose();
+        v.row(b) -= wb * j.transpose();
+      }
     }
     if (!violated) break;
   }
+}
+
+bool strain_limit_violated(const ClothTopology& topo, double limit, const MatX3& x) {
+  for (Index i = 0; i < topo.num_vertices(); ++i) {
+    const int32_t a = topo.tether_anchor[i];
+    if (a >= 0 && (x.row(i) - x.row(a)).norm() > (1.0 + limit) * topo.tether_length[i]) return true;
+  }
+  for (Index s = 0; s < topo.num_springs(); ++s) {
+    if (topo.spring_kind[s] == SpringKind::kBend) continue;
+    const int a = topo.springs(s, 0), b = topo.springs(s, 1);
+    if (topo.inv_mass[a] + topo.inv_mass[b] == 0) continue;
+    if ((x.row(b) - x.row(a)).norm() > (1.0 + limit) * topo.rest_length[s]) return true;
+  }
+  return false;
+}
+
+double limit_strain_work(const ClothTopology& topo, const Vec3& g, double limit, int iterations,
+                         MatX3& x, MatX3& v) {
+  if (!strain_limit_violated(topo, limit, x)) return 0.0;
+  const double before = total_energy(topo, g, x, v);
+  limit_strain(topo, limit, iterations, x, v);
+  return total_energy(topo, g, x, v) - before;
 }
 
 }  // namespace flagsim

@@ -19,6 +19,17 @@ struct ForceSet {
   Vec3 g{0, -9.81, 0};  ///< m/s^2
   DragParams drag_params;
   double rho = 1.2;     ///< air density, kg/m^3
+  /// J. Implicit: a piece of a step whose energy gain beyond the work of the forces (the
+  /// positive parts of its remainder and of its strain-limit work, StepWork) exceeds this is
+  /// redone as two pieces of half the length (as a failed CG solve is); 0 = off. The Simulation sets integrator.energy_tolerance x its energy
+  /// scale.
+  double energy_guard = 0;
+  /// (N x 3) N, a force held over the step on top of the built ones (eq. 5 "force"), or none.
+  const MatX3* external = nullptr;
+  /// (N x 3) m/s, a prescribed velocity the positions follow on top of v over the step, or
+  /// none: x' = x + h (v' + drift). Springs answer it inside the solve; damping and drag do not
+  /// see it (eq. 5 "displace": dz n / h). Zero rows where pinned.
+  const MatX3* drift = nullptr;
 };
 
 /// Seconds spent per force stage (accumulated).
@@ -27,25 +38,64 @@ struct ForceTimings {
   double strain_limit = 0;  ///< Provot projection after every substep / implicit piece
 };
 
-/// f = sum of the built forces at (x, v) with air velocity u (all N x 3).
+/// f = sum of the built forces at (x, v) with air velocity u (all N x 3); drag (N x 3) gets the
+/// drag alone when it is built (for the energy bookkeeping), and is left as it was otherwise.
 void compute_forces(const ClothTopology& topo, const ForceSet& fs, const MatX3& x, const MatX3& v,
-                    const MatX3& u, MatX3& f, ForceTimings* timings = nullptr);
+                    const MatX3& u, MatX3& f, MatX3& drag, ForceTimings* timings = nullptr);
 
 /// kUnstableStep: explicit without adaptive substeps was asked for a step above the stable-step
 /// estimate. It is refused rather than run, because strain limiting would turn the instability
 /// into bounded jitter that no finiteness or strain check can see.
-enum class IntegrateStatus { kOk, kTooManySubsteps, kCgFailed, kUnstableStep };
+/// kEnergyGain: an implicit step still made energy beyond ForceSet::energy_guard after
+/// max_halvings halvings.
+enum class IntegrateStatus { kOk, kTooManySubsteps, kCgFailed, kUnstableStep, kEnergyGain };
+
+/// Energy bookkeeping of one integrate() call, J. The work of each force is the force as the
+/// integrator applied it times the displacement it made, W = sum_i f_i . dx_i: explicit, f at the
+/// substep's start; implicit, the linearised end-of-step force f0 + K dx + D dv of Baraff-Witkin
+/// eq. 16 (damping is linear, so there it is exactly k_d (v'_j - v'_i)). Gravity is not listed:
+/// its work is the change of the gravity term of total_energy. `drift` is the energy the drift's
+/// share h r of the displacement made against springs and gravity: explicit, exactly
+/// PE(x') - PE(x' - h r); implicit, -f_c . h r with f_c the linearised end-of-step conservative
+/// force the solve applied (the solve already answered the drift, so x' - h r is no state of
+/// its own there). `pins` is the work of the pins
+/// holding pinned vertices that move (-f . dx over pinned vertices, f at the start of the piece).
+/// `remainder` closes the balance
+///   E_after - E_before = drag + external + drift + damping + pins + strain_limit + remainder,
+/// E = total_energy. For linear springs it is, per piece, -1/2 |dv|^2_M - 1/2 dx^T H dx <= 0
+/// implicit (backward Euler dissipates) and -1/2 |dv|^2_M + 1/2 dx^T H dx explicit (symplectic
+/// Euler: bounded, oscillating); docs/energy.md derives both.
+struct StepWork {
+  double drag = 0;          ///< air drag (wind, fans and the grid all act through it)
+  double external = 0;      ///< ForceSet::external
+  double drift = 0;         ///< ForceSet::drift against springs and gravity
+  double damping = 0;       ///< spring damping, eq. 4 (<= 0)
+  double pins = 0;          ///< pins that move
+  double strain_limit = 0;  ///< energy change made by strain limiting inside the step
+  double remainder = 0;     ///< the integrator's own (numerical) energy change
+  StepWork& operator+=(const StepWork& o) {
+    drag += o.drag, external += o.external, drift += o.drift, damping += o.damping;
+    pins += o.pins;
+    strain_limit += o.strain_limit;
+    remainder += o.remainder;
+    return *this;
+  }
+};
 
 struct IntegratorStats {
   long substeps = 0;       ///< explicit: substeps of the last step
   long cg_iterations = 0;  ///< implicit: CG iterations of the last step (all solves)
   long halvings = 0;       ///< implicit: step halvings of the last step
   double stable_step = 0;  ///< explicit: stable step estimate at the start of the last step, s
+  long energy_halvings = 0;  ///< implicit: halvings of the last step caused by energy gain
+  StepWork work;             ///< the last step's energy bookkeeping
+  double energy_before = 0;  ///< J, total_energy at the start of the last step
+  double energy_after = 0;   ///< J, total_energy at its end
 };
 
 /// Scratch for both integrators, sized once for a topology (no allocation inside a step).
 struct IntegratorScratch {
-  MatX3 f, x0, v0, dv, r, z, p, q, b, tmp;
+  MatX3 f, fd, x0, v0, dv, r, z, p, q, b, tmp;  // fd: the drag part of f
   MatX3 dv_prev;    ///< implicit: the solve's dv one step before dv (for the warm start)
   ClothSystem sys;  ///< the implicit system of the current step
   Multigrid mg;     ///< levels built when the topology is a grid (multigrid_applies)
@@ -54,10 +104,11 @@ struct IntegratorScratch {
 };
 
 /// The implicit system of a step of h from (x, v) in air u (all N x 3): A's terms (ClothSystem,
-/// sized by IntegratorScratch) and Kv = (d f / d x) v (N x 3, N), for b = h (f + h Kv).
+/// sized by IntegratorScratch) and Kv = (d f / d x) w (N x 3, N), for b = h (f + h Kv), with w
+/// the velocity the positions move with: `moving_velocity` (N x 3; v + drift) if given, else v.
 void assemble_implicit_system(const ClothTopology& topo, const ForceSet& fs, double h,
                               const MatX3& x, const MatX3& v, const MatX3& u, ClothSystem& A,
-                              MatX3& Kv);
+                              MatX3& Kv, const MatX3* moving_velocity = nullptr);
 
 /// Advance (x, v) by h. u (N x 3) is the air velocity at the masses, held over the step.
 IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const IntegratorParams& ip,
@@ -66,9 +117,18 @@ IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const I
 
 /// Strain limiting: each vertex's distance to its nearest pin is capped at (1 + limit) x its rest
 /// distance (long-range attachments, Kim et al. 2012), then (Provot 1995) structural and shear
-/// springs longer than (1 + limit) x rest length are shortened
-/// by moving their ends (mass-weighted, pinned ends fixed); velocities take the correction / h.
-void limit_strain(const ClothTopology& topo, double limit, int iterations, double h, MatX3& x,
-                  MatX3& v);
+/// springs longer than (1 + limit) x rest length are shortened by moving their ends
+/// (mass-weighted, pinned ends fixed). Velocities: each limited pair loses the relative velocity
+/// along it that still stretches it (inelastic, momentum-conserving; never adds kinetic energy).
+void limit_strain(const ClothTopology& topo, double limit, int iterations, MatX3& x, MatX3& v);
+
+/// True when limit_strain would move something: a tether or a structural or shear spring longer
+/// than (1 + limit) x its rest length.
+bool strain_limit_violated(const ClothTopology& topo, double limit, const MatX3& x);
+
+/// limit_strain, returning the change of total_energy it made, J: 0, with neither the
+/// projection nor the energy evaluated, when nothing exceeds the limit.
+double limit_strain_work(const ClothTopology& topo, const Vec3& g, double limit, int iterations,
+                         MatX3& x, MatX3& v);
 
 }  // namespace flagsim

@@ -47,6 +47,7 @@ void IntegratorParams::validate(const std::string& p) const {
   check_positive(p + ".max_strain", max_strain);
   check_nonnegative(p + ".strain_limit", strain_limit);
   if (strain_limit_iterations < 1) fail_param(p + ".strain_limit_iterations", ">= 1", strain_limit_iterations);
+  check_nonnegative(p + ".energy_tolerance", energy_tolerance);
 }
 
 }  // namespace flagsim

@@ -56,6 +56,11 @@ struct IntegratorParams {
   double strain_limit = 0.1;          ///< > 0: Provot 1995 strain limiting of structural and
                                       ///< shear springs to (1 + strain_limit) x rest; 0 = off
   int strain_limit_iterations = 50;   ///< Gauss-Seidel sweeps at most (stops when satisfied)
+  double energy_tolerance = 0.1;      ///< energy a step may make beyond what its stages' work
+                                      ///< explains, as a fraction of the flag's energy scale
+                                      ///< m |g| H + m U^2 / 2; more raises DivergenceError
+                                      ///< ("energy"), and an implicit step is first halved;
+                                      ///< 0 = off (docs/energy.md)
   void validate(const std::string& prefix = "integrator") const;
 };
 

@@ -11,15 +11,21 @@ double flapping_ramp(double L, const FlappingParams& p) {
   return p.amplitude * u * u * (3.0 - 2.0 * u);
 }
 
+double flapping_fade_in(double t, const FlappingParams& p) {
+  if (p.ramp <= 0) return 1.0;
+  const double u = std::clamp(t / p.ramp, 0.0, 1.0);
+  return u * u * (3.0 - 2.0 * u);
+}
+
 void flapping_displacement(const Perlin1D& noise, const MatX2& xy, const VecX& L, double u_p,
                            double t, const FlappingParams& p, VecX& z) {
   const Index n = xy.rows();
   if (z.size() != n) z.resize(n);
-  const double shift = p.speed * t;
+  const double shift = p.speed * t, fade = u_p * flapping_fade_in(t, p);
   parallel_for(n, [&](Index i) {
     const double x = xy(i, 0), y = xy(i, 1);
     const double phase = x - shift - p.parabola * (1.0 - y) * y;
-    z[i] = u_p * flapping_ramp(L[i], p) * noise(p.frequency * phase);
+    z[i] = fade * flapping_ramp(L[i], p) * noise(p.frequency * phase);
   });
 }
 

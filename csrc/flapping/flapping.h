@@ -2,6 +2,8 @@
 //
 //   z = u_p A(L) f_n( k (x - v t - a (1 - y) y) )                                 (paper eq. 5)
 //
+// times a fade-in over the first `ramp` seconds (flapping_fade_in; ramp = 0: none).
+//
 // Normalisation (paper §4.2 leaves it open): x and y are the vertex's rest texture coordinates,
 //   x = distance along the flag away from the pole / flag length   (0 at the pole edge, 1 at the fly)
 //   y = distance across the flag / flag height                      (0 and 1 at the top and bottom)
@@ -21,6 +23,12 @@ namespace flagsim {
 
 /// A(L), m per m/s. L: distance to the nearest pinned vertex, m (>= 0).
 double flapping_ramp(double L, const FlappingParams& p);
+
+/// The fade-in S(min(t / ramp, 1)) (1 when ramp = 0) that multiplies z: a flat flag at t = 0
+/// grows its wave over `ramp` seconds. The paper starts at full amplitude; a start from the flat
+/// rest shape in one step is a jump of up to amplitude x u_p, which stiff springs answer with
+/// energy far beyond the wave's own (docs/energy.md).
+double flapping_fade_in(double t, const FlappingParams& p);
 
 /// Eq. 5 for every vertex.
 /// noise  the f_n of the scene (Perlin1D(p.seed), built once)

@@ -12,6 +12,7 @@ void FlappingParams::validate(const std::string& p) const {
   check_finite(p + ".speed", speed);
   check_finite(p + ".parabola", parabola);
   check_positive(p + ".frequency", frequency);
+  check_nonnegative(p + ".ramp", ramp);
 }
 
 }  // namespace flagsim

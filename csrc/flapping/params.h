@@ -12,6 +12,8 @@ struct FlappingParams {
   double speed = 1.0;         ///< v, wave speed in normalised flag lengths per second
   double parabola = 1.0;      ///< a, parabola shape coefficient (eq. 5)
   double frequency = 3.0;     ///< noise lattice cells per normalised flag length
+  double ramp = 0.5;          ///< s, eq. 5 fades in over this time from a flat flag at t = 0
+                              ///< (C1 smoothstep, as A(L)); 0 = the whole wave from the start
   uint32_t seed = 0;
   void validate(const std::string& prefix) const;
 };

@@ -31,6 +31,12 @@ const char* Simulation::stage_name(Stage s) {
   throw std::logic_error("stage_name: unknown stage");
 }
 
+double EnergyLedger::unexplained_since(const EnergyLedger& b) const {
+  const double projections = (strain_limit - b.strain_limit) + (pole - b.pole) +
+                             (self_collision - b.self_collision);
+  return std::max(integrator - b.integrator, 0.0) + std::max(projections, 0.0);
+}
+
 namespace {
 Scene validated(const Scene& s) {
   s.validate();
@@ -75,14 +81,42 @@ Simulation::Simulation(const Scene& scene)
   if (built_[kSelfCollision]) {
     self_collision_ = std::make_unique<SelfCollision>(topo_.triangles, N, scene_.self_collision);
     // Strain limiting inside the collision sweeps: contacts alone would hold a stretch.
-    strain_projector_ = [this](MatX3& x, MatX3& v) { limit_cloth_strain(x, v); };
+    strain_projector_ = [this](MatX3& x, MatX3& v) { ledger_.strain_limit += limit_cloth_strain(x, v); };
   }
   for (int s = 0; s < kNumStages; ++s)
     if (built_[s]) stage_names_.emplace_back(stage_name(Stage(s)));
   n_.resize(N, 3);
   update_normals();
   setup_flapping();
+  setup_energy();
 }
+
+// The plausibility check's scale m |g| H + m U^2 / 2 (docs/energy.md) and the energy at the start.
+void Simulation::setup_energy() {
+  const FlagParams& f = scene_.flag;
+  double U = scene_.air.model == "none" ? 0.0 : scene_.air.wind.max_speed();
+  if (scene_.air.model == "grid")
+    for (const FanParams& fan : scene_.air.fans) U = std::max(U, fan.max_speed);
+  const double m = topo_.mass.sum(), H = std::max(f.width, f.height);
+  energy_scale_ = m * scene_.gravity.norm() * H + 0.5 * m * U * U;
+  if (!(energy_scale_ > 0)) energy_scale_ = 0.5 * m;  // m (1 m/s)^2 / 2
+  forces_.energy_guard = scene_.integrator.energy_tolerance * energy_scale_;
+  energy_end_ = energy_now();
+  gravity_potential_0_ = energy().gravity;
+  const Index N = topo_.num_vertices();
+  x_piece_ = x_;
+  if (built_[kFlap] && scene_.flapping.mode == "displace") {
+    flap_drift_.setZero(N, 3);
+    forces_.drift = &flap_drift_;
+  }
+  if (built_[kFlap] && scene_.flapping.mode == "force") {
+    flap_force_.setZero(N, 3);
+    forces_.external = &flap_force_;
+  }
+  if (built_[kFlap]) flap_start_.setZero(N);
+}
+
+double Simulation::energy_now() const { return total_energy(topo_, scene_.gravity, x_, v_); }
 
 void Simulation::setup_flapping() {
   const Index N = topo_.num_vertices();
@@ -139,16 +173,32 @@ void Simulation::step(long n) {
   for (long k = 0; k < n; ++k) step_once();
 }
 
-// One step, as the method reads: air -> forces + integrate -> constraints -> check.
+// One step, as the method reads: air -> forces + integrate -> constraints -> check. A step that
+// makes energy no stage's work explains (the check's "energy") is redone from its start as 2,
+// 4, ... pieces, up to integrator.max_halvings levels: a projection's error grows with how far
+// the cloth moves in a step (a vertex put back on the pole while its neighbours moved on
+// stretches their springs), so shorter pieces make less of it. Other failures raise at once.
 void Simulation::step_once() {
   x_start_ = x_;
   v_start_ = v_;
-  stage_air();
-  stage_integrate();  // includes strain limiting after every substep, timed as its own stage
-  if (built_[kFlap]) stage_flap();
-  stage_collide();
-  stage_check();
-  if (built_[kFlap]) flap_applied_ = flap_z_;
+  ledger_start_ = ledger_;
+  energy_end_start_ = energy_end_;
+  if (built_[kFlap]) flap_start_ = flap_applied_;
+  int level = 0;
+  for (;; ++level) {
+    const long pieces = 1L << level;
+    h_ = scene_.dt / double(pieces);
+    Implausible bad;
+    for (long k = 0; k < pieces && bad.cause.empty(); ++k) {
+      t_piece_ = time_ + double(k) * h_;
+      bad = step_piece();
+    }
+    if (bad.cause.empty()) break;
+    if (level == scene_.integrator.max_halvings)
+      diverge(bad.cause, bad.vertex, bad.why + " even in " + std::to_string(pieces) + " pieces");
+    restore_step_start();
+  }
+  stats_.energy_halvings += level;
   advance_fluid();  // after the check: a rolled-back step leaves the air as it was
   ++step_count_;
   time_ = double(step_count_) * scene_.dt;  // no drift from summing dt
@@ -156,79 +206,113 @@ void Simulation::step_once() {
   if (built_[kFlapVisual]) stage_flap_visual();
 }
 
+// One piece of h_ from t_piece_: an empty cause when it passed its checks.
+Simulation::Implausible Simulation::step_piece() {
+  x_piece_ = x_;
+  const bool displace = built_[kFlap] && scene_.flapping.mode == "displace";
+  stage_air();
+  if (displace) stage_flap_drift();                     // a drift of the positions, or
+  if (built_[kFlap] && !displace) stage_flap_force();  // a force, held over the piece
+  stage_integrate();  // includes strain limiting after every substep, timed as its own stage
+  stage_collide();
+  Implausible bad = stage_check();
+  if (!bad.cause.empty()) return bad;
+  if (built_[kFlap]) flap_applied_ = flap_z_;
+  energy_end_ = energy_run_;
+  return bad;
+}
+
+void Simulation::restore_step_start() {
+  x_ = x_start_;
+  v_ = v_start_;
+  ledger_ = ledger_start_;
+  energy_end_ = energy_end_start_;
+  if (built_[kFlap]) flap_applied_ = flap_start_;
+}
+
 double Simulation::sample_pole_air_speed() {
   air_velocity(edge_points_, edge_air_);
   return edge_air_.rowwise().norm().mean();
 }
 
-// Paper eq. 5 at the end of the step, t + dt. "displace" moves each vertex along its normal by
-// the change of z since the last step, so the applied offset follows eq. 5 and springs, drag,
-// pins and collisions respond to it. "force" applies F = m d2z/dt2 n (the force that would move a
-// free mass along the wave; d2z/dt2 by the central difference over dt) by operator splitting,
-// v += dt F / m and x += dt^2 F / m, so pinned vertices (inv_mass 0) stay put.
-void Simulation::stage_flap() {
+// Paper eq. 5 at the end of the piece. "displace": the change of z over the piece, dz, is a drift
+// dz n / h that the integrator adds to the positions (ForceSet::drift), so the springs answer
+// the displaced cloth inside the solve while damping and drag see only the cloth's own velocity;
+// the ledger's flap entry is its work against springs and gravity. Moving the positions after
+// the solve instead stored whatever the wave stretched in the springs: at k_s = 1e6 N/m that
+// was 5e4 J in a 66 g flag (docs/energy.md). Pinned vertices stay put.
+void Simulation::stage_flap_drift() {
+  ScopedTimer t(seconds_[kFlap]);
+  u_p_ = sample_pole_air_speed();
+  compute_vertex_normals(topo_, x_, n_);
+  flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, t_piece_ + h_, scene_.flapping, flap_z_);
+  for (Index i = 0; i < topo_.num_vertices(); ++i)
+    flap_drift_.row(i) = topo_.pinned(i) ? Vec3::Zero().transpose()
+                                         : (((flap_z_[i] - flap_applied_[i]) / h_) * n_.row(i)).eval();
+}
+
+// "force": F = m d2z/dt2 n, the force that would move a free mass along the wave (d2z/dt2 by the
+// central difference over the piece), held over the piece by the integrator as an external
+// force (its work is the ledger's flap entry). Pinned vertices get none.
+void Simulation::stage_flap_force() {
   ScopedTimer t(seconds_[kFlap]);
   const FlappingParams& fp = scene_.flapping;
-  const double h = scene_.dt, t1 = double(step_count_ + 1) * h;
+  const double h = h_, t1 = t_piece_ + h_;
   u_p_ = sample_pole_air_speed();
   compute_vertex_normals(topo_, x_, n_);
   flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, t1, fp, flap_z_);
-  const Index N = topo_.num_vertices();
-  if (fp.mode == "displace") {
-    for (Index i = 0; i < N; ++i) {
-      if (topo_.pinned(i)) continue;
-      x_.row(i) += (flap_z_[i] - flap_applied_[i]) * n_.row(i);
-    }
-    // The cloth stays within its strain limit: eq. 5's amplitude grows with the wind, and at
-    // storm speeds its wave alone would stretch the cloth severalfold.
-    if (built_[kStrainLimit]) limit_cloth_strain(x_, v_);
-    return;  // flap_applied_ = flap_z_ once the step has passed its check
-  }
   flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, t1 - h, fp, flap_before_);
   flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, t1 + h, fp, flap_after_);
-  for (Index i = 0; i < N; ++i) {
-    if (topo_.pinned(i)) continue;
+  for (Index i = 0; i < topo_.num_vertices(); ++i) {
     const double a = (flap_after_[i] - 2 * flap_z_[i] + flap_before_[i]) / (h * h);
-    v_.row(i) += (h * a) * n_.row(i);
-    x_.row(i) += (h * h * a) * n_.row(i);
+    flap_force_.row(i) = topo_.pinned(i) ? Vec3::Zero().transpose() : ((topo_.mass[i] * a) * n_.row(i)).eval();
   }
 }
 
-// Pole, then self-collision, which keeps the pole in its own sweeps and ends on it, both from
-// the start-of-step positions (so both are swept). A vertex the pole stops while its neighbours
-// move on stretches their springs, and strain limiting pulls it along chords through the pole:
-// the two projections alternate (at most kPoleStrainRounds times) until the pole moves nothing,
-// so that a flag blown back wraps around the pole without over-stretching; the pole has the
-// last word.
-// The integrator's strain limit on (x, v) over one step: outside the integrator, after the
-// flapping displacement, between pole passes and inside the collision sweeps.
-void Simulation::limit_cloth_strain(MatX3& x, MatX3& v) {
-  limit_strain(topo_, scene_.integrator.strain_limit, scene_.integrator.strain_limit_iterations,
-               scene_.dt, x, v);
+double Simulation::limit_cloth_strain(MatX3& x, MatX3& v) {
+  return limit_strain_work(topo_, scene_.gravity, scene_.integrator.strain_limit,
+                           scene_.integrator.strain_limit_iterations, x, v);
 }
 
+// Each projection's entry in the ledger is the change of E it made, less the strain limiting
+// inside it (which has its own entry).
 void Simulation::stage_collide() {
   constexpr int kPoleStrainRounds = 10;
   if (built_[kPole]) {
+    const double strain_before = ledger_.strain_limit;
     Index moved;
     {
       ScopedTimer t(seconds_[kPole]);
-      moved = collide_pole(scene_.pole, x_start_, x_, v_, topo_.inv_mass);
+      moved = collide_pole(scene_.pole, x_piece_, x_, v_, topo_.inv_mass);
     }
+    const bool changed = moved > 0;  // a vertex left alone keeps its position and velocity
     for (int k = 0; k < kPoleStrainRounds && moved > 0 && built_[kStrainLimit]; ++k) {
       {
         ScopedTimer t(seconds_[kStrainLimit]);
-        limit_cloth_strain(x_, v_);
+        ledger_.strain_limit += limit_cloth_strain(x_, v_);
       }
       ScopedTimer t(seconds_[kPole]);
-      moved = collide_pole(scene_.pole, x_start_, x_, v_, topo_.inv_mass);
+      moved = collide_pole(scene_.pole, x_piece_, x_, v_, topo_.inv_mass);
+    }
+    if (changed) {
+      ScopedTimer t(seconds_[kCheck]);
+      const double e = energy_now();
+      ledger_.pole += e - energy_run_ - (ledger_.strain_limit - strain_before);
+      energy_run_ = e;
     }
   }
   if (built_[kSelfCollision]) {
-    ScopedTimer t(seconds_[kSelfCollision]);
-    self_collision_->resolve(x_start_, x_, v_, topo_.inv_mass,
-                             built_[kPole] ? &scene_.pole : nullptr,
-                             built_[kStrainLimit] ? &strain_projector_ : nullptr);
+    const double strain_before = ledger_.strain_limit;
+    {
+      ScopedTimer t(seconds_[kSelfCollision]);
+      self_collision_->resolve(x_piece_, x_, v_, topo_.inv_mass,
+                               built_[kPole] ? &scene_.pole : nullptr,
+                               built_[kStrainLimit] ? &strain_projector_ : nullptr);
+    }
+    ScopedTimer t(seconds_[kCheck]);
+    const double e = energy_now();
+    ledger_.self_collision += e - energy_run_ - (ledger_.strain_limit - strain_before);
+    energy_run_ = e;
   }
 }
 
@@ -247,7 +331,7 @@ void Simulation::stage_flap_visual() {
 void Simulation::stage_air() {
   if (built_[kWind]) {
     ScopedTimer t(seconds_[kWind]);
-    const Vec3 w = scene_.air.wind.at(time_);
+    const Vec3 w = scene_.air.wind.at(t_piece_);
     u_.rowwise() = w.transpose();
   }
   if (built_[kFluid]) {
@@ -269,7 +353,7 @@ void Simulation::stage_integrate() {
   IntegrateStatus status;
   {
     ScopedTimer t(total);
-    status = integrate(topo_, forces_, scene_.integrator, scene_.dt, u_, x_, v_, scratch_, stats_,
+    status = integrate(topo_, forces_, scene_.integrator, h_, u_, x_, v_, scratch_, stats_,
                        &force_seconds_);
   }
   // The integrate stage's own cost excludes the force kernels it called (timed separately).
@@ -277,6 +361,15 @@ void Simulation::stage_integrate() {
   seconds_[kDrag] += force_seconds_.drag - before.drag;
   seconds_[kSprings] += force_seconds_.springs - before.springs;
   seconds_[kStrainLimit] += force_seconds_.strain_limit - before.strain_limit;
+  const StepWork& w = stats_.work;
+  ledger_.edits += stats_.energy_before - energy_end_;  // the state written between steps
+  ledger_.drag += w.drag;
+  ledger_.flap += w.external + w.drift;
+  ledger_.damping += w.damping;
+  ledger_.pins += w.pins;
+  ledger_.strain_limit += w.strain_limit;
+  ledger_.integrator += w.remainder;
+  energy_run_ = stats_.energy_after;
   seconds_[kIntegrate] += total - (force_seconds_.gravity - before.gravity) -
                           (force_seconds_.drag - before.drag) -
                           (force_seconds_.springs - before.springs) -
@@ -294,6 +387,13 @@ void Simulation::stage_integrate() {
       << " s (integrator.adaptive = false)";
     diverge("unstable_step", -1, s.str());
   }
+  if (status == IntegrateStatus::kEnergyGain) {
+    std::ostringstream s;
+    s << "the implicit step made more than integrator.energy_tolerance x the energy scale = "
+      << forces_.energy_guard << " J of energy beyond the work of its forces even after "
+      << scene_.integrator.max_halvings << " step halvings";
+    diverge("energy", -1, s.str());
+  }
   if (status == IntegrateStatus::kCgFailed) {
     std::ostringstream s;
     s << "conjugate gradient did not reach integrator.cg_tolerance = "
@@ -303,7 +403,11 @@ void Simulation::stage_integrate() {
   }
 }
 
-void Simulation::stage_check() {
+// Finite and strain below integrator.max_strain, or DivergenceError now. Then plausibility
+// (docs/energy.md): strain within the strain limit's promise, and the step so far (all its
+// pieces) has made no more energy than the tolerance allows beyond what the stages' work
+// explains; a piece that fails either is returned, and the step is redone in shorter pieces.
+Simulation::Implausible Simulation::stage_check() {
   ScopedTimer t(seconds_[kCheck]);
   const Index N = topo_.num_vertices();
   for (Index i = 0; i < N; ++i)
@@ -311,22 +415,41 @@ void Simulation::stage_check() {
       diverge("non-finite", long(i), "non-finite position or velocity");
   Index worst = -1;
   const double e = flagsim::max_strain(topo_, x_, &worst);
+  // the worst vertex: whichever end of the worst spring moved more in this step
+  long vertex = -1;
+  if (worst >= 0) {
+    const int a = topo_.springs(worst, 0), b = topo_.springs(worst, 1);
+    vertex = (x_.row(a) - x_start_.row(a)).norm() >= (x_.row(b) - x_start_.row(b)).norm() ? a : b;
+  }
   if (e > scene_.integrator.max_strain) {
     std::ostringstream s;
     s << "spring strain " << e << " exceeds integrator.max_strain = " << scene_.integrator.max_strain;
-    // the worst vertex: whichever end of the worst spring moved more in this step
-    long vertex = -1;
-    if (worst >= 0) {
-      const int a = topo_.springs(worst, 0), b = topo_.springs(worst, 1);
-      vertex = (x_.row(a) - x_start_.row(a)).norm() >= (x_.row(b) - x_start_.row(b)).norm() ? a : b;
-    }
     diverge("strain", vertex, s.str());
   }
+  const double limit = scene_.integrator.strain_limit;
+  if (limit > 0 && e > limit + kStrainLimitSlack) {
+    std::ostringstream s;
+    s << "spring strain " << e << " exceeds the strain limit's promise, integrator.strain_limit + "
+      << kStrainLimitSlack << " = " << limit + kStrainLimitSlack;
+    return {"strain", vertex, s.str()};
+  }
+  if (scene_.integrator.energy_tolerance <= 0) return {};
+  const double gain = ledger_.unexplained_since(ledger_start_);
+  const double allowed = scene_.integrator.energy_tolerance * energy_scale_;
+  if (!(gain > allowed)) return {};
+  const EnergyLedger& a = ledger_;
+  const EnergyLedger& b = ledger_start_;
+  std::ostringstream s;
+  s << "the step (in pieces of " << h_ << " s) made " << gain
+    << " J that no stage's work explains (integrator "
+    << a.integrator - b.integrator << ", strain limiting " << a.strain_limit - b.strain_limit
+    << ", pole " << a.pole - b.pole << ", self-collision " << a.self_collision - b.self_collision
+    << " J), more than integrator.energy_tolerance x the energy scale = " << allowed << " J";
+  return {"energy", -1, s.str()};
 }
 
 void Simulation::diverge(const std::string& cause, long vertex, const std::string& detail) {
-  x_ = x_start_;
-  v_ = v_start_;
+  restore_step_start();
   update_normals();
   std::ostringstream s;
   s << "simulation diverged at step " << step_count_ << " (t = " << time_ << " s)";
@@ -345,6 +468,12 @@ std::vector<std::pair<std::string, double>> Simulation::timings() const {
 }
 
 ClothEnergy Simulation::energy() const { return cloth_energy(topo_, scene_.gravity, x_, v_); }
+
+EnergyLedger Simulation::energy_ledger() const {
+  EnergyLedger l = ledger_;
+  l.gravity = gravity_potential_0_ - energy().gravity;
+  return l;
+}
 
 void Simulation::air_velocity(const MatX3& points, MatX3& out) const {
   out.resize(points.rows(), 3);

@@ -16,6 +16,36 @@
 
 namespace flagsim {
 
+/// Energy the flag took from or gave to each stage since the Simulation was built, J
+/// (docs/energy.md). Balance, with E_mech = kinetic + spring and E = E_mech + gravity potential
+/// (the three terms of energy()):
+///   E_mech(t) - E_mech(0) = sum of every entry,   E(t) - E(0) = the same sum without `gravity`.
+/// Forces count as the integrator applied them (StepWork); a projection or a displacement counts
+/// as the change of E it made. `integrator` is what is left: backward Euler's numerical
+/// dissipation (<= 0 for linear springs), symplectic Euler's bounded oscillation.
+/// Strain a scene with integrator.strain_limit = s promises: s + this. The collision
+/// projections run after the last strain-limiting pass and may leave a little more.
+constexpr double kStrainLimitSlack = 0.02;
+
+struct EnergyLedger {
+  double gravity = 0;         ///< work of gravity, minus the change of its potential
+  double drag = 0;            ///< air drag: wind, fans and the grid push the flag through it
+  double damping = 0;         ///< spring damping, eq. 4 (<= 0)
+  double flap = 0;            ///< eq. 5 flapping, "displace" or "force"
+  double strain_limit = 0;    ///< strain limiting, in the integrator and between projections
+  double pole = 0;            ///< the pole's collision projection
+  double self_collision = 0;  ///< the self-collision response (its strain limiting excluded)
+  double pins = 0;            ///< pinned vertices that move
+  double edits = 0;           ///< the state written from outside between steps
+  double integrator = 0;      ///< remainder: the integrator's numerical energy change
+  /// The part no physical stage explains, from the ledger at `before` to this one: the positive
+  /// part of the change of the integrator remainder plus that of the projections together
+  /// (strain limiting, pole, self-collision, which alternate within a step). Backward Euler and
+  /// the projections should only take energy out; counted apart, neither can hide the other's
+  /// gain (a projection pumping the springs that the next solve damps).
+  double unexplained_since(const EnergyLedger& before) const;
+};
+
 class Simulation {
  public:
   /// Validates the scene (InvalidArgument on a bad parameter) and builds only the needed stages.
@@ -58,6 +88,13 @@ class Simulation {
   /// Seconds spent per built stage since construction.
   std::vector<std::pair<std::string, double>> timings() const;
   ClothEnergy energy() const;
+  /// Work by stage since construction (EnergyLedger; `gravity` from the current positions).
+  EnergyLedger energy_ledger() const;
+  /// J, the flag's energy scale m |g| H + m U^2 / 2 (m its mass, H = max(width, height), U the
+  /// largest wind or fan speed of the scene); m (1 m/s)^2 / 2 when both are zero. A step whose
+  /// unexplained energy gain exceeds integrator.energy_tolerance x this raises
+  /// DivergenceError(cause "energy").
+  double energy_scale() const { return energy_scale_; }
   /// Largest spring strain (l - L) / L of the current positions.
   double max_strain() const { return flagsim::max_strain(topo_, x_); }
   const IntegratorStats& last_step_stats() const { return stats_; }
@@ -87,16 +124,26 @@ class Simulation {
   static const char* stage_name(Stage s);
 
   void step_once();
+  struct Implausible {  // a piece that failed a plausibility test; empty cause: it passed
+    std::string cause;
+    long vertex = -1;
+    std::string why;
+  };
+  Implausible step_piece();
+  void restore_step_start();
   void stage_air();
   void advance_fluid();
   void build_fluid();
   void stage_integrate();
-  void stage_check();
+  Implausible stage_check();
   void setup_flapping();
   double sample_pole_air_speed();
-  void stage_flap();
+  void stage_flap_drift();
+  void stage_flap_force();
   void stage_collide();
-  void limit_cloth_strain(MatX3& x, MatX3& v);
+  double limit_cloth_strain(MatX3& x, MatX3& v);  // returns the change of E it made, J
+  void setup_energy();
+  double energy_now() const;  // total_energy of (x_, v_)
   void stage_flap_visual();
   [[noreturn]] void diverge(const std::string& cause, long vertex, const std::string& detail);
 
@@ -107,6 +154,8 @@ class Simulation {
   IntegratorStats stats_;
   MatX3 x_, v_, n_, u_;    // (N x 3) positions, velocities, normals, air at masses
   MatX3 x_start_, v_start_;  // (N x 3) state at the start of the step (rollback)
+  MatX3 x_piece_;            // (N x 3) positions at the start of the piece (swept collisions)
+  double h_ = 0, t_piece_ = 0;  // s, length and start time of the piece being stepped
   double time_ = 0;
   long step_count_ = 0;
   std::array<bool, kNumStages> built_{};
@@ -126,6 +175,17 @@ class Simulation {
   double u_p_ = 0;
   bool visual_ = false;
   MatX3 render_x_, render_n_;  // (N x 3) "visual" geometry
+
+  // Energy bookkeeping (docs/energy.md): the ledger (gravity filled in on demand), its value at
+  // the start of the step (rollback), E at the end of the last step (edits show as a change
+  // before the next), E running through the stages of a step, the gravity potential at the
+  // start, and the scale of the plausibility check.
+  EnergyLedger ledger_, ledger_start_;
+  double energy_end_start_ = 0;
+  double energy_end_ = 0, energy_run_ = 0, gravity_potential_0_ = 0, energy_scale_ = 0;
+  MatX3 flap_drift_;           // (N x 3) m/s, "displace": dz n / h, the integrator's drift
+  MatX3 flap_force_;           // (N x 3) N, "force": held over the piece by the integrator
+  VecX flap_start_;            // (N) m, flap_applied_ at the start of the step (rollback)
 
   std::unique_ptr<SelfCollision> self_collision_;
   SelfCollision::Projector strain_projector_;  // built once: no allocation per step

@@ -46,4 +46,6 @@ def reference_ramp(L, amplitude, l_max):
 def reference_eq5(x, y, L, u_p, t, p):
     """Paper eq. 5 per vertex with a FlappingParams-like p."""
     phase = p.frequency * (x - p.speed * t - p.parabola * (1 - y) * y)
-    return u_p * reference_ramp(L, p.amplitude, p.l_max) * reference_noise(phase, p.seed)
+    u = min(t / p.ramp, 1.0) if p.ramp > 0 else 1.0  # the fade-in, a smoothstep in time
+    fade = u * u * (3 - 2 * u)
+    return fade * u_p * reference_ramp(L, p.amplitude, p.l_max) * reference_noise(phase, p.seed)

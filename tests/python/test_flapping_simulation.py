@@ -7,9 +7,10 @@ import flagsim
 from _perlin_reference import reference_eq5
 
 
-def quiet_scene(mode="displace", wind=2.0):
+def quiet_scene(mode="displace", wind=2.0, ramp=0.0):
     """The paper's flag with nothing moving it but eq. 5: uniform air of zero density (no drag,
-    the wind only sets u_p), no gravity, no strain limiting (which would answer the wave)."""
+    the wind only sets u_p), no gravity, no strain limiting (which would answer the wave); the
+    whole wave from the first step (flapping.ramp = 0, the paper's start) unless `ramp` says."""
     s = flagsim.Scene.paper()
     s.air.model = "uniform"
     s.air.wind = (wind, 0.0, 0.0)
@@ -19,6 +20,7 @@ def quiet_scene(mode="displace", wind=2.0):
     f = s.flapping
     f.mode, f.amplitude, f.l_max, f.speed, f.parabola, f.frequency, f.seed = (
         mode, 0.02, 0.25, 0.8, 1.3, 3.5, 11)
+    f.ramp = ramp
     return s
 
 
@@ -34,19 +36,39 @@ def eq5_inputs(sim):
 
 def test_displacement_with_dynamics_frozen_is_eq5_at_every_vertex():
     # From rest with no force acting, one step moves each vertex by exactly eq. 5 along its
-    # normal (+z for the flat flag), evaluated at the end of the step.
+    # normal (+z for the flat flag), evaluated at the end of the step. The whole wave at once
+    # (ramp 0) stretches the springs across by fourth order in its amplitude: at 0.02 m/(m/s)
+    # that is 0.13 J, the scene's whole energy scale, and the check redoes the step in pieces
+    # (the springs then move the cloth in-plane); at 0.005 it is ~5e-4 J, a plausible jump.
     s = quiet_scene()
+    s.flapping.amplitude = 0.005
     sim = flagsim.Simulation(s)
     rest = np.array(sim.rest_positions)
     x, y, L = eq5_inputs(sim)
     assert np.all(L[np.asarray(sim.pinned)] == 0) and L.max() > s.flapping.l_max
     sim.step()
     z = reference_eq5(x, y, L, 2.0, s.dt, s.flapping)
-    assert np.abs(z).max() > 0.01  # a real displacement, not zeros
+    assert np.abs(z).max() > 0.003  # a real displacement, not zeros
+    assert sim.last_step_stats["energy_halvings"] == 0
     np.testing.assert_allclose(sim.positions[:, :2], rest[:, :2], rtol=0, atol=1e-14)
     np.testing.assert_allclose(sim.positions[:, 2] - rest[:, 2], z, rtol=0, atol=1e-14)
     np.testing.assert_allclose(sim.flap_displacement, z, rtol=0, atol=1e-15)
     assert sim.pole_air_speed == pytest.approx(2.0)
+
+
+def test_the_wave_fades_in_over_the_ramp_from_a_flat_flag():
+    # flapping.ramp = 0.05 s: after one step of 0.01 s eq. 5 is scaled by the smoothstep
+    # S(0.2) = 0.104 (reference_eq5 computes S independently); the flag starts flat.
+    s = quiet_scene(ramp=0.05)
+    sim = flagsim.Simulation(s)
+    rest = np.array(sim.rest_positions)
+    np.testing.assert_array_equal(sim.positions, rest)
+    x, y, L = eq5_inputs(sim)
+    sim.step()
+    z = reference_eq5(x, y, L, 2.0, s.dt, s.flapping)
+    full = reference_eq5(x, y, L, 2.0, s.dt, quiet_scene().flapping)
+    np.testing.assert_allclose(z, 0.104 * full, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(sim.positions[:, 2] - rest[:, 2], z, rtol=0, atol=1e-14)
 
 
 def test_visual_mode_changes_only_the_exported_geometry():
@@ -130,8 +152,12 @@ def test_flapping_demo_wave_front_moves_away_from_the_pole(mode):
     rest = np.array(sim.rest_positions)
     sim.step(100)
     lags = wave_lags(sim, rows, cols)
-    # eq. 5 moves the pattern v = 1 flag length per second: 0.1 s is 2.3 columns of 23
-    assert np.mean(lags > 0) >= 0.8 and 1.5 <= np.median(lags) <= 3, lags
+    # eq. 5 moves the pattern v = 1 flag length per second: 0.1 s is 2.3 columns of 23. In
+    # "force" the integrator solves the force with the springs and damping, which answer it
+    # (a response of ~2 mm against ~10 mm displaced) and add the cloth's own waves: 12 of the
+    # 16 intervals follow eq. 5's, all 16 with "displace".
+    assert np.mean(lags > 0) >= (0.8 if mode == "displace" else 0.7), lags
+    assert 1.5 <= np.median(lags) <= 3, lags
     np.testing.assert_array_equal(sim.positions[pinned], rest[pinned])
     assert np.abs(sim.positions[:, 2]).max() > 1e-3  # it flaps
 

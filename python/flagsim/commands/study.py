@@ -3,8 +3,10 @@
   accuracy   error against run time per step: spring-mass pair, banner angle, flag trajectory,
              Taylor-Green vortex and the coupled paper scene, with observed convergence orders,
              the Pareto front, and the cheapest setting per error target
-  stability  a matrix over stiffness, wind, dt, areal density and integrator plus pathological
-             cases; every case ends stable, diverged (reported) or silently non-finite
+  stability  a matrix over stiffness, wind, dt, areal density, flapping mode and integrator
+             plus pathological cases; every case ends plausible (finite, energy ledger balanced,
+             strain within the scene's promise), diverged (reported), implausible or non-finite
+             (the last two must never happen: the command then exits 1)
 
 Cases run through a process pool (--jobs N) and an interrupted study resumes from its CSV.
 Timings are most meaningful with --jobs 1 on a quiet machine.
@@ -40,11 +42,12 @@ def run(args):
     if args.study == "stability":
         rows = study.run_stability(args.out, reduced=args.quick, jobs=args.jobs,
                                    progress=not args.quiet, report_path=report)
-        from ..study.stability import summarize
-        for integ, c in summarize(rows).items():
-            print(f"{integ:>18}: {c['stable']} stable, {c['diverged']} diverged (reported), "
-                  f"{c['silent_nonfinite']} silent non-finite")
-        silent = sum(c["silent_nonfinite"] for c in summarize(rows).values())
+        from ..study.stability import headline, summarize
+        for (integ,), c in summarize(rows).items():
+            print(f"{integ:>18}: " + ", ".join(f"{n} {o}" for o, n in c.items()))
+        print(headline(rows))
+        total = summarize(rows, by=())[()]
+        silent = total["implausible"] + total["nonfinite"]
     else:
         plot_dir = os.path.join(args.docs, "images") if args.docs else None
         study.run_accuracy(args.out, quick=args.quick, jobs=args.jobs, progress=not args.quiet,

@@ -69,8 +69,9 @@ TEST(FlappingDisplacement, EqualsEquation5AtEveryVertex) {
       const double x = g.xy(i, 0), y = g.xy(i, 1);
       const double u = std::min(g.L[i] / p.l_max, 1.0);
       const double A = p.amplitude * (3 * u * u - 2 * u * u * u);
+      const double s = std::min(t / p.ramp, 1.0), fade = s * s * (3 - 2 * s);  // the fade-in
       const double expected =
-          u_p * A * noise(p.frequency * (x - p.speed * t - p.parabola * (1 - y) * y));
+          fade * u_p * A * noise(p.frequency * (x - p.speed * t - p.parabola * (1 - y) * y));
       EXPECT_NEAR(z[i], expected, 1e-15) << "vertex " << i << " t " << t;
     }
   }
@@ -95,6 +96,7 @@ TEST(FlappingDisplacement, PinnedEdgeStillAndLinearInAirSpeed) {
 TEST(FlappingDisplacement, WaveTravelsAtSpeedVOnParabolicFronts) {
   FlappingParams p = demo_params();
   p.l_max = 1e-9;  // A constant everywhere on this test's points: only the wave is left
+  p.ramp = 0.0;    // and no fade-in
   const Perlin1D noise(p.seed);
   MatX2 xy(1, 2), xy2(1, 2);
   const VecX L = VecX::Constant(1, 1.0);
@@ -113,6 +115,23 @@ TEST(FlappingDisplacement, WaveTravelsAtSpeedVOnParabolicFronts) {
     flapping_displacement(noise, xy, L, 1.5, t, p, z);
     flapping_displacement(noise, xy2, L, 1.5, t, p, z2);
     EXPECT_NEAR(z[0], z2[0], 1e-12);
+  }
+}
+
+TEST(FlappingDisplacement, FadesInAsASmoothstepOverTheRamp) {
+  FlappingParams p = demo_params();
+  p.ramp = 0.4;
+  FlappingParams full = p;
+  full.ramp = 0.0;
+  const Grid g = grid(11, 8, 0.54);
+  const Perlin1D noise(p.seed);
+  VecX z, z_full;
+  // S(u) = 3u^2 - 2u^3: 0 at the start, 1/2 half way, 1 from the end of the ramp on
+  for (auto [t, S] : {std::pair{0.0, 0.0}, {0.1, 0.15625}, {0.2, 0.5}, {0.4, 1.0}, {3.0, 1.0}}) {
+    flapping_displacement(noise, g.xy, g.L, 2.0, t, p, z);
+    flapping_displacement(noise, g.xy, g.L, 2.0, t, full, z_full);
+    ASSERT_GT(z_full.cwiseAbs().maxCoeff(), 1e-3);
+    for (Index i = 0; i < z.size(); ++i) EXPECT_NEAR(z[i], S * z_full[i], 1e-16) << t;
   }
 }
 
@@ -136,6 +155,9 @@ TEST(FlappingParams, ValidateNamesTheParameter) {
   p = FlappingParams{};
   p.amplitude = -1;
   EXPECT_EQ(message(p), "flapping.amplitude should be finite and >= 0, got -1");
+  p = FlappingParams{};
+  p.ramp = -0.5;
+  EXPECT_EQ(message(p), "flapping.ramp should be finite and >= 0, got -0.5");
   p = FlappingParams{};
   p.speed = NAN;
   EXPECT_EQ(message(p), "flapping.speed should be a finite number, got nan");
