@@ -83,6 +83,24 @@ double pin_work(const ClothTopology& topo, const MatX3& f, const MatX3& v, doubl
   return h * w;
 }
 
+// The work of the forces as the integrator applied them over the displacement h v (J, into
+// work): the drag s.fd, the external force, spring damping at velocities a, and the pins (s.f on
+// pinned vertices that move; their v is the same before and after a step). A drift books its own.
+void book_force_work(const ClothTopology& topo, const ForceSet& fs, const MatX3& a,
+                     const MatX3& v, double h, const IntegratorScratch& s, StepWork& work) {
+  if (fs.drag) work.drag += work_over(s.fd, v, h);
+  if (fs.external) work.external += work_over(*fs.external, v, h);
+  work.damping += damping_work(topo, a, v, h);
+  work.pins += pin_work(topo, s.f, v, h);
+}
+
+// total_energy, timed as the plausibility check's bookkeeping (ForceTimings::energy).
+double timed_energy(const ClothTopology& topo, const ForceSet& fs, const MatX3& x, const MatX3& v,
+                    IntegratorScratch& s, ForceTimings* t) {
+  ScopedTimer timer(t ? t->energy : s.unused_timer);
+  return total_energy(topo, gravity_of(fs), x, v);
+}
+
 // Minus the work of the conservative forces (springs, gravity) that the implicit solve applied,
 // f_c = M dv / h - applied drag - k_d (v'_j - v'_i) - external, over the drift's share h r of
 // the displacement, J. With these linearised end-of-step forces backward Euler's remainder
@@ -138,15 +156,12 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
       v.row(i) += (hs * topo.inv_mass[i]) * s.f.row(i);
       x.row(i) += hs * v.row(i);
     });
-    if (fs.drift) {
-      x += hs * *fs.drift;
-      work.drift += potential_change(topo, gravity_of(fs), x, hs, *fs.drift);
+    if (fs.drift) x += hs * *fs.drift;
+    {
+      ScopedTimer timer(t ? t->energy : s.unused_timer);
+      if (fs.drift) work.drift += potential_change(topo, gravity_of(fs), x, hs, *fs.drift);
+      book_force_work(topo, fs, s.v0, v, hs, s, work);  // forces at the substep's start
     }
-    // The forces at the substep's start over its displacement hs v.
-    if (fs.drag) work.drag += work_over(s.fd, v, hs);
-    if (fs.external) work.external += work_over(*fs.external, v, hs);
-    work.damping += damping_work(topo, s.v0, v, hs);
-    work.pins += pin_work(topo, s.f, v, hs);
     if (ip.strain_limit > 0) {
       ScopedTimer timer(t ? t->strain_limit : s.unused_timer);
       work.strain_limit += limit_strain_work(topo, gravity_of(fs), ip.strain_limit,
@@ -323,21 +338,19 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     stats.cg_iterations += it;
     if (!converged) return IntegrateStatus::kCgFailed;
   }
-  if (fs.drag) implicit_drag_applied(topo, A, h, s.dv, s.fd);
-  work.pins += pin_work(topo, s.f, v, h);  // pinned rows of dv are zero: v' = v there
   parallel_for(N, [&](Index i) {
     v.row(i) += s.dv.row(i);
     x.row(i) += h * v.row(i);
   });
-  if (fs.drift) {
-    x += h * *fs.drift;
-    work.drift += implicit_drift_work(topo, fs, h, s.dv, v, s.fd);
+  if (fs.drift) x += h * *fs.drift;
+  {
+    // The linearised end-of-step forces over the displacement h v'; damping is linear in v, so
+    // the applied damping is exactly k_d (v'_j - v'_i).
+    ScopedTimer timer(t ? t->energy : s.unused_timer);
+    if (fs.drag) implicit_drag_applied(topo, A, h, s.dv, s.fd);
+    if (fs.drift) work.drift += implicit_drift_work(topo, fs, h, s.dv, v, s.fd);
+    book_force_work(topo, fs, v, v, h, s, work);
   }
-  // The linearised end-of-step forces over the displacement h v'; damping is linear in v, so
-  // the applied damping is exactly k_d (v'_j - v'_i).
-  if (fs.drag) work.drag += work_over(s.fd, v, h);
-  if (fs.external) work.external += work_over(*fs.external, v, h);
-  work.damping += damping_work(topo, v, v, h);
   if (ip.strain_limit > 0) {
     ScopedTimer timer(t ? t->strain_limit : s.unused_timer);
     work.strain_limit +=
@@ -368,7 +381,7 @@ IntegrateStatus implicit_step(const ClothTopology& topo, const ForceSet& fs,
         failure = IntegrateStatus::kCgFailed;
         break;
       }
-      const double e1 = total_energy(topo, gravity_of(fs), x, v);
+      const double e1 = timed_energy(topo, fs, x, v, s, t);
       pw.remainder =
           e1 - e - pw.drag - pw.external - pw.drift - pw.damping - pw.pins - pw.strain_limit;
       e = e1;
@@ -401,7 +414,7 @@ IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const I
                           double h, const MatX3& u, MatX3& x, MatX3& v, IntegratorScratch& s,
                           IntegratorStats& stats, ForceTimings* t) {
   stats = IntegratorStats{};
-  double E = stats.energy_before = total_energy(topo, gravity_of(fs), x, v);
+  double E = stats.energy_before = timed_energy(topo, fs, x, v, s, t);
   StepWork work;
   const double hs = h / double(ip.substeps);
   long explicit_substeps = 0;
@@ -419,7 +432,7 @@ IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const I
   }
   if (ip.method == "explicit") {
     stats.substeps = explicit_substeps;
-    E = total_energy(topo, gravity_of(fs), x, v);
+    E = timed_energy(topo, fs, x, v, s, t);
     work.remainder = E - stats.energy_before - work.drag - work.external - work.drift -
                      work.damping - work.pins - work.strain_limit;
   }

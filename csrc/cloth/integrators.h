@@ -36,6 +36,7 @@ struct ForceSet {
 struct ForceTimings {
   double gravity = 0, drag = 0, springs = 0;
   double strain_limit = 0;  ///< Provot projection after every substep / implicit piece
+  double energy = 0;        ///< energy bookkeeping (StepWork): the check stage's share
 };
 
 /// f = sum of the built forces at (x, v) with air velocity u (all N x 3); drag (N x 3) gets the

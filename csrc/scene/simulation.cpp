@@ -361,6 +361,7 @@ void Simulation::stage_integrate() {
   seconds_[kDrag] += force_seconds_.drag - before.drag;
   seconds_[kSprings] += force_seconds_.springs - before.springs;
   seconds_[kStrainLimit] += force_seconds_.strain_limit - before.strain_limit;
+  seconds_[kCheck] += force_seconds_.energy - before.energy;  // the check's bookkeeping
   const StepWork& w = stats_.work;
   ledger_.edits += stats_.energy_before - energy_end_;  // the state written between steps
   ledger_.drag += w.drag;
@@ -373,7 +374,8 @@ void Simulation::stage_integrate() {
   seconds_[kIntegrate] += total - (force_seconds_.gravity - before.gravity) -
                           (force_seconds_.drag - before.drag) -
                           (force_seconds_.springs - before.springs) -
-                          (force_seconds_.strain_limit - before.strain_limit);
+                          (force_seconds_.strain_limit - before.strain_limit) -
+                          (force_seconds_.energy - before.energy);
   if (status == IntegrateStatus::kTooManySubsteps) {
     std::ostringstream s;
     s << "the stable step estimate " << stats_.stable_step << " s needs more than "
@@ -454,9 +456,15 @@ void Simulation::diverge(const std::string& cause, long vertex, const std::strin
   std::ostringstream s;
   s << "simulation diverged at step " << step_count_ << " (t = " << time_ << " s)";
   if (vertex >= 0) s << ", vertex " << vertex;
-  s << ": " << detail << "; the state was restored to the start of that step. Try "
-    << (scene_.integrator.method == "explicit" ? "integrator.adaptive = true, " : "")
-    << "integrator.method = 'implicit' or a smaller dt.";
+  s << ": " << detail << "; the state was restored to the start of that step. Try ";
+  const IntegratorParams& ip = scene_.integrator;
+  if (ip.method == "explicit")
+    s << (ip.adaptive ? "" : "integrator.adaptive = true, ") << "integrator.method = 'implicit', ";
+  if (cause == "energy")
+    s << "a smaller dt, stiffness closer to the shear and bend springs', or a larger "
+         "integrator.energy_tolerance (0 switches the check off; docs/energy.md).";
+  else
+    s << "a smaller dt.";
   throw DivergenceError(s.str(), step_count_, time_, vertex, cause);
 }
 

@@ -1,0 +1,141 @@
+"""The energy ledger from Python, the plausibility check, and a property test: a run of any scene
+in the documented parameter ranges ends plausible or reported, never implausible."""
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import flagsim
+from flagsim.study import stability
+
+ENTRIES = ("gravity", "drag", "damping", "flap", "strain_limit", "pole", "self_collision", "pins",
+           "edits", "integrator")
+
+
+def total(sim):
+    return sum(sim.energy().values())
+
+
+def test_ledger_balances_every_stage_of_the_paper_scene():
+    s = flagsim.Scene.paper()
+    s.flapping.mode = "displace"
+    s.self_collision.enabled = True
+    sim = flagsim.Simulation(s)
+    e0 = sim.energy()
+    for _ in range(20):
+        sim.step(10)
+        ledger = sim.energy_ledger()
+        assert tuple(ledger) == ENTRIES
+        e = sim.energy()
+        # E(t) - E(0) = every entry but gravity; kinetic + spring: every entry
+        assert total(sim) - sum(e0.values()) == pytest.approx(
+            sum(ledger.values()) - ledger["gravity"], abs=1e-12)
+        assert (e["kinetic"] + e["spring"]) - (e0["kinetic"] + e0["spring"]) == pytest.approx(
+            sum(ledger.values()), abs=1e-12)
+        assert ledger["gravity"] == pytest.approx(-(e["gravity"] - e0["gravity"]), abs=1e-15)
+    assert ledger["damping"] < 0 and ledger["integrator"] < 0 and ledger["flap"] != 0
+
+
+def test_energy_scale_is_m_g_h_plus_half_m_u_squared():
+    s = flagsim.Scene.paper()
+    sim = flagsim.Simulation(s)
+    m = float(np.sum(sim.node_mass))
+    H = max(s.flag.width, s.flag.height)
+    U = max([np.linalg.norm(v) for _, v in s.air.wind] + [f.max_speed for f in s.air.fans])
+    assert sim.energy_scale == pytest.approx(m * 9.81 * H + 0.5 * m * U**2, rel=1e-12)
+    s.gravity = (0.0, 0.0, 0.0)
+    s.air.model = "none"
+    assert flagsim.Simulation(s).energy_scale == pytest.approx(0.5 * m, rel=1e-12)  # 1 m/s
+
+
+def test_edits_between_steps_show_as_edits():
+    sim = flagsim.Simulation(flagsim.Scene.paper())
+    sim.step(3)
+    before, edits = total(sim), sim.energy_ledger()["edits"]
+    v = sim.velocities.copy()
+    v[-1] += (0.0, 0.0, 1.0)
+    sim.velocities = v
+    added = total(sim) - before
+    sim.step()
+    assert sim.energy_ledger()["edits"] - edits == pytest.approx(added, rel=1e-12)
+
+
+def heavy_stiff_flag():
+    """The plausibility issue's flag: 10 kg/m^2, k_s = 1e7 (soft default shear and bend),
+    dt = 0.05, implicit, flapping off."""
+    s = flagsim.Scene.paper()
+    s.flag.areal_density = 10.0
+    s.flag.stretch_stiffness = 1e7
+    s.dt = 0.05
+    s.flapping.mode = "off"
+    return s
+
+
+def test_an_implausible_step_raises_energy_and_leaves_the_state_as_it_was():
+    s = heavy_stiff_flag()
+    s.integrator.max_halvings = 0  # no shorter pieces to fall back on
+    sim = flagsim.Simulation(s)
+    with pytest.raises(flagsim.DivergenceError, match=r"integrator\.energy_tolerance") as info:
+        for _ in range(40):
+            x, v, ledger = sim.positions.copy(), sim.velocities.copy(), sim.energy_ledger()
+            sim.step()
+    assert info.value.cause == "energy" and info.value.step == sim.step_count
+    assert "method = 'implicit'" not in str(info.value)  # it is implicit already
+    np.testing.assert_array_equal(sim.positions, x)
+    np.testing.assert_array_equal(sim.velocities, v)
+    assert sim.energy_ledger() == ledger
+
+
+def test_the_issues_cases_end_plausible():
+    # k_s 1e6 with the paper's flapping held 5e4 J in a 66 g flag; the heavy stiff flag 3e5 J.
+    s = flagsim.Scene.paper()
+    s.flag.stretch_stiffness = 1e6
+    s.flapping.mode = "displace"
+    sim = flagsim.Simulation(s)
+    sim.step(300)
+    assert sim.energy()["spring"] < 0.05 and sim.max_strain() <= 0.12
+    sim = flagsim.Simulation(heavy_stiff_flag())
+    sim.step(20)
+    assert sim.energy()["spring"] < 10.0 and sim.max_strain() <= 0.12
+
+
+def test_energy_tolerance_and_ramp_are_validated_fields():
+    s = flagsim.Scene.paper()
+    with pytest.raises(ValueError, match=r"integrator\.energy_tolerance should be finite and >= 0"):
+        s.integrator.energy_tolerance = -0.1
+    with pytest.raises(ValueError, match=r"flapping\.ramp should be finite and >= 0"):
+        s.flapping.ramp = math.nan
+    s.integrator.energy_tolerance = 0.25
+    s.flapping.ramp = 0.0
+    back = flagsim.Scene.from_dict(s.to_dict())
+    assert back.integrator.energy_tolerance == 0.25 and back.flapping.ramp == 0.0
+
+
+# Documented ranges (docs/energy.md): stiffness 10..1e7 N/m, 1e-3..10 kg/m^2, wind 0..60 m/s,
+# dt 5e-3..5e-2 s, every flapping mode and integrator. The adaptive explicit integrator's cost
+# grows as sqrt(k / m) per step, so its draws keep k / density below 1e6 to stay within CI time
+# (the stability study covers the corners).
+@st.composite
+def scene_cases(draw):
+    integrator = draw(st.sampled_from(stability.INTEGRATORS))
+    density = 10 ** draw(st.floats(-3, 1))
+    k_max = min(7.0, math.log10(1e6 * density)) if integrator == "explicit_adaptive" else 7.0
+    return dict(
+        id="hypothesis", kind="matrix", integrator=integrator,
+        flapping=draw(st.sampled_from(stability.FLAPPING)),
+        k_s=10 ** draw(st.floats(1, max(1.0, k_max))), wind=draw(st.floats(0, 60)),
+        dt=10 ** draw(st.floats(math.log10(5e-3), math.log10(5e-2))), density=density,
+        duration=0.0)
+
+
+@settings(max_examples=25, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(scene_cases())
+def test_every_run_in_the_documented_ranges_ends_plausible_or_reported(case):
+    case["duration"] = 150 * case["dt"]  # a few hundred steps at most
+    r = stability.run_case(case)
+    assert r["outcome"] in ("plausible", "diverged"), (case, r)
+    if case["integrator"] != "explicit":
+        assert r["outcome"] == "plausible", (case, r)
