@@ -245,16 +245,7 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
       [](const Simulation& s) {
         const EnergyLedger l = s.energy_ledger();
         py::dict d;
-        d["gravity"] = l.gravity;
-        d["drag"] = l.drag;
-        d["damping"] = l.damping;
-        d["flap"] = l.flap;
-        d["strain_limit"] = l.strain_limit;
-        d["pole"] = l.pole;
-        d["self_collision"] = l.self_collision;
-        d["pins"] = l.pins;
-        d["edits"] = l.edits;
-        d["integrator"] = l.integrator;
+        for (const auto& [name, entry] : kLedgerEntries) d[name] = l.*entry;
         return d;
       },
       "dict of the energy each stage gave the flag since construction, J (docs/energy.md): "

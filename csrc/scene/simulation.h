@@ -46,6 +46,20 @@ struct EnergyLedger {
   double unexplained_since(const EnergyLedger& before) const;
 };
 
+/// The ledger's entries by name, in the order energy_ledger() reports them (Python dict keys).
+inline constexpr std::array<std::pair<const char*, double EnergyLedger::*>, 10> kLedgerEntries{{
+    {"gravity", &EnergyLedger::gravity},
+    {"drag", &EnergyLedger::drag},
+    {"damping", &EnergyLedger::damping},
+    {"flap", &EnergyLedger::flap},
+    {"strain_limit", &EnergyLedger::strain_limit},
+    {"pole", &EnergyLedger::pole},
+    {"self_collision", &EnergyLedger::self_collision},
+    {"pins", &EnergyLedger::pins},
+    {"edits", &EnergyLedger::edits},
+    {"integrator", &EnergyLedger::integrator},
+}};
+
 class Simulation {
  public:
   /// Validates the scene (InvalidArgument on a bad parameter) and builds only the needed stages.
