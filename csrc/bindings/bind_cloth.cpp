@@ -9,6 +9,7 @@ namespace py = pybind11;
 namespace flagsim::bindings {
 
 void bind_cloth(py::module_& m) {
+  m.attr("STRAIN_LIMIT_SLACK") = kStrainLimitSlack;  // the strain limit's promise: limit + this
   py::class_<FlagParams> flag(m, "FlagParams",
                               "The mass-spring flag (paper §3): a rows x cols grid of masses.");
   flag.def(py::init<>());

@@ -37,6 +37,10 @@ struct DragParams {
   void validate(const std::string& prefix = "drag") const;
 };
 
+/// Strain a scene with integrator.strain_limit = s promises: s + this. The collision
+/// projections run after the last strain-limiting pass and may leave a little more.
+constexpr double kStrainLimitSlack = 0.02;
+
 struct IntegratorParams {
   std::string method = "implicit";   ///< "explicit" (symplectic Euler) | "implicit" (Baraff-Witkin)
   int substeps = 1;                   ///< fixed substeps per step (each of dt / substeps)

@@ -20,6 +20,14 @@ void Scene::validate() const {
   if (air.model == "grid") air.validate_combination("air");
   drag.validate("drag");
   integrator.validate("integrator");
+  // A strain beyond max_strain raises: at or below the strain limit's promise, so could a step
+  // the limit keeps within it.
+  if (integrator.strain_limit > 0 && !(integrator.max_strain > integrator.strain_limit + kStrainLimitSlack))
+    fail_param("integrator.max_strain",
+               "> integrator.strain_limit + " + detail::to_text(kStrainLimitSlack) + " = " +
+                   detail::to_text(integrator.strain_limit + kStrainLimitSlack) +
+                   " (the strain the limit promises)",
+               integrator.max_strain);
   flapping.validate("flapping");
   self_collision.validate("self_collision");
   if (self_collision.enabled) {

@@ -89,6 +89,25 @@ Simulation::Simulation(const Scene& scene)
   update_normals();
   setup_flapping();
   setup_energy();
+  check_explicit_step();
+}
+
+// Explicit without adaptive substeps refuses a step above the stable-step estimate (strain
+// limiting would otherwise hide the instability as bounded jitter). When dt / substeps is above
+// the estimate for the scene at rest, no step can run: say so now, naming the fix.
+void Simulation::check_explicit_step() const {
+  const IntegratorParams& ip = scene_.integrator;
+  if (ip.method != "explicit" || ip.adaptive) return;
+  MatX3 u0;
+  air_velocity(x_, u0);
+  const double stable = stable_step_estimate(topo_, scene_.drag, forces_.rho, forces_.drag, x_, v_, u0);
+  const double h = scene_.dt / double(ip.substeps);
+  if (!(h > stable)) return;
+  std::ostringstream s;
+  s << ">= " << std::ceil(scene_.dt / stable) << " (dt / substeps at most the stable step "
+    << stable << " s of this scene at rest, for explicit steps without integrator.adaptive; or "
+    << "set integrator.adaptive = true or integrator.method = 'implicit')";
+  fail_param("integrator.substeps", s.str(), ip.substeps);
 }
 
 // The plausibility check's scale m |g| H + m U^2 / 2 (docs/energy.md) and the energy at the start.

@@ -23,10 +23,6 @@ namespace flagsim {
 /// Forces count as the integrator applied them (StepWork); a projection or a displacement counts
 /// as the change of E it made. `integrator` is what is left: backward Euler's numerical
 /// dissipation (<= 0 for linear springs), symplectic Euler's bounded oscillation.
-/// Strain a scene with integrator.strain_limit = s promises: s + this. The collision
-/// projections run after the last strain-limiting pass and may leave a little more.
-constexpr double kStrainLimitSlack = 0.02;
-
 struct EnergyLedger {
   double gravity = 0;         ///< work of gravity, minus the change of its potential
   double drag = 0;            ///< air drag: wind, fans and the grid push the flag through it
@@ -157,6 +153,7 @@ class Simulation {
   void stage_collide();
   double limit_cloth_strain(MatX3& x, MatX3& v);  // returns the change of E it made, J
   void setup_energy();
+  void check_explicit_step() const;
   double energy_now() const;  // total_energy of (x_, v_)
   void stage_flap_visual();
   [[noreturn]] void diverge(const std::string& cause, long vertex, const std::string& detail);

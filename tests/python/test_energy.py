@@ -139,3 +139,13 @@ def test_every_run_in_the_documented_ranges_ends_plausible_or_reported(case):
     assert r["outcome"] in ("plausible", "diverged"), (case, r)
     if case["integrator"] != "explicit":
         assert r["outcome"] == "plausible", (case, r)
+
+
+def test_parameters_that_rule_out_a_plausible_run_are_rejected_before_any_step():
+    s = flagsim.Scene.paper()
+    s.integrator.max_strain = 0.1  # below what the strain limit promises: any step could raise
+    with pytest.raises(ValueError, match=r"^integrator\.max_strain should be > "
+                                         r"integrator\.strain_limit \+ 0\.02 = 0\.12"):
+        flagsim.Simulation(s)
+    s.integrator.strain_limit = 0.0  # no promise, no conflict
+    flagsim.Simulation(s)

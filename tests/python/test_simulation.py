@@ -66,21 +66,34 @@ def test_explicit_adaptive_substeps_on_stiff_springs():
     assert sim.max_strain() < 0.01
 
 
-def test_explicit_without_substeps_raises_and_restores_state():
-    sim = flagsim.Simulation(stiff("explicit", False))
-    for _ in range(100):
+def test_explicit_without_substeps_unstable_at_rest_is_rejected_before_any_step():
+    with pytest.raises(ValueError, match=r"^integrator\.substeps should be >= \d+ .*got 1$"):
+        flagsim.Simulation(stiff("explicit", False))
+
+
+def test_explicit_step_that_becomes_unstable_raises_and_restores_state():
+    # stable at rest (the stable step is 0.95 ms); a gust to 1000 m/s raises the drag slope
+    # beyond what dt allows
+    s = flagsim.Scene.paper()
+    s.air.model = "uniform"
+    s.air.wind = [(0.0, (2.0, 0.0, 0.0)), (0.02, (2.0, 0.0, 0.0)), (0.1, (1000.0, 0.0, 0.0))]
+    s.flapping.mode = "off"
+    s.integrator.method, s.integrator.adaptive, s.integrator.energy_tolerance = "explicit", False, 0
+    s.dt = 5e-4
+    sim = flagsim.Simulation(s)
+    for _ in range(200):
         x, v, n = sim.positions.copy(), sim.velocities.copy(), sim.step_count
         try:
             sim.step()
         except flagsim.DivergenceError as e:
             assert np.array_equal(sim.positions, x) and np.array_equal(sim.velocities, v)
-            assert sim.step_count == n == e.step
+            assert sim.step_count == n == e.step and n > 40
             assert e.cause == "unstable_step"
             assert math.isclose(e.time, n * sim.scene.dt)
             assert "diverged at step" in str(e) and "restored" in str(e)
             return
         assert np.isfinite(sim.positions).all()
-    pytest.fail("an explicit step 100x beyond the stable step did not raise")
+    pytest.fail("a gust to 1000 m/s never made the explicit step unstable")
 
 
 def test_positions_are_views_that_outlive_their_name(paper):

@@ -149,7 +149,11 @@ def _run_trajectory(case: dict[str, Any], state_dir: str) -> dict[str, Any]:
     times = []
     sim = None
     for _ in range(int(case.get("repeats", 1))):
-        sim = flagsim.Simulation(trajectory_scene(case["method"], dt))
+        try:
+            sim = flagsim.Simulation(trajectory_scene(case["method"], dt))
+        except ValueError as e:  # a setting that cannot run, named before any step
+            return dict(dt=dt, steps=0, error="", seconds_per_step="", steps_per_second="",
+                        state=f"rejected: {str(e).split(' should')[0]}")
         try:
             times.append(_timed_run(sim, steps) / steps)
         except flagsim.DivergenceError as e:

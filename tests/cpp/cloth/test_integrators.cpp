@@ -76,7 +76,9 @@ TEST(Explicit, UndampedClothEnergyStaysBoundedOver1e4Steps) {
   s.integrator.method = "explicit";
   s.integrator.adaptive = false;
   s.integrator.strain_limit = 0;  // the bare integrator: strain limiting is a dissipative projection
-  Simulation probe(s);
+  Scene adaptive = s;  // the default dt is above the stable step: only the topology is wanted
+  adaptive.integrator.adaptive = true;
+  Simulation probe(adaptive);
   MatX3 zero = MatX3::Zero(probe.topology().num_vertices(), 3);
   const double h_stable = stable_step_estimate(probe.topology(), s.drag, 1.2, false,
                                                probe.positions(), zero, zero);
@@ -130,22 +132,61 @@ TEST(Stiff, ExplicitAdaptiveSubstepsAndStaysStable) {
 }
 
 // Strain limiting would keep an unstable explicit run bounded (but meaningless), so a step
-// above the stable-step estimate is refused; with strain limiting off the blow-up itself is
-// caught by the strain or finiteness check. Either way the state is restored.
-TEST(Stiff, ExplicitWithoutSubstepsRaisesDivergenceAndRestoresTheState) {
-  Simulation sim(stiff_paper("explicit", false));
-  sim.step(0);
-  const MatX3 x = sim.positions(), v = sim.velocities();
+// above the stable-step estimate is refused. When the scene is unstable at rest, no step could
+// run: the Simulation refuses to be built, naming the parameter and the count it needs.
+TEST(Stiff, ExplicitWithoutSubstepsUnstableAtRestIsRejectedUpFront) {
   try {
-    sim.step();
-    FAIL() << "an explicit step far above the stable step was accepted";
-  } catch (const DivergenceError& e) {
-    EXPECT_EQ(e.cause, "unstable_step");
-    EXPECT_EQ(e.step, 0);
+    Simulation sim(stiff_paper("explicit", false));
+    FAIL() << "an explicit scene far above its stable step was built";
+  } catch (const InvalidArgument& e) {
+    const std::string what = e.what();
+    EXPECT_EQ(what.rfind("integrator.substeps should be >= ", 0), 0u) << what;
+    EXPECT_NE(what.find("integrator.adaptive = true"), std::string::npos) << what;
+    EXPECT_NE(what.find("got 1"), std::string::npos) << what;
   }
-  EXPECT_EQ(sim.positions(), x);
-  EXPECT_EQ(sim.velocities(), v);
-  EXPECT_EQ(sim.step_count(), 0);
+  // with the substeps it names, the scene is built and runs
+  Scene s = stiff_paper("explicit", false);
+  try {
+    Simulation probe(s);
+  } catch (const InvalidArgument& e) {
+    const std::string what = e.what();
+    s.integrator.substeps = std::stoi(what.substr(what.find(">= ") + 3));
+  }
+  Simulation sim(s);
+  sim.step(5);
+  EXPECT_TRUE(sim.positions().allFinite());
+}
+
+// Stable at rest, unstable once a gust raises the drag slope (the estimate's |u| + |v| term,
+// ~4 |u| per second here, passes the springs' bound near 360 m/s):
+// the step where it happens raises DivergenceError("unstable_step") and restores its start.
+TEST(Stiff, ExplicitStepThatBecomesUnstableRaisesDivergenceAndRestoresTheState) {
+  Scene s = Scene::paper();
+  s.air.model = "uniform";
+  s.air.wind = WindSchedule{};
+  s.air.wind.keys = {{0.0, Vec3(2, 0, 0)}, {0.02, Vec3(2, 0, 0)}, {0.1, Vec3(1000, 0, 0)}};
+  s.flapping.mode = "off";
+  s.integrator.method = "explicit";
+  s.integrator.adaptive = false;
+  s.integrator.energy_tolerance = 0;  // the mechanism under test is the stable-step refusal
+  s.dt = 5e-4;        // the stable step at rest is 0.95 ms
+  Simulation sim(s);  // stable at rest
+  MatX3 x, v;
+  for (int i = 0; i < 200; ++i) {
+    x = sim.positions();
+    v = sim.velocities();
+    try {
+      sim.step();
+    } catch (const DivergenceError& e) {
+      EXPECT_EQ(e.cause, "unstable_step");
+      EXPECT_GT(e.step, 40);  // after the gust began
+      EXPECT_EQ(sim.step_count(), e.step);
+      EXPECT_EQ(sim.positions(), x);
+      EXPECT_EQ(sim.velocities(), v);
+      return;
+    }
+  }
+  FAIL() << "a gust to 1000 m/s never made the explicit step unstable";
 }
 
 TEST(Divergence, StrainBeyondTheBoundRaisesAndRestores) {
