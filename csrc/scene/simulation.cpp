@@ -110,7 +110,8 @@ void Simulation::check_explicit_step() const {
   fail_param("integrator.substeps", s.str(), ip.substeps);
 }
 
-// The plausibility check's scale m |g| H + m U^2 / 2 (docs/energy.md) and the energy at the start.
+// The plausibility check's scale m |g| H + m U^2 / 2 (docs/energy.md), and the energy and the
+// piece's start positions at construction.
 void Simulation::setup_energy() {
   const FlagParams& f = scene_.flag;
   double U = scene_.air.model == "none" ? 0.0 : scene_.air.wind.max_speed();
@@ -122,17 +123,7 @@ void Simulation::setup_energy() {
   forces_.energy_guard = scene_.integrator.energy_tolerance * energy_scale_;
   energy_end_ = energy_now();
   gravity_potential_0_ = energy().gravity;
-  const Index N = topo_.num_vertices();
   x_piece_ = x_;
-  if (built_[kFlap] && scene_.flapping.mode == "displace") {
-    flap_drift_.setZero(N, 3);
-    forces_.drift = &flap_drift_;
-  }
-  if (built_[kFlap] && scene_.flapping.mode == "force") {
-    flap_force_.setZero(N, 3);
-    forces_.external = &flap_force_;
-  }
-  if (built_[kFlap]) flap_start_.setZero(N);
 }
 
 double Simulation::energy_now() const { return total_energy(topo_, scene_.gravity, x_, v_); }
@@ -152,8 +143,18 @@ void Simulation::setup_flapping() {
       flap_L_[i] = std::min(flap_L_[i], (topo_.rest_positions.row(i) - topo_.rest_positions.row(j)).norm());
   }
   flap_applied_.setZero(N);
+  flap_start_.setZero(N);
   flap_before_.setZero(N);
   flap_after_.setZero(N);
+  // The integrator carries the stage: "displace" as a drift of the positions, "force" as an
+  // external force, each held over a piece.
+  if (fp.mode == "displace") {
+    flap_drift_.setZero(N, 3);
+    forces_.drift = &flap_drift_;
+  } else if (fp.mode == "force") {
+    flap_force_.setZero(N, 3);
+    forces_.external = &flap_force_;
+  }
   // u_p is sampled along the flag's pole-side edge (column 0, beside the pole), at rest.
   edge_points_.resize(topo_.rows, 3);
   for (int r = 0; r < topo_.rows; ++r) edge_points_.row(r) = topo_.rest_positions.row(r * topo_.cols);

@@ -125,8 +125,9 @@ class Simulation {
 
  private:
   enum Stage {
-    kWind, kFluid, kGravity, kDrag, kSprings, kIntegrate, kStrainLimit,
-    kFlap,           // "displace" / "force": before the collisions, which then see its motion
+    kWind, kFluid,
+    kFlap,           // "displace" / "force": a drift or force the integrator carries
+    kGravity, kDrag, kSprings, kIntegrate, kStrainLimit,
     kPole, kSelfCollision, kCheck,
     kFlapVisual,     // "visual": after the step, on the exported geometry only
     kNumStages
