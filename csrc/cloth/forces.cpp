@@ -234,19 +234,6 @@ double total_energy(const ClothTopology& topo, const Vec3& g, const MatX3& x, co
   return e.kinetic + e.gravity + e.spring;
 }
 
-double potential_change(const ClothTopology& topo, const Vec3& g, const MatX3& x, double h,
-                        const MatX3& r) {
-  double dE = 0;
-  for (Index i = 0; i < topo.num_vertices(); ++i) dE -= topo.mass[i] * g.dot(h * Vec3(r.row(i)));
-  for (Index s = 0; s < topo.num_springs(); ++s) {
-    const int a = topo.springs(s, 0), b = topo.springs(s, 1);
-    const Vec3 d = x.row(b) - x.row(a), dr = h * (r.row(b) - r.row(a));
-    const double L = topo.rest_length[s], l1 = d.norm(), l0 = (d - dr).norm();
-    dE += 0.5 * topo.stiffness[s] * ((l1 - L) * (l1 - L) - (l0 - L) * (l0 - L));
-  }
-  return dE;
-}
-
 double max_strain(const ClothTopology& topo, const MatX3& x, Index* worst) {
   double m = 0;
   Index w = -1;

@@ -70,10 +70,6 @@ ClothEnergy cloth_energy(const ClothTopology& topo, const Vec3& g, const MatX3& 
 /// kinetic + gravity + spring of cloth_energy, J: the energy the ledger balances
 /// (scene/simulation.h, EnergyLedger).
 double total_energy(const ClothTopology& topo, const Vec3& g, const MatX3& x, const MatX3& v);
-/// PE(x) - PE(x - h r), J, PE = spring + gravity potential: the energy that moving the positions
-/// by h r (r: N x 3, m/s) to x made. One pass over the springs.
-double potential_change(const ClothTopology& topo, const Vec3& g, const MatX3& x, double h,
-                        const MatX3& r);
 
 /// Largest spring strain (l - L) / L and the spring index where it occurs (springs with L > 0).
 double max_strain(const ClothTopology& topo, const MatX3& x, Index* worst_spring = nullptr);

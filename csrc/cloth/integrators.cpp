@@ -101,19 +101,21 @@ double timed_energy(const ClothTopology& topo, const ForceSet& fs, const MatX3& 
   return total_energy(topo, gravity_of(fs), x, v);
 }
 
-// Minus the work of the conservative forces (springs, gravity) that the implicit solve applied,
-// f_c = M dv / h - applied drag - k_d (v'_j - v'_i) - external, over the drift's share h r of
-// the displacement, J. With these linearised end-of-step forces backward Euler's remainder
-// keeps its sign (docs/energy.md). Pinned rows have no drift.
-double implicit_drift_work(const ClothTopology& topo, const ForceSet& fs, double h,
-                           const MatX3& dv, const MatX3& v, const MatX3& fd) {
+// Minus the work of the conservative forces (springs, gravity) as the integrator applied them,
+// f_c = f - drag - k_d (a_j - a_i) - external with f the total applied force (explicit: at the
+// substep's start, damping at velocities a = v; implicit: M dv / h, a = v'), over the drift's
+// share h r of the displacement, J. The first-order work of the prescribed motion: what is left
+// of the change of potential energy is the integrator's own, in its remainder (docs/energy.md).
+// Pinned rows have no drift.
+double drift_work(const ClothTopology& topo, const ForceSet& fs, const MatX3& f, const MatX3& a,
+                  const MatX3& fd, double h) {
   const MatX3& r = *fs.drift;
   double w = 0;
   for (Index i = 0; i < topo.num_vertices(); ++i) {
     if (topo.inv_mass[i] == 0.0) continue;
-    Vec3 fc = (topo.mass[i] / h) * Vec3(dv.row(i));
+    Vec3 fc = f.row(i);
     for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k)
-      fc -= topo.damping[topo.adj_spring[k]] * (Vec3(v.row(topo.adj_other[k])) - Vec3(v.row(i)));
+      fc -= topo.damping[topo.adj_spring[k]] * (Vec3(a.row(topo.adj_other[k])) - Vec3(a.row(i)));
     if (fs.drag) fc -= Vec3(fd.row(i));
     if (fs.external) fc -= Vec3(fs.external->row(i));
     w -= fc.dot(Vec3(r.row(i)));
@@ -145,7 +147,7 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
     if (n == 0) stats.stable_step = stable;
     if (!ip.adaptive && hs > stable) return IntegrateStatus::kUnstableStep;
     if (ip.adaptive) {
-      const double remaining_pieces = std::ceil(hs / (ip.safety * stable));
+      const double remaining_pieces = std::ceil(hs / (ip.safety * fs.refine * stable));
       if (remaining_pieces + n > ip.max_substeps) return IntegrateStatus::kTooManySubsteps;
       hs = hs / remaining_pieces;  // even pieces of what is left, each below the stable step
     }
@@ -159,7 +161,7 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
     if (fs.drift) x += hs * *fs.drift;
     {
       ScopedTimer timer(t ? t->energy : s.unused_timer);
-      if (fs.drift) work.drift += potential_change(topo, gravity_of(fs), x, hs, *fs.drift);
+      if (fs.drift) work.drift += drift_work(topo, fs, s.f, s.v0, s.fd, hs);
       book_force_work(topo, fs, s.v0, v, hs, s, work);  // forces at the substep's start
     }
     if (ip.strain_limit > 0) {
@@ -348,7 +350,10 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     // the applied damping is exactly k_d (v'_j - v'_i).
     ScopedTimer timer(t ? t->energy : s.unused_timer);
     if (fs.drag) implicit_drag_applied(topo, A, h, s.dv, s.fd);
-    if (fs.drift) work.drift += implicit_drift_work(topo, fs, h, s.dv, v, s.fd);
+    if (fs.drift) {
+      for (Index i = 0; i < N; ++i) s.q.row(i) = (topo.mass[i] / h) * s.dv.row(i);  // applied f
+      work.drift += drift_work(topo, fs, s.q, v, s.fd, h);
+    }
     book_force_work(topo, fs, v, v, h, s, work);
   }
   if (ip.strain_limit > 0) {

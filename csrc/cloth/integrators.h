@@ -24,6 +24,10 @@ struct ForceSet {
   /// redone as two pieces of half the length (as a failed CG solve is); 0 = off. The Simulation sets integrator.energy_tolerance x its energy
   /// scale.
   double energy_guard = 0;
+  /// Explicit adaptive: substeps are at most refine x safety x the stable step estimate. A
+  /// step redone in 2^k pieces after an implausible one runs at refine = 2^-k: shorter pieces
+  /// alone would not shorten substeps that the stable step sets.
+  double refine = 1.0;
   /// (N x 3) N, a force held over the step on top of the built ones (eq. 5 "force"), or none.
   const MatX3* external = nullptr;
   /// (N x 3) m/s, a prescribed velocity the positions follow on top of v over the step, or
@@ -55,11 +59,10 @@ enum class IntegrateStatus { kOk, kTooManySubsteps, kCgFailed, kUnstableStep, kE
 /// integrator applied it times the displacement it made, W = sum_i f_i . dx_i: explicit, f at the
 /// substep's start; implicit, the linearised end-of-step force f0 + K dx + D dv of Baraff-Witkin
 /// eq. 16 (damping is linear, so there it is exactly k_d (v'_j - v'_i)). Gravity is not listed:
-/// its work is the change of the gravity term of total_energy. `drift` is the energy the drift's
-/// share h r of the displacement made against springs and gravity: explicit, exactly
-/// PE(x') - PE(x' - h r); implicit, -f_c . h r with f_c the linearised end-of-step conservative
-/// force the solve applied (the solve already answered the drift, so x' - h r is no state of
-/// its own there). `pins` is the work of the pins
+/// its work is the change of the gravity term of total_energy. `drift` is the work of the drift's
+/// share h r of the displacement against springs and gravity, -f_c . h r, with f_c as applied
+/// (first order; splitting x' at x' - h r instead is arbitrary once the springs answer the
+/// drift, and put +-1e4 J in each of drift and remainder). `pins` is the work of the pins
 /// holding pinned vertices that move (-f . dx over pinned vertices, f at the start of the piece).
 /// `remainder` closes the balance
 ///   E_after - E_before = drag + external + drift + damping + pins + strain_limit + remainder,

@@ -40,6 +40,9 @@ struct EnergyLedger {
   /// the projections should only take energy out; counted apart, neither can hide the other's
   /// gain (a projection pumping the springs that the next solve damps).
   double unexplained_since(const EnergyLedger& before) const;
+  /// Net since construction: integrator + strain limiting + pole + self-collision, J. What the
+  /// flag still holds of the energy no stage explains (dissipation counts back).
+  double unexplained_net() const;
 };
 
 /// The ledger's entries by name, in the order energy_ledger() reports them (Python dict keys).
