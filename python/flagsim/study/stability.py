@@ -280,19 +280,20 @@ def write_report(rows: list[dict[str, str]], path: str, machine: str) -> None:
              "drag, uniform wind along (1, 0, 0.3)) with the settings of its row; springs: "
              "stretch k_s, shear k_s/5, bend k_s/20; strain limit 10 %, energy tolerance 0.1 "
              "(the defaults). Outcomes (docs/energy.md):", "",
-             "- **plausible**: ran to the end, finite, the energy ledger balanced (no more than "
-             "integrator.energy_tolerance x the energy scale m g H + m U^2/2 made beyond the "
-             "stages' work over the run) and strain within the scene's promise (strain limit + "
-             f"{STRAIN_SLACK:g});",
+             "- **plausible**: ran to the end, finite, the energy ledger balanced (to 1e-9 of "
+             "the energy scale m g H + m U^2/2; no step, and not the run as a whole, made more "
+             "than integrator.energy_tolerance x that scale beyond the stages' work) and strain "
+             f"within the scene's promise (strain limit + {STRAIN_SLACK:g});",
              "- **diverged** (reported): DivergenceError raised with the state restored, cause "
              "given; or the scene rejected before any step (ValueError naming the parameter, "
              "cause `rejected: <parameter>`);",
              "- **implausible**: finite but failing the ledger or the strain test (must never "
              "happen);",
              "- **nonfinite**: non-finite output without an error (must never happen).", "",
-             "`unexplained`: the most energy the run had made beyond its stages' work (integrator "
-             "remainder + strain limiting + pole + self-collision), J; `energy halvings`: implicit "
-             "step halvings caused by energy gain.", "",
+             "`unexplained`: the most energy the run held beyond its stages' work (net integrator "
+             "remainder + strain limiting + pole + self-collision since the start), J; `energy "
+             "halvings`: the most halvings one step needed, of the step or of an implicit piece, "
+             "before it was plausible.", "",
              "## Counts", "", headline(rows), "", head.format("integrator"), rule]
     for (integ,), c in sorted(summarize(rows).items(), key=lambda kv: INTEGRATORS.index(kv[0][0])):
         lines.append(_count_row(integ, c))
