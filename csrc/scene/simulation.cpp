@@ -85,7 +85,11 @@ Simulation::Simulation(const Scene& scene)
   if (built_[kSelfCollision]) {
     self_collision_ = std::make_unique<SelfCollision>(topo_.triangles, N, scene_.self_collision);
     // Strain limiting inside the collision sweeps: contacts alone would hold a stretch.
-    strain_projector_ = [this](MatX3& x, MatX3& v) { ledger_.strain_limit += limit_cloth_strain(x, v); };
+    // Its energy is booked with the self-collision response's (one evaluation around it).
+    strain_projector_ = [this](MatX3& x, MatX3& v) {
+      limit_strain(topo_, scene_.integrator.strain_limit,
+                   scene_.integrator.strain_limit_iterations, x, v);
+    };
   }
   for (int s = 0; s < kNumStages; ++s)
     if (built_[s]) stage_names_.emplace_back(stage_name(Stage(s)));
@@ -300,8 +304,10 @@ double Simulation::limit_cloth_strain(MatX3& x, MatX3& v) {
                            scene_.integrator.strain_limit_iterations, x, v);
 }
 
-// Each projection's entry in the ledger is the change of E it made, less the strain limiting
-// inside it (which has its own entry).
+// Each projection's entry in the ledger is the change of E it made: the pole's less the strain
+// limiting between its passes (which has its own entry), self-collision's with the strain
+// limiting inside its sweeps (one evaluation around the whole response; the check counts the
+// projections together either way).
 void Simulation::stage_collide() {
   constexpr int kPoleStrainRounds = 10;
   if (built_[kPole]) {
@@ -328,7 +334,6 @@ void Simulation::stage_collide() {
     }
   }
   if (built_[kSelfCollision]) {
-    const double strain_before = ledger_.strain_limit;
     {
       ScopedTimer t(seconds_[kSelfCollision]);
       self_collision_->resolve(x_piece_, x_, v_, topo_.inv_mass,
@@ -337,7 +342,7 @@ void Simulation::stage_collide() {
     }
     ScopedTimer t(seconds_[kCheck]);
     const double e = energy_now();
-    ledger_.self_collision += e - energy_run_ - (ledger_.strain_limit - strain_before);
+    ledger_.self_collision += e - energy_run_;
     energy_run_ = e;
   }
 }

@@ -28,9 +28,10 @@ struct EnergyLedger {
   double drag = 0;            ///< air drag: wind, fans and the grid push the flag through it
   double damping = 0;         ///< spring damping, eq. 4 (<= 0)
   double flap = 0;            ///< eq. 5 flapping, "displace" or "force"
-  double strain_limit = 0;    ///< strain limiting, in the integrator and between projections
+  double strain_limit = 0;    ///< strain limiting, in the integrator and between pole passes
   double pole = 0;            ///< the pole's collision projection
-  double self_collision = 0;  ///< the self-collision response (its strain limiting excluded)
+  double self_collision = 0;  ///< the self-collision response, with the strain limiting and
+                              ///< pole passes inside its sweeps
   double pins = 0;            ///< pinned vertices that move
   double edits = 0;           ///< the state written from outside between steps
   double integrator = 0;      ///< remainder: the integrator's numerical energy change
