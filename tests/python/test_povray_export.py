@@ -154,3 +154,83 @@ def test_camera_faces_the_flag_from_its_plus_z_side_within_elevation_limits():
     # a banner blown flat faces up: seen from at most 40 degrees above
     assert np.isclose(angles(view_direction([0, 1, 0.2]))[1], 40.0)
     assert np.isclose(np.linalg.norm(view_direction([0.3, 0.4, 0.5])), 1.0)
+
+
+def snapshot(folder):
+    """Every file below `folder` (hidden ones too) and its bytes."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+def test_a_folder_that_is_not_an_export_is_never_written(tmp_path):
+    # What `--out ~` or a careless folder holds: a user's pictures, scene, POV-Ray settings and
+    # hidden files. Neither a plain export nor --overwrite may touch them.
+    (tmp_path / "render").mkdir()
+    (tmp_path / "render" / "frame_001.png").write_bytes(b"holiday picture")
+    (tmp_path / "flag.pov").write_text("// my own scene\n")
+    (tmp_path / ".povray" / "3.7").mkdir(parents=True)
+    (tmp_path / ".povray" / "3.7" / "povray.conf").write_text("[File I/O Security]\n")
+    (tmp_path / ".draft.tmp").write_text("unsaved\n")
+    before = snapshot(tmp_path)
+    for overwrite in (False, True):
+        with pytest.raises(pov.ExportConflict, match=r"is not empty \(.*\) and holds no flagsim "
+                                                     r"export"):
+            pov.export(StandInSim(), tmp_path, seconds=0.2, fps=10, dt=0.01, progress=False,
+                       overwrite=overwrite)
+        assert snapshot(tmp_path) == before  # nothing written, nothing deleted, no lock left
+
+
+@pytest.mark.parametrize("out", ["", "   "])
+def test_an_empty_output_path_is_an_error_not_the_current_folder(tmp_path, monkeypatch, out):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ValueError, match=r"out should be a folder path, got "):
+        pov.export(StandInSim(), out, seconds=0.2, fps=10, dt=0.01, progress=False)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_output_path_that_is_a_file_is_an_error(tmp_path):
+    f = tmp_path / "notes.txt"
+    f.write_text("mine\n")
+    with pytest.raises(ValueError, match=r"out should be a folder, got a file: .*notes\.txt"):
+        pov.export(StandInSim(), f, seconds=0.2, fps=10, dt=0.01, progress=False)
+    assert f.read_text() == "mine\n"
+
+
+@pytest.mark.parametrize("manifest", ["[]", "{}", '"x"', "{not json", '{"key": 1, "frames": 1e9}'])
+def test_overwrite_recovers_from_a_corrupt_manifest_and_keeps_the_users_files(tmp_path,
+                                                                                 manifest):
+    key = {"scene": "a"}
+    pov.export(StandInSim(), tmp_path, seconds=0.3, fps=10, dt=0.01, key=key, progress=False)
+    (tmp_path / "notes.txt").write_text("keep me\n")
+    (tmp_path / "render" / "poster.png").write_bytes(b"poster")
+    (tmp_path / "export.json").write_text(manifest)
+    if manifest.startswith('{"key"'):  # readable but damaged: another key, so a conflict
+        match = r"holds an export of another scene"
+    else:
+        match = r"export\.json is not a flagsim export manifest"
+    with pytest.raises(pov.ExportConflict, match=match):
+        pov.export(StandInSim(), tmp_path, seconds=0.3, fps=10, dt=0.01, key=key, progress=False)
+    res = pov.export(StandInSim(), tmp_path, seconds=0.3, fps=10, dt=0.01, key=key,
+                     overwrite=True, progress=False)
+    assert res.frames == 4 and pov.load_export(tmp_path)["complete"] is True
+    assert (tmp_path / "notes.txt").read_text() == "keep me\n"
+    assert (tmp_path / "render" / "poster.png").read_bytes() == b"poster"
+    assert not (tmp_path / ".flagsim.lock").exists()
+
+
+@pytest.mark.parametrize("field, value", [("frames", 1_000_000_000), ("frames", "12"),
+                                          ("fps", -1), ("width", 1.5), ("height", None)])
+def test_render_names_a_damaged_manifest_field_without_reading_on(tmp_path, field, value):
+    pov.export(StandInSim(), tmp_path, seconds=0.2, fps=10, dt=0.01, progress=False)
+    m = json.loads((tmp_path / "export.json").read_text())
+    m[field] = value
+    (tmp_path / "export.json").write_text(json.dumps(m))
+    with pytest.raises(pov.ExportConflict, match=rf"{field} should be .*--overwrite"):
+        pov.load_export(tmp_path)
+
+
+def test_cli_refuses_an_empty_out_in_one_line(capsys):
+    from flagsim import cli
+
+    assert cli.main(["run", "paper", "--out", "", "--seconds", "0.1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["flagsim: error: out should be a folder path, got ''"]

@@ -4,7 +4,9 @@ With --render, POV-Ray renders the frames on every core and they are assembled i
 GIF (or MP4); its path is printed at the end.
 
 Running the same command again resumes an interrupted run: frames already exported or rendered
-are kept.
+are kept. DIR must be new, empty, or a flagsim export; flagsim never deletes or overwrites a file
+it did not create, and refuses a second process writing into DIR at the same time
+(docs/rendering.md).
 
 examples:
   flagsim run paper --seconds 4 --fps 25 --out out/demo --render --gif
@@ -36,7 +38,8 @@ def configure(p):
                    help="image (png, jpeg, gif, tga, ppm, tiff, ...) mapped onto the flag; "
                         "default: a built-in red flag with a white cross")
     p.add_argument("--overwrite", action="store_true",
-                   help="replace an export of another scene or other settings in DIR")
+                   help="replace a flagsim export of another scene or other settings (or with a "
+                        "damaged export.json) in DIR; other files in DIR are kept")
     add_animation_options(p)
 
 

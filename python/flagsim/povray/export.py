@@ -18,6 +18,7 @@ import numpy as np
 
 from .. import __version__
 from . import scenefiles
+from .lock import LOCK_NAME, ExportLock
 from .mesh import format_mesh2, mesh_arrays
 
 MANIFEST = "export.json"
@@ -64,13 +65,57 @@ def _area_normal(positions, triangles):
 
 
 def read_manifest(out_dir):
+    """The folder's export.json as a dict, or None when there is none; ExportConflict naming
+    the problem when it is not a manifest flagsim can read."""
     path = Path(out_dir) / MANIFEST
     if not path.is_file():
         return None
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except ValueError as e:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+    except (ValueError, UnicodeDecodeError) as e:
         raise ExportConflict(f"{path} is not a flagsim export manifest ({e})") from None
+    except RecursionError:
+        raise ExportConflict(f"{path} is not a flagsim export manifest (nested too deeply)") from None
+    if not isinstance(manifest, dict) or "key" not in manifest:
+        raise ExportConflict(f"{path} is not a flagsim export manifest (expected an object with "
+                             f"a 'key', got {type(manifest).__name__})")
+    return manifest
+
+
+def _foreign_entries(out):
+    """What a folder without a manifest holds besides flagsim's lock and the temporary file of a
+    manifest write that was interrupted: anything there is the user's."""
+    return sorted(p.name for p in out.iterdir()
+                  if p.name != LOCK_NAME
+                  and not (p.name.startswith(f".{MANIFEST}.") and p.name.endswith(".tmp")))
+
+
+def _prepare_folder(out, key, overwrite):
+    """Check that flagsim may write into `out` (held under its lock) and return the manifest of
+    the export there to resume, or None. flagsim writes only into a new or empty folder or one
+    of its own exports; with overwrite it replaces an export of other settings, or one whose
+    manifest it cannot read, deleting only the files it names itself."""
+    try:
+        old = read_manifest(out)
+    except ExportConflict:
+        if not overwrite:
+            raise
+        old = {"key": None}  # a damaged export of its own: replaced below
+    if old is None:
+        foreign = _foreign_entries(out)
+        if foreign:
+            shown = ", ".join(foreign[:5]) + (", ..." if len(foreign) > 5 else "")
+            raise ExportConflict(f"{out} is not empty ({shown}) and holds no flagsim export "
+                                 f"({MANIFEST}); flagsim writes only into a new or empty folder "
+                                 f"or one of its own exports, so choose another output folder")
+        return None
+    if old.get("key") != key:
+        if not overwrite:
+            raise ExportConflict(f"{out} holds an export of another scene or other settings; "
+                                 f"choose another output folder or overwrite it")
+        _clear(out)
+        return None
+    return old
 
 
 def _remove_stale(out, old_frames, frames):
@@ -90,7 +135,9 @@ def _remove_stale(out, old_frames, frames):
 
 
 def _clear(out):
-    for sub, pattern in ((scenefiles.FRAME_DIR, "flag_*.inc"), (scenefiles.RENDER_DIR, "*.png")):
+    """The frames and pictures of the export being replaced (only files flagsim names)."""
+    for sub, pattern in ((scenefiles.FRAME_DIR, "flag_*.inc"),
+                         (scenefiles.RENDER_DIR, "frame_*.png")):
         for p in (out / sub).glob(pattern):
             p.unlink()
 
@@ -126,19 +173,32 @@ def export(sim, out_dir, *, seconds, fps=25.0, dt=None, scene=None, width=640, h
     scenefiles.check_texture(texture)
     pole = scenefiles.scene_pole(scene)
 
-    out = Path(out_dir)
+    out = output_folder(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     key = {"fps": float(fps), "dt": dt} if key is None else key
-    old = read_manifest(out)
-    has_frames = any((out / scenefiles.FRAME_DIR).glob("flag_*.inc"))
-    if (old is not None and old.get("key") != key) or (old is None and has_frames):
-        if not overwrite:
-            what = "another scene or other settings" if old is not None else "unknown frames"
-            raise ExportConflict(f"{out} holds an export of {what}; choose another output folder "
-                                 f"or overwrite it")
-        _clear(out)
-    old_frames = old.get("frames", 0) if old is not None and old.get("key") == key else 0
-    _remove_stale(out, old_frames, len(steps))
+    with ExportLock(out):
+        old = _prepare_folder(out, key, overwrite)
+        old_frames = old.get("frames", 0) if old is not None else 0
+        if not isinstance(old_frames, int) or isinstance(old_frames, bool) or old_frames < 0:
+            old_frames = 0  # a damaged count: every stale frame and picture goes
+        _remove_stale(out, old_frames, len(steps))
+        return _export_frames(sim, out, steps, dt, key, pole, width, height, texture, progress,
+                              povray_binary, fps)
+
+
+def output_folder(out_dir) -> Path:
+    """`out_dir` as a Path, or ValueError: an empty path (an unset $OUT) does not mean the current
+    folder, and a file is not a folder."""
+    if out_dir is None or not str(out_dir).strip():
+        raise ValueError(f"out should be a folder path, got {str(out_dir)!r}")
+    out = Path(out_dir).expanduser()
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"out should be a folder, got a file: {out}")
+    return out
+
+
+def _export_frames(sim, out, steps, dt, key, pole, width, height, texture, progress,
+                   povray_binary, fps):
     (out / scenefiles.FRAME_DIR).mkdir(exist_ok=True)
     (out / scenefiles.RENDER_DIR).mkdir(exist_ok=True)
     manifest = {"format": MANIFEST_FORMAT, "flagsim": __version__, "key": key,

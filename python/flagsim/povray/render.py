@@ -161,6 +161,7 @@ def load_export(out_dir):
     if manifest is None:
         raise IncompleteExport(f"{out} is not a flagsim export (no {out / 'export.json'}): make "
                                f"one with  flagsim run SCENE --out {out}")
+    _check_manifest_fields(out / "export.json", manifest)
     missing = [k for k in range(manifest["frames"])
                if not (out / scenefiles.frame_file(k)).is_file()]
     if not manifest.get("complete") or missing or not (out / scenefiles.SCENE_FILE).is_file():
@@ -168,6 +169,26 @@ def load_export(out_dir):
         raise IncompleteExport(f"the export in {out} is incomplete{what}: run the same "
                                f"flagsim run command again to resume it")
     return manifest
+
+
+def _check_manifest_fields(path, manifest):
+    """The fields render reads, in their ranges, or ExportConflict naming the field."""
+    from .export import MAX_FRAMES, ExportConflict
+
+    def bad(field, expected):
+        raise ExportConflict(f"{path}: {field} should be {expected}, got "
+                             f"{manifest.get(field)!r}; run the flagsim run command again with "
+                             f"--overwrite to replace this export")
+    frames = manifest.get("frames")
+    if not isinstance(frames, int) or isinstance(frames, bool) or not 1 <= frames <= MAX_FRAMES:
+        bad("frames", f"an integer in [1, {MAX_FRAMES}]")
+    fps = manifest.get("fps")
+    if not isinstance(fps, (int, float)) or isinstance(fps, bool) or not 0 < fps < 1e6:
+        bad("fps", "a number in (0, 1e6)")
+    for field in ("width", "height"):
+        v = manifest.get(field)
+        if not isinstance(v, int) or isinstance(v, bool) or not 16 <= v <= 8192:
+            bad(field, "an integer in [16, 8192]")
 
 
 def _ranges(numbers):
@@ -200,6 +221,20 @@ def _default_executor(jobs):
 
 def render(out_dir, *, width=None, height=None, executor=None, jobs=None, retries=1,
            antialias=0.3, progress=True, povray_binary=None, worker=render_frame, force=False):
+    """Render every frame of the export in ``out_dir`` to render/frame_NNN.png, holding the
+    folder's lock (ExportBusy while another process writes into it); see _render_frames."""
+    from .lock import ExportLock
+
+    if not Path(out_dir).is_dir():
+        load_export(out_dir)  # the clear error for a folder that is not there
+    with ExportLock(out_dir):
+        return _render_frames(out_dir, width=width, height=height, executor=executor, jobs=jobs,
+                              retries=retries, antialias=antialias, progress=progress,
+                              povray_binary=povray_binary, worker=worker, force=force)
+
+
+def _render_frames(out_dir, *, width, height, executor, jobs, retries, antialias, progress,
+                   povray_binary, worker, force):
     """Render every frame of the export in ``out_dir`` to render/frame_NNN.png.
 
     width, height  default: the export's (export.json)
