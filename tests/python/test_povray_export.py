@@ -161,7 +161,7 @@ def snapshot(folder):
     return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
 
 
-def test_a_folder_that_is_not_an_export_is_never_written(tmp_path):
+def test_a_folder_that_is_not_an_export_is_never_written(tmp_path, monkeypatch):
     # What `--out ~` or a careless folder holds: a user's pictures, scene, POV-Ray settings and
     # hidden files. Neither a plain export nor --overwrite may touch them.
     (tmp_path / "render").mkdir()
@@ -171,12 +171,21 @@ def test_a_folder_that_is_not_an_export_is_never_written(tmp_path):
     (tmp_path / ".povray" / "3.7" / "povray.conf").write_text("[File I/O Security]\n")
     (tmp_path / ".draft.tmp").write_text("unsaved\n")
     before = snapshot(tmp_path)
+    created = []
+    real_open = os.open
+
+    def spy(path, flags, *a, **kw):  # the lock file is flagsim's only os.open(O_CREAT)
+        if flags & os.O_CREAT:
+            created.append(str(path))
+        return real_open(path, flags, *a, **kw)
+    monkeypatch.setattr(os, "open", spy)
     for overwrite in (False, True):
         with pytest.raises(pov.ExportConflict, match=r"is not empty \(.*\) and holds no flagsim "
                                                      r"export"):
             pov.export(StandInSim(), tmp_path, seconds=0.2, fps=10, dt=0.01, progress=False,
                        overwrite=overwrite)
-        assert snapshot(tmp_path) == before  # nothing written, nothing deleted, no lock left
+        assert snapshot(tmp_path) == before  # nothing written, nothing deleted
+        assert created == []  # refused before even a lock file was made
 
 
 @pytest.mark.parametrize("out", ["", "   "])

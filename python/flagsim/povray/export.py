@@ -86,7 +86,7 @@ def _foreign_entries(out):
     """What a folder without a manifest holds besides flagsim's lock and the temporary file of a
     manifest write that was interrupted: anything there is the user's."""
     return sorted(p.name for p in out.iterdir()
-                  if p.name != LOCK_NAME
+                  if not p.name.startswith(LOCK_NAME)
                   and not (p.name.startswith(f".{MANIFEST}.") and p.name.endswith(".tmp")))
 
 
@@ -176,6 +176,8 @@ def export(sim, out_dir, *, seconds, fps=25.0, dt=None, scene=None, width=640, h
     out = output_folder(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     key = {"fps": float(fps), "dt": dt} if key is None else key
+    if not (out / MANIFEST).exists() and not (out / LOCK_NAME).exists():
+        _prepare_folder(out, key, overwrite)  # a user's folder is refused before any lock file
     with ExportLock(out):
         old = _prepare_folder(out, key, overwrite)
         old_frames = old.get("frames", 0) if old is not None else 0
@@ -199,13 +201,14 @@ def output_folder(out_dir) -> Path:
 
 def _export_frames(sim, out, steps, dt, key, pole, width, height, texture, progress,
                    povray_binary, fps):
-    (out / scenefiles.FRAME_DIR).mkdir(exist_ok=True)
-    (out / scenefiles.RENDER_DIR).mkdir(exist_ok=True)
     manifest = {"format": MANIFEST_FORMAT, "flagsim": __version__, "key": key,
                 "fps": float(fps), "dt": dt, "frames": len(steps), "complete": False,
                 "width": width, "height": height,
                 "times": [s * dt for s in steps]}
+    # The manifest first: from then on the folder is recognisably an export.
     scenefiles.write_text(out / MANIFEST, json.dumps(manifest, indent=1) + "\n")
+    (out / scenefiles.FRAME_DIR).mkdir(exist_ok=True)
+    (out / scenefiles.RENDER_DIR).mkdir(exist_ok=True)
 
     bar = None
     if progress:

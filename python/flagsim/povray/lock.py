@@ -1,4 +1,4 @@
-"""One writer per export folder: an O_EXCL lock file naming its holder.
+"""One writer per export folder: a lock file naming its holder, created whole (link(2)).
 
 `flagsim run` (export) and `flagsim render` hold ``DIR/.flagsim.lock`` while they write into DIR.
 A second writer is refused with a message naming the holder (pid, host, start time, command).
@@ -49,13 +49,20 @@ class ExportLock:
                        "command": " ".join(Path(sys.argv[0]).name.split() + sys.argv[1:])[:200]}
 
     def _create(self) -> bool:
+        # Whole or not at all: the record goes into a private file, which is then linked to the
+        # lock's name (link fails if the name exists), so a reader never sees a half-written lock.
+        # (Not named *.tmp: the lock holder's clean-up of interrupted writes removes those.)
+        tmp = self.path.with_name(f"{LOCK_NAME}.{os.getpid()}")
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_CLOEXEC, 0o644)
         try:
-            fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o644)
-        except FileExistsError:
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                json.dump(self.record, f)
+            os.link(tmp, self.path)
+            return True
+        except (FileExistsError, FileNotFoundError):
             return False
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            json.dump(self.record, f)
-        return True
+        finally:
+            tmp.unlink(missing_ok=True)
 
     def _holder(self) -> dict | None:
         try:
