@@ -93,6 +93,25 @@ def test_bad_values_and_folders_are_user_errors(capsys, tmp_path):
     assert code == 2 and "is not a flagsim export" in err and "Traceback" not in err
 
 
+@pytest.mark.parametrize("name, content", [
+    ("flag.png", b"not a picture, just text\n"),     # text named .png
+    ("flag.jpg", b"\x89PNG\r\n\x1a\n" + bytes(40)),    # a PNG named .jpg
+    ("flag.gif", b""),                                 # empty
+])
+def test_a_texture_povray_cannot_read_is_rejected_before_any_work(capsys, tmp_path, monkeypatch,
+                                                                   name, content):
+    import flagsim
+
+    (tmp_path / name).write_bytes(content)
+    built = []
+    monkeypatch.setattr(flagsim, "Simulation", lambda *a, **k: built.append(a))
+    out = tmp_path / "o"
+    code, _, err = flagsim_cmd(capsys, "run", "paper", "--out", str(out), "--texture",
+                               str(tmp_path / name), "--render")
+    assert code == 2 and "does not start like one" in err and "Traceback" not in err
+    assert built == [] and not out.exists()  # no simulation built, no folder made
+
+
 def test_missing_povray_fails_before_simulating(capsys, tmp_path, monkeypatch):
     monkeypatch.setenv("FLAGSIM_POVRAY", "povray-not-installed")
     name = "paper"

@@ -199,8 +199,28 @@ def texture_pigment(texture_name):
     return f'pigment {{ uv_mapping image_map {{ {kind} "{texture_name}" interpolate 2 }} }}'
 
 
+def _tga_header(head: bytes) -> bool:
+    # TGA has no magic number: a colour map type of 0 or 1 and an image type POV-Ray reads
+    return len(head) >= 18 and head[1] in (0, 1) and head[2] in (1, 2, 3, 9, 10, 11)
+
+
+# What each image type's file starts with (its format's signature).
+_SIGNATURES = {
+    "png": lambda h: h.startswith(b"\x89PNG\r\n\x1a\n"),
+    "jpeg": lambda h: h.startswith(b"\xff\xd8\xff"),
+    "gif": lambda h: h[:6] in (b"GIF87a", b"GIF89a"),
+    "tga": _tga_header,
+    "ppm": lambda h: h[:2] in (b"P3", b"P6"),
+    "pgm": lambda h: h[:2] in (b"P2", b"P5"),
+    "tiff": lambda h: h[:4] in (b"II*\x00", b"MM\x00*"),
+    "exr": lambda h: h.startswith(b"\x76\x2f\x31\x01"),
+    "hdr": lambda h: h.startswith((b"#?RADIANCE", b"#?RGBE")),
+}
+
+
 def check_texture(texture):
-    """Reject a texture POV-Ray cannot read, before any work is done."""
+    """Reject a texture POV-Ray cannot read, before any work is done: an unknown extension, a
+    missing file, or a file whose content is not the image type its extension names."""
     if texture is None:
         return None
     texture = Path(texture)
@@ -209,6 +229,13 @@ def check_texture(texture):
                          f"got '{texture}'")
     if not texture.is_file():
         raise FileNotFoundError(f"texture image '{texture}' not found")
+    kind = IMAGE_TYPES[texture.suffix.lower()]
+    with open(texture, "rb") as f:
+        head = f.read(32)
+    if not _SIGNATURES[kind](head):
+        raise ValueError(f"texture should be a {kind} image, as its name says, but '{texture}' "
+                         f"does not start like one (first bytes {head[:8]!r}); POV-Ray could not "
+                         f"read it")
     return texture
 
 
