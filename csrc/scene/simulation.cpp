@@ -198,6 +198,18 @@ void Simulation::update_normals() { compute_vertex_normals(topo_, x_, n_); }
 
 void Simulation::step(long n) {
   if (n < 0) fail_param("n", ">= 0", n);
+  // One thread at a time (Python releases the GIL around step): a second caller is refused
+  // rather than left to interleave its stages with the first one's.
+  bool idle = false;
+  if (!stepping_.compare_exchange_strong(idle, true))
+    throw std::runtime_error(
+        "Simulation.step was called while another thread is stepping this Simulation; a "
+        "Simulation is stepped by one thread at a time (use one Simulation per thread, or wait "
+        "for the other call to return)");
+  struct Idle {
+    std::atomic<bool>& flag;
+    ~Idle() { flag.store(false); }
+  } idle_again{stepping_};
   for (long k = 0; k < n; ++k) step_once();
 }
 

@@ -1,6 +1,7 @@
 // The pipeline: a Scene built into the stages it needs, stepped as the paper's method reads.
 #pragma once
 #include <array>
+#include <atomic>
 #include <memory>
 #include <string>
 #include <utility>
@@ -66,7 +67,8 @@ class Simulation {
   explicit Simulation(const Scene& scene);
 
   /// Advance n steps of scene.dt. On divergence throws DivergenceError with the state restored
-  /// to the start of the failed step (earlier steps of this call are kept).
+  /// to the start of the failed step (earlier steps of this call are kept). One thread at a
+  /// time: a call while another thread is stepping this Simulation throws std::runtime_error.
   void step(long n = 1);
 
   const Scene& scene() const { return scene_; }
@@ -204,6 +206,7 @@ class Simulation {
   VecX flap_start_;            // (N) m, flap_applied_ at the start of the step (rollback)
 
   std::unique_ptr<SelfCollision> self_collision_;
+  std::atomic<bool> stepping_{false};  // a step() is running (one thread at a time)
   SelfCollision::Projector strain_projector_;  // built once: no allocation per step
   long air_outside_last_ = 0, air_outside_total_ = 0;
 };

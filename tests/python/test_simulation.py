@@ -176,3 +176,37 @@ def test_step_rejects_negative_count(paper):
     sim = flagsim.Simulation(paper)
     with pytest.raises(ValueError, match="n should be >= 0, got -1"):
         sim.step(-1)
+
+
+def test_a_second_thread_stepping_the_same_simulation_is_refused():
+    # step() releases the GIL; two threads stepping one Simulation used to interleave its stages
+    # (spurious DivergenceErrors, step_count 545 instead of 1000). The second is now refused and
+    # the first one's steps all count.
+    import threading
+
+    s = flagsim.Scene.paper()
+    s.air.model = "uniform"
+    s.flag.rows = s.flag.cols = 48  # long enough steps for the calls to overlap
+    sim = flagsim.Simulation(s)
+    started, errors = threading.Event(), []
+
+    def long_run():
+        started.set()
+        sim.step(60)
+
+    t = threading.Thread(target=long_run)
+    t.start()
+    started.wait()
+    done = 0  # steps this thread got in before the other call began
+    while t.is_alive():
+        try:
+            sim.step(1)
+            done += 1
+        except RuntimeError as e:
+            errors.append(str(e))
+            t.join(0.01)
+    t.join()
+    assert errors and all("another thread is stepping this Simulation" in e for e in errors)
+    assert sim.step_count == 60 + done  # every accepted step counted once, none interleaved
+    sim.step(1)  # free again once the other call returned
+    assert sim.step_count == 61 + done
