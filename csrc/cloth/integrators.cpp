@@ -387,8 +387,7 @@ IntegrateStatus implicit_step(const ClothTopology& topo, const ForceSet& fs,
         break;
       }
       const double e1 = timed_energy(topo, fs, x, v, s, t);
-      pw.remainder =
-          e1 - e - pw.drag - pw.external - pw.drift - pw.damping - pw.pins - pw.strain_limit;
+      pw.remainder = e1 - e - pw.booked();
       e = e1;
       level_work += pw;
       // Backward Euler should only dissipate and a projection only take energy out: what
@@ -438,8 +437,7 @@ IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const I
   if (ip.method == "explicit") {
     stats.substeps = explicit_substeps;
     E = timed_energy(topo, fs, x, v, s, t);
-    work.remainder = E - stats.energy_before - work.drag - work.external - work.drift -
-                     work.damping - work.pins - work.strain_limit;
+    work.remainder = E - stats.energy_before - work.booked();
   }
   stats.energy_after = E;
   stats.work = work;

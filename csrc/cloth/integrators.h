@@ -77,6 +77,8 @@ struct StepWork {
   double pins = 0;          ///< pins that move
   double strain_limit = 0;  ///< energy change made by strain limiting inside the step
   double remainder = 0;     ///< the integrator's own (numerical) energy change
+  /// The energy the booked stages account for (everything but the remainder), J.
+  double booked() const { return drag + external + drift + damping + pins + strain_limit; }
   StepWork& operator+=(const StepWork& o) {
     drag += o.drag, external += o.external, drift += o.drift, damping += o.damping;
     pins += o.pins;

@@ -6,15 +6,20 @@
 
 namespace flagsim {
 
+namespace {
+// C1 smoothstep S(u) = 3u^2 - 2u^3 of u clamped to [0, 1]: 0 and flat at 0, 1 and flat at 1.
+inline double smoothstep(double u) {
+  u = std::clamp(u, 0.0, 1.0);
+  return u * u * (3.0 - 2.0 * u);
+}
+}  // namespace
+
 double flapping_ramp(double L, const FlappingParams& p) {
-  const double u = std::clamp(L / p.l_max, 0.0, 1.0);
-  return p.amplitude * u * u * (3.0 - 2.0 * u);
+  return p.amplitude * smoothstep(L / p.l_max);
 }
 
 double flapping_fade_in(double t, const FlappingParams& p) {
-  if (p.ramp <= 0) return 1.0;
-  const double u = std::clamp(t / p.ramp, 0.0, 1.0);
-  return u * u * (3.0 - 2.0 * u);
+  return p.ramp > 0 ? smoothstep(t / p.ramp) : 1.0;
 }
 
 void flapping_displacement(const Perlin1D& noise, const MatX2& xy, const VecX& L, double u_p,
