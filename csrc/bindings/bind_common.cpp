@@ -3,6 +3,7 @@
 #include <string>
 
 #include "common/errors.h"
+#include "common/memory.h"
 #include "common/parallel.h"
 #include "common/types.h"
 
@@ -109,6 +110,9 @@ void bind_common(py::module_& m) {
   m.def("build_info", &build_info,
         "dict: compiler id, version and flags, build type, Eigen version and SIMD set, OpenMP and "
         "FFTW presence and versions (how this module was compiled).");
+  m.def("available_memory", &available_memory,
+        "Bytes a Simulation or Fluid may still allocate (MemAvailable, the cgroup limit and "
+        "$FLAGSIM_MEMORY_LIMIT); their constructors refuse a scene estimated to need more");
   m.def("has_openmp", &has_openmp, "True when the core was compiled with OpenMP.");
 #ifdef FLAGSIM_HAVE_FFTW
   m.def("has_fftw", []() { return true; }, "True when the FFT pressure solver (FFTW) is built in.");

@@ -49,7 +49,9 @@ void bind_flapping(py::module_& m) {
             "the whole wave from the first step, as the paper");
   fp.def_property(
       "seed", [](const FlappingParams& p) { return p.seed; },
-      [](FlappingParams& p, int64_t seed) { p.seed = checked_seed("flapping.seed", seed); },
+      [](FlappingParams& p, const py::object& seed) {
+        p.seed = checked_seed("flapping.seed", from_py<int64_t>("flapping.seed", seed));
+      },
       "noise seed, an integer in [0, 2**32)");
   fp.def("validate", &FlappingParams::validate, "prefix"_a = "flapping",
          "Raise ValueError naming the first invalid field.");

@@ -19,17 +19,6 @@ namespace flagsim::bindings {
 
 namespace {
 
-Vec3 to_vec3(const py::handle& h, const std::string& name) {
-  py::array_t<double, py::array::c_style | py::array::forcecast> a;
-  try {
-    a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(h);
-  } catch (const py::error_already_set&) {
-  }
-  if (!a || a.ndim() != 1 || a.shape(0) != 3)
-    fail_param(name, "a sequence of 3 numbers", std::string(py::str(h)));
-  return Vec3(a.at(0), a.at(1), a.at(2));
-}
-
 /// None -> empty; a 3-vector -> constant; a sequence of (time, (vx, vy, vz)) -> keyframes.
 WindSchedule to_wind(const py::handle& h) {
   WindSchedule w;
@@ -38,7 +27,7 @@ WindSchedule to_wind(const py::handle& h) {
   if (!py::isinstance<py::sequence>(h)) fail_param("wind", expected, std::string(py::str(h)));
   auto seq = py::reinterpret_borrow<py::sequence>(h);
   if (py::len(seq) == 3 && !py::isinstance<py::sequence>(seq[0])) {
-    w.keys = {{0.0, to_vec3(h, "wind")}};
+    w.keys = {{0.0, from_py<Vec3>("wind", h)}};
     return w;
   }
   for (auto item : seq) {
@@ -46,7 +35,7 @@ WindSchedule to_wind(const py::handle& h) {
       fail_param("wind", expected, std::string(py::str(h)));
     auto pair = py::reinterpret_borrow<py::sequence>(item);
     const std::string key = "wind[" + std::to_string(w.keys.size()) + "]";
-    w.keys.push_back({pair[0].cast<double>(), to_vec3(pair[1], key + ".velocity")});
+    w.keys.push_back({from_py<double>(key + ".time", pair[0]), from_py<Vec3>(key + ".velocity", pair[1])});
   }
   return w;
 }
@@ -85,13 +74,7 @@ void def_fluid_fields(py::class_<AirParams>& cls, const std::string& section) {
       "resolution",
       [](const AirParams& a) { return py::make_tuple(a.resolution[0], a.resolution[1], a.resolution[2]); },
       [section](AirParams& a, const py::object& o) {
-        std::array<long long, 3> n;
-        try {
-          n = o.cast<std::array<long long, 3>>();
-        } catch (const py::cast_error&) {
-          throw InvalidArgument(section + ".resolution should be 3 cell counts (nx, ny, nz), got " +
-                                std::string(py::str(py::repr(o))));
-        }
+        const auto n = from_py<std::array<long long, 3>>(section + ".resolution", o);
         AirParams copy = a;
         for (int d = 0; d < 3; ++d) copy.resolution[d] = (n[d] < -1000000 || n[d] > 1000000) ? -1 : int(n[d]);
         copy.validate(section);
@@ -113,9 +96,9 @@ void def_fluid_fields(py::class_<AirParams>& cls, const std::string& section) {
                             "iteration cap of each pcg solve");
   cls.def_property(
       "fans", [](const AirParams& a) { return a.fans; },
-      [section](AirParams& a, const std::vector<FanParams>& fans) {
+      [section](AirParams& a, const py::object& fans) {
         AirParams copy = a;
-        copy.fans = fans;
+        copy.fans = from_py<std::vector<FanParams>>(section + ".fans", fans);
         copy.validate(section);
         a = copy;
       },
@@ -126,25 +109,25 @@ void bind_fluid(py::module_& m) {
   py::class_<FanParams> fan_cls(m, "FanParams",
                         "A region pushing the air: force density (N/m^3) along direction inside a box "
                         "or a sphere, times a keyframed strength.");
-  fan_cls.def(py::init([](const std::string& shape, const py::object& center, const py::object& half_size,
-                       double radius, const py::object& direction, double force_density, double max_speed,
-                       const std::vector<std::pair<double, double>>& strength) {
+  fan_cls.def(py::init([](const py::object& shape, const py::object& center, const py::object& half_size,
+                       const py::object& radius, const py::object& direction, const py::object& force_density,
+                       const py::object& max_speed, const py::object& strength) {
              FanParams f;
-             f.shape = shape;
-             f.center = to_vec3(center, "center");
-             f.half_size = to_vec3(half_size, "half_size");
-             f.radius = radius;
-             f.direction = to_vec3(direction, "direction");
-             f.force_density = force_density;
-             f.max_speed = max_speed;
-             f.strength.keys = strength;
+             f.shape = from_py<std::string>("shape", shape);
+             f.center = from_py<Vec3>("center", center);
+             f.half_size = from_py<Vec3>("half_size", half_size);
+             f.radius = from_py<double>("radius", radius);
+             f.direction = from_py<Vec3>("direction", direction);
+             f.force_density = from_py<double>("force_density", force_density);
+             f.max_speed = from_py<double>("max_speed", max_speed);
+             f.strength.keys = from_py<std::vector<std::pair<double, double>>>("strength", strength);
              f.validate("");
              return f;
            }),
            py::kw_only(), py::arg("shape") = "box", py::arg("center") = py::make_tuple(0.0, 0.0, 0.0),
            py::arg("half_size") = py::make_tuple(0.25, 0.25, 0.25), py::arg("radius") = 0.25,
            py::arg("direction") = py::make_tuple(1.0, 0.0, 0.0), py::arg("force_density") = 20.0,
-           py::arg("max_speed") = 0.0, py::arg("strength") = std::vector<std::pair<double, double>>{});
+           py::arg("max_speed") = 0.0, py::arg("strength") = py::list());
   py::class_<FanParams>& fan = fan_cls;
   def_field<FanParams, std::string>(fan, "shape", &FanParams::shape, "fan", "'box' | 'sphere'");
   def_vec3_field<FanParams>(fan, "center", &FanParams::center, "fan", "m");
@@ -157,9 +140,9 @@ void bind_fluid(py::module_& m) {
   fan
       .def_property(
           "strength", [](const FanParams& f) { return f.strength.keys; },
-          [](FanParams& f, const std::vector<std::pair<double, double>>& k) {
+          [](FanParams& f, const py::object& k) {
             FanParams copy = f;
-            copy.strength.keys = k;
+            copy.strength.keys = from_py<std::vector<std::pair<double, double>>>("fan.strength", k);
             copy.validate("fan");
             f = copy;
           },
@@ -174,31 +157,27 @@ nx x ny x nz of each; tunnel grids one more face along the component's own axis.
 Pressure: "fft" (FFTW, periodic only; divergence at round-off) or "pcg" (MIC(0)-preconditioned
 CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip walls.
 )doc")
-      .def(py::init([](const py::object& resolution, double cell_size, const py::object& origin,
-                       const std::string& boundary, double viscosity, double density,
-                       const std::string& advection, const std::string& pressure, const std::string& precision,
-                       double pcg_tolerance, int pcg_max_iterations, const py::object& wind,
-                       const std::vector<FanParams>& fans) {
+      .def(py::init([](const py::object& resolution, const py::object& cell_size, const py::object& origin,
+                       const py::object& boundary, const py::object& viscosity, const py::object& density,
+                       const py::object& advection, const py::object& pressure, const py::object& precision,
+                       const py::object& pcg_tolerance, const py::object& pcg_max_iterations,
+                       const py::object& wind, const py::object& fans) {
              FluidParams p;
-             auto res = py::array_t<long long, py::array::c_style | py::array::forcecast>::ensure(resolution);
-             if (!res || res.ndim() != 1 || res.shape(0) != 3)
-               fail_param("resolution", "3 cell counts (nx, ny, nz)", std::string(py::str(resolution)));
-             for (int d = 0; d < 3; ++d) {
-               const long long n = res.at(d);
-               p.resolution[d] = (n < -1000000 || n > 1000000) ? -1 : int(n);
-             }
-             p.cell_size = cell_size;
-             p.origin = to_vec3(origin, "origin");
-             p.boundary = boundary;
-             p.viscosity = viscosity;
-             p.density = density;
-             p.advection = advection;
-             p.pressure = pressure;
-             p.precision = precision;
-             p.pcg_tolerance = pcg_tolerance;
-             p.pcg_max_iterations = pcg_max_iterations;
+             const auto res = from_py<std::array<long long, 3>>("resolution", resolution);
+             for (int d = 0; d < 3; ++d)
+               p.resolution[d] = (res[d] < -1000000 || res[d] > 1000000) ? -1 : int(res[d]);
+             p.cell_size = from_py<double>("cell_size", cell_size);
+             p.origin = from_py<Vec3>("origin", origin);
+             p.boundary = from_py<std::string>("boundary", boundary);
+             p.viscosity = from_py<double>("viscosity", viscosity);
+             p.density = from_py<double>("density", density);
+             p.advection = from_py<std::string>("advection", advection);
+             p.pressure = from_py<std::string>("pressure", pressure);
+             p.precision = from_py<std::string>("precision", precision);
+             p.pcg_tolerance = from_py<double>("pcg_tolerance", pcg_tolerance);
+             p.pcg_max_iterations = from_py<int>("pcg_max_iterations", pcg_max_iterations);
              p.wind = to_wind(wind);
-             p.fans = fans;
+             p.fans = from_py<std::vector<FanParams>>("fans", fans);
              return std::make_unique<Fluid>(p);
            }),
            py::kw_only(), py::arg("resolution") = py::make_tuple(16, 16, 16), py::arg("cell_size") = 0.125,
@@ -206,17 +185,19 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
            py::arg("viscosity") = 1.5e-5, py::arg("density") = 1.2, py::arg("advection") = "semi_lagrangian",
            py::arg("pressure") = FluidParams().pressure, py::arg("precision") = "double", py::arg("pcg_tolerance") = 1e-8,
            py::arg("pcg_max_iterations") = 500, py::arg("wind") = py::none(),
-           py::arg("fans") = std::vector<FanParams>{},
+           py::arg("fans") = py::list(),
            "resolution (nx, ny, nz) cells; cell_size m; origin m (min corner); viscosity m^2/s; "
            "density kg/m^3; wind: None, a 3-vector (m/s) or [(time s, (vx, vy, vz)), ...]: the "
            "periodic mean flow or the tunnel inflow; fans: [FanParams, ...].")
       .def(
           "step",
-          [](Fluid& f, double dt, int n) {
+          [](Fluid& f, const py::object& dt_, const py::object& n_) {
+            const double dt = from_py<double>("dt", dt_);
+            const long n = from_py<long>("n", n_);
             check_positive("dt", dt);
             if (n < 0) fail_param("n", ">= 0", n);
             py::gil_scoped_release release;
-            for (int i = 0; i < n; ++i) f.step(dt);
+            for (long i = 0; i < n; ++i) f.step(dt);
           },
           py::arg("dt"), py::arg("n") = 1, "Advance the air n steps of dt seconds (GIL released).")
       .def_property_readonly("time", &Fluid::time, "Simulated time, s.")
@@ -226,12 +207,12 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
             for (int c = 0; c < 3; ++c) {
               const MatX3 x = f.face_positions(c);
               py::array pts = py::cast(x);
-              auto val = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(fn(pts));
-              if (!val || val.ndim() != 2 || val.shape(0) != x.rows() || val.shape(1) != 3)
+              py::object result = fn(pts);
+              auto val = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(result);
+              if (result.is_none() || !val || val.ndim() != 2 || val.shape(0) != x.rows() || val.shape(1) != 3)
                 fail_param("fn(points)", "an (M, 3) array for M = " + std::to_string(x.rows()) + " points",
-                           val ? "shape (" + std::to_string(val.shape(0)) + ", " +
-                                     (val.ndim() > 1 ? std::to_string(val.shape(1)) : std::string("")) + ")"
-                               : std::string("not an array"));
+                           !result.is_none() && val ? "shape " + std::string(py::str(val.attr("shape")))
+                                                    : repr_of(result));
               std::vector<double> col(std::size_t(x.rows()));
               for (py::ssize_t r = 0; r < x.rows(); ++r) col[std::size_t(r)] = val.at(r, c);
               f.set_component(c, col.data());
@@ -279,7 +260,8 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
           "w", [](py::object self) { return component_view(self, 2); },
           [](Fluid& f, const py::object& a) { set_component_from(f, 2, a); }, "z-face velocities (view), m/s")
       .def(
-          "face_positions", [](const Fluid& f, int c) {
+          "face_positions", [](const Fluid& f, const py::object& c_) {
+            const long c = from_py<long>("component", c_);
             if (c < 0 || c > 2) fail_param("component", "0, 1 or 2", c);
             return f.face_positions(c);
           },

@@ -69,12 +69,7 @@ WindSchedule wind_from(const std::string& name, const py::object& o) {
     py::object item = seq[i];
     if (!py::isinstance<py::sequence>(item) || py::len(item) != 2)
       throw InvalidArgument(key + " should be a pair (time, (vx, vy, vz)), got " + std::string(py::str(py::repr(item))));
-    double t;
-    try {
-      t = item[py::int_(0)].cast<double>();
-    } catch (const py::cast_error&) {
-      throw InvalidArgument(key + ".time should be a number, got " + std::string(py::str(py::repr(item[py::int_(0)]))));
-    }
+    const double t = from_py<double>(key + ".time", item[py::int_(0)]);
     w.keys.push_back({t, vec3_from(key + ".velocity", item[py::int_(1)])});
   }
   return w;
@@ -115,14 +110,17 @@ the scene unchanged. Build one with Scene.paper(), Scene.named(name) or Scene.lo
                    "mass pulled along +x.");
   scene.def_static("_builtins", &builtin_scenes);
   scene.def_static("_named", &builtin_scene, py::arg("name"));
-  scene.def_readwrite("name", &Scene::name, "free text, used in exports and reports");
+  scene.def_property(
+      "name", [](const Scene& s) { return s.name; },
+      [](Scene& s, const py::object& o) { s.name = from_py<std::string>("name", o); },
+      "free text, used in exports and reports");
   auto part = [&scene](const char* name, auto member, const char* doc) {
     using T = std::remove_reference_t<decltype(std::declval<Scene>().*member)>;
     scene.def_property(
         name, [member](Scene& s) -> T& { return s.*member; },
-        [member](Scene& s, const T& value) {
+        [member, name](Scene& s, const py::object& value) {
           Scene copy = s;
-          copy.*member = value;
+          copy.*member = from_py<T>(name, value);
           copy.validate();
           s = copy;
         },
@@ -137,7 +135,8 @@ the scene unchanged. Build one with Scene.paper(), Scene.named(name) or Scene.lo
   part("pole", &Scene::pole, "PoleParams");
   scene.def_property(
       "dt", [](const Scene& s) { return s.dt; },
-      [](Scene& s, double dt) {
+      [](Scene& s, const py::object& o) {
+        const double dt = from_py<double>("dt", o);
         check_positive("dt", dt);
         s.dt = dt;
       },
@@ -159,10 +158,18 @@ the scene unchanged. Build one with Scene.paper(), Scene.named(name) or Scene.lo
 sim.step(n) advances n steps of scene.dt with the GIL released. positions, velocities and normals
 are (N, 3) float64 views into the simulation (no copy per access; they stay valid across steps
 and keep the simulation alive); assigning `sim.positions = x` copies into the same buffer.)doc");
-  sim.def(py::init<const Scene&>(), py::arg("scene"));
+  sim.def(py::init([](const py::object& scene) {
+            const Scene s = from_py<Scene>("scene", scene);
+            std::unique_ptr<Simulation> out;
+            py::gil_scoped_release release;  // a large flag takes seconds to build
+            out = std::make_unique<Simulation>(s);
+            return out;
+          }),
+          py::arg("scene"));
   sim.def(
       "step",
-      [](Simulation& s, long n) {
+      [](Simulation& s, const py::object& n_) {
+        const long n = from_py<long>("n", n_);
         if (n < 0) fail_param("n", ">= 0", n);
         py::gil_scoped_release release;
         s.step(n);

@@ -8,9 +8,9 @@ void FlagParams::validate(const std::string& p) const {
   if (rows < 2) fail_param(p + ".rows", ">= 2", rows);
   if (cols < 2) fail_param(p + ".cols", ">= 2", cols);
   if (static_cast<long long>(rows) * cols > 50'000'000) fail_param(p + ".rows * cols", "<= 5e7", 1LL * rows * cols);
-  check_positive(p + ".width", width);
-  check_positive(p + ".height", height);
-  check_finite_vec(p + ".origin", origin);
+  check_length(p + ".width", width);
+  check_length(p + ".height", height);
+  check_position(p + ".origin", origin);
   check_positive(p + ".areal_density", areal_density);
   check_nonnegative(p + ".stretch_stiffness", stretch_stiffness);
   check_nonnegative(p + ".shear_stiffness", shear_stiffness);

@@ -11,9 +11,9 @@ void SelfCollisionParams::validate(const std::string& p) const {
 }
 
 void PoleParams::validate(const std::string& p) const {
-  check_positive(p + ".radius", radius);
-  check_positive(p + ".height", height);
-  check_finite_vec(p + ".base", base);
+  check_length(p + ".radius", radius);
+  check_length(p + ".height", height);
+  check_position(p + ".base", base);
 }
 
 }  // namespace flagsim

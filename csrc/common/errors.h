@@ -1,9 +1,11 @@
 // Error types and boundary validation helpers. Validate at the boundary, trust inside.
 #pragma once
+#include <charconv>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 
 #include "common/types.h"
 
@@ -34,12 +36,19 @@ class DivergenceError : public std::runtime_error {
 };
 
 namespace detail {
+/// The value as text; floating-point values in their shortest form that reads back exactly.
 template <class T>
 std::string to_text(const T& v) {
-  std::ostringstream s;
-  s.precision(17);
-  s << v;
-  return s.str();
+  if constexpr (std::is_floating_point_v<T>) {
+    char buf[32];
+    const auto r = std::to_chars(buf, buf + sizeof buf, v);
+    return std::string(buf, r.ptr);
+  } else {
+    std::ostringstream s;
+    s.precision(17);
+    s << v;
+    return s.str();
+  }
 }
 }  // namespace detail
 
@@ -69,6 +78,28 @@ void check_finite_vec(const std::string& name, const V& v) {
       std::ostringstream s;
       s << "(" << v.transpose() << ")";
       fail_param(name, "finite", s.str());
+    }
+}
+
+/// Positions and lengths in a scene, m: a 2,000 km cube about the origin. Far beyond any flag,
+/// and it keeps coordinates, their squares and the exported text well inside double range.
+constexpr double kMaxCoordinate = 1e6;
+
+/// A length: finite, > 0 and at most kMaxCoordinate.
+inline void check_length(const std::string& name, double v) {
+  if (!(std::isfinite(v) && v > 0 && v <= kMaxCoordinate))
+    fail_param(name, "in (0, " + detail::to_text(kMaxCoordinate) + "] m", v);
+}
+/// A position: every component finite and within +-kMaxCoordinate.
+template <class V>
+void check_position(const std::string& name, const V& v) {
+  check_finite_vec(name, v);
+  for (Eigen::Index i = 0; i < v.size(); ++i)
+    if (std::fabs(v[i]) > kMaxCoordinate) {
+      std::ostringstream s;
+      s << "(" << v.transpose() << ")";
+      fail_param(name, "within " + detail::to_text(kMaxCoordinate) + " m of the origin in each component",
+                 s.str());
     }
 }
 

@@ -311,6 +311,15 @@ void PaddedComponent<T>::fill(const T* src) {
 }
 
 template <class T>
+void PaddedComponent<T>::unpad(T* dst) const {
+  for (int i = 0; i < n[0]; ++i)
+    for (int j = 0; j < n[1]; ++j) {
+      const T* s = data.data() + index(i, j, 0);
+      std::copy(s, s + n[2], dst + (std::size_t(i) * n[1] + std::size_t(j)) * n[2]);
+    }
+}
+
+template <class T>
 void PeriodicAdvectScratch<T>::resize(const GridGeometry& g) {
   for (int c = 0; c < 3; ++c) {
     u[c].resize(g.face_shape(c));

@@ -47,6 +47,8 @@ struct PaddedComponent {
   void resize(const Shape3& s);
   /// data <- src (n0 x n1 x n2, C order) with wrapped ghosts.
   void fill(const T* src);
+  /// dst (n0 x n1 x n2, C order) <- the interior of data: undoes fill.
+  void unpad(T* dst) const;
   /// Index of node (i, j, k), each in [-G, n + G).
   std::size_t index(int i, int j, int k) const {
     return (std::size_t(i + kGhost) * p1 + std::size_t(j + kGhost)) * p2 + std::size_t(k + kGhost);

@@ -1,9 +1,12 @@
 #include "fluid/fluid.h"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
+#include <sstream>
 
 #include "common/errors.h"
+#include "common/memory.h"
 #include "common/timer.h"
 #include "fluid/advect.h"
 #include "fluid/forces.h"
@@ -18,6 +21,10 @@ struct Fluid::Solver {
   mutable FluidStats stats;
   virtual ~Solver() = default;
   virtual void step(double dt) = 0;
+  /// The largest |velocity| on the grid, or infinity when any value is not finite.
+  virtual double max_speed_component() const = 0;
+  /// Back to the field at the start of the last step (its copy is kept by the step anyway).
+  virtual void undo_step(double dt) = 0;
   virtual void* data(int c) = 0;
   virtual void set_component(int c, const double* values) = 0;
   virtual long sample(const double* points, long m, double* out) const = 0;
@@ -131,6 +138,30 @@ struct TypedSolver final : Fluid::Solver {
     ++stats.steps;
   }
 
+  double max_speed_component() const override {
+    double m = 0;
+    for (int c = 0; c < 3; ++c) {
+      const auto& a = u.comp[c];
+      m = std::max(m, parallel_max(a.size(), [&](std::size_t i) {
+                     const double x = std::fabs(double(a[i]));
+                     return std::isfinite(x) ? x : std::numeric_limits<double>::infinity();
+                   }));
+    }
+    return m;
+  }
+
+  // u^n is still held by the step's own copy: the padded source (periodic) or prev (tunnel).
+  // The pcg warm start phi may hold the failure too: it restarts from zero.
+  void undo_step(double dt) override {
+    if (geo.periodic)
+      for (int c = 0; c < 3; ++c) padded.u[c].unpad(u.comp[c].data());
+    else
+      copy_grid(prev, u);
+    std::fill(phi.begin(), phi.end(), T(0));
+    time -= dt;
+    --stats.steps;
+  }
+
   /// (I - nu dt lap) u_new = u per component, CG with Jacobi (diagonally dominant system).
   void diffuse_iterative(double nu_dt) {
     const double beta = nu_dt / (geo.h * geo.h);
@@ -195,6 +226,11 @@ TypedSolver<T>& typed(Fluid::Solver& s) {
 Fluid::Fluid(const FluidParams& params, const std::string& prefix) {
   params.validate(prefix);
   params.validate_combination(prefix);
+  const double cells = double(params.resolution[0]) * params.resolution[1] * params.resolution[2];
+  check_memory("a grid of " + detail::to_text(cells) + " cells",
+               cells * kValuesPerCell * (params.precision == "float" ? 4 : 8),
+               "use a coarser " + (prefix.empty() ? std::string("resolution") : prefix + ".resolution") +
+                   " or precision 'float'");
   if (params.precision == "float")
     s_ = std::make_unique<TypedSolver<float>>(params);
   else
@@ -205,9 +241,21 @@ Fluid::~Fluid() = default;
 Fluid::Fluid(Fluid&&) noexcept = default;
 Fluid& Fluid::operator=(Fluid&&) noexcept = default;
 
+// A step that leaves a non-finite velocity is undone and raises DivergenceError: the air is as
+// it was, as Simulation promises for the cloth (a too-small cell_size or a huge dt gets here).
 void Fluid::step(double dt) {
   check_positive("dt", dt);
+  const double t0 = s_->time;
   s_->step(dt);
+  if (std::isfinite(s_->max_speed_component())) return;
+  s_->undo_step(dt);
+  s_->time = t0;
+  std::ostringstream s;
+  s << "the air diverged at step " << s_->stats.steps << " (t = " << t0
+    << " s): a non-finite velocity; the state was restored to the start of that step. Try a "
+       "smaller dt or a larger cell_size (h = "
+    << s_->geo.h << " m)";
+  throw DivergenceError(s.str(), s_->stats.steps, t0, -1, "non-finite");
 }
 
 double Fluid::time() const { return s_->time; }

@@ -28,12 +28,12 @@ void check_choice(const std::string& name, const std::string& got,
 
 void FanParams::validate(const std::string& prefix) const {
   check_choice(join(prefix, "shape"), shape, {"box", "sphere"});
-  check_finite_vec(join(prefix, "center"), center);
+  check_position(join(prefix, "center"), center);
   for (int d = 0; d < 3; ++d)
-    if (!(std::isfinite(half_size[d]) && half_size[d] > 0))
-      fail_param(join(prefix, "half_size"), "finite and > 0 in every component",
+    if (!(std::isfinite(half_size[d]) && half_size[d] > 0 && half_size[d] <= kMaxCoordinate))
+      fail_param(join(prefix, "half_size"), "in (0, 1e6] m in every component",
                  detail::to_text(half_size.transpose()));
-  check_positive(join(prefix, "radius"), radius);
+  check_length(join(prefix, "radius"), radius);
   check_finite_vec(join(prefix, "direction"), direction);
   if (!(direction.norm() > 0)) fail_param(join(prefix, "direction"), "a non-zero vector", "(0 0 0)");
   check_finite(join(prefix, "force_density"), force_density);
@@ -52,8 +52,9 @@ void FluidParams::validate(const std::string& prefix) const {
     cells *= resolution[d];
   }
   if (cells > (1LL << 28)) fail_param(res, "at most 2^28 cells in all", cells);
-  check_positive(join(prefix, "cell_size"), cell_size);
-  check_finite_vec(join(prefix, "origin"), origin);
+  // Below a micrometre h^3 and the pressure scale underflow long before any flag needs it.
+  check_range(join(prefix, "cell_size"), cell_size, kMinCellSize, kMaxCellSize);
+  check_position(join(prefix, "origin"), origin);
   check_choice(join(prefix, "boundary"), boundary, {"periodic", "tunnel"});
   check_choice(join(prefix, "advection"), advection, {"semi_lagrangian", "maccormack"});
   check_choice(join(prefix, "pressure"), pressure, {"fft", "pcg"});

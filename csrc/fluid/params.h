@@ -25,6 +25,10 @@ struct FanParams {
   void validate(const std::string& prefix) const;
 };
 
+/// The cell sizes FluidParams accepts, m: below a micrometre h^3 and the pressure scale head for
+/// underflow; above 10 km a grid no longer describes wind around a flag.
+constexpr double kMinCellSize = 1e-6, kMaxCellSize = 1e4;
+
 /// Stable Fluids (Stam 1999) on a staggered MAC grid; see csrc/fluid/fluid.h for the layout.
 /// Periodic boundary: the mean flow (k = 0 mode) follows `wind` when it has keys (gusts are its
 /// keyframes) and is left free otherwise. Tunnel: inflow `wind` through the x-min face,

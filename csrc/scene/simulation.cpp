@@ -7,6 +7,7 @@
 
 #include "collision/pole.h"
 #include "common/errors.h"
+#include "common/memory.h"
 #include "common/timer.h"
 #include "flapping/flapping.h"
 
@@ -42,8 +43,20 @@ double EnergyLedger::unexplained_since(const EnergyLedger& b) const {
 }
 
 namespace {
+// Valid, and small enough to build in the memory this machine has (checked before any of it is
+// allocated: a flag or grid too large fails here in one line, not in std::bad_alloc).
 Scene validated(const Scene& s) {
   s.validate();
+  const double vertices = double(s.flag.rows) * double(s.flag.cols);
+  double cells = 0;
+  if (s.air.model == "grid")
+    cells = double(s.air.resolution[0]) * s.air.resolution[1] * s.air.resolution[2];
+  const double bytes = vertices * kBytesPerVertex +
+                       cells * kValuesPerCell * (s.air.precision == "float" ? 4 : 8);
+  check_memory("this scene (a " + std::to_string(s.flag.rows) + " x " + std::to_string(s.flag.cols) +
+                   " flag" + (cells > 0 ? ", " + detail::to_text(cells) + " air cells" : std::string()) +
+                   ")",
+               bytes, "use fewer flag.rows / flag.cols or a coarser air.resolution");
   return s;
 }
 }  // namespace
@@ -143,13 +156,13 @@ void Simulation::setup_flapping() {
   const FlappingParams& fp = scene_.flapping;
   noise_ = Perlin1D(fp.seed);
   flap_xy_ = topo_.uv;  // x = u (0 at the pole edge), y = v; y (1 - y) is symmetric
-  // L: rest distance to the nearest pinned vertex (infinite, so A = amplitude, without pins).
-  flap_L_.setConstant(N, std::numeric_limits<double>::infinity());
-  for (Index j = 0; j < N; ++j) {
-    if (!topo_.pinned(j)) continue;
-    for (Index i = 0; i < N; ++i)
-      flap_L_[i] = std::min(flap_L_[i], (topo_.rest_positions.row(i) - topo_.rest_positions.row(j)).norm());
-  }
+  // L: rest distance to the nearest pinned vertex, the topology's tether length (0 at a pin;
+  // infinite, so A = amplitude, without pins).
+  flap_L_.resize(N);
+  for (Index i = 0; i < N; ++i)
+    flap_L_[i] = topo_.pinned(i)                ? 0.0
+                 : topo_.tether_anchor[i] >= 0 ? topo_.tether_length[i]
+                                               : std::numeric_limits<double>::infinity();
   flap_applied_.setZero(N);
   flap_start_.setZero(N);
   flap_before_.setZero(N);
@@ -240,8 +253,8 @@ void Simulation::step_once() {
       diverge(bad.cause, bad.vertex, bad.why + " even in " + std::to_string(pieces) + " pieces");
     restore_step_start();
   }
-  stats_.energy_halvings += level;
   advance_fluid();  // after the check: a rolled-back step leaves the air as it was
+  stats_.energy_halvings += level;
   ++step_count_;
   time_ = double(step_count_) * scene_.dt;  // no drift from summing dt
   update_normals();
@@ -384,10 +397,19 @@ void Simulation::stage_air() {
   }
 }
 
+// The air restores itself when its step fails; the cloth's step is then undone too, so the
+// whole Simulation is as it was at the start of the step.
 void Simulation::advance_fluid() {
   if (!built_[kFluid]) return;
   ScopedTimer t(seconds_[kFluid]);
-  fluid_->step(scene_.dt);
+  try {
+    fluid_->step(scene_.dt);
+  } catch (const DivergenceError& e) {
+    restore_step_start();
+    update_normals();
+    throw DivergenceError(std::string(e.what()) + " (air.cell_size, air.resolution)", step_count_,
+                          time_, -1, e.cause);
+  }
 }
 
 void Simulation::stage_integrate() {

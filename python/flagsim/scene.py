@@ -36,6 +36,10 @@ Scene = _core.Scene
 # theirs here (e.g. air.fans), so TOML arrays of tables map onto them.
 LIST_ITEM_TYPES: dict[tuple[type, str], type] = {(_core.AirParams, "fans"): _core.FanParams}
 
+# The section a struct's own setters name in their errors when it stands alone (a FanParams says
+# "fan.center"); apply_dict renames it to the item's path ("air.fans[1].center").
+OWN_SECTION: dict[type, str] = {_core.FanParams: "fan"}
+
 
 def fields(obj_or_type: Any) -> list[str]:
     """Public field names of a bound parameter struct, in definition order."""
@@ -61,20 +65,6 @@ def _plain(v: Any) -> Any:
     if isinstance(v, (list, tuple)):
         return [_plain(x) for x in v]
     return v
-
-
-def _type_name(v: Any) -> str:
-    if isinstance(v, bool):
-        return "a boolean"
-    if isinstance(v, int):
-        return "an integer"
-    if isinstance(v, float):
-        return "a number"
-    if isinstance(v, str):
-        return "a string"
-    if isinstance(v, (list, tuple)):
-        return "a list"
-    return type(v).__name__
 
 
 def apply_dict(obj: Any, data: dict[str, Any], section: str) -> None:
@@ -108,8 +98,15 @@ def apply_dict(obj: Any, data: dict[str, Any], section: str) -> None:
             value = items
         try:
             setattr(obj, key, value)
-        except TypeError:
-            raise ValueError(f"{name} should be {_type_name(current)}, got {value!r}") from None
+        except (TypeError, ValueError) as e:
+            raise ValueError(_renamed(str(e), type(obj), section)) from None
+
+
+def _renamed(message: str, cls: type, section: str) -> str:
+    own = OWN_SECTION.get(cls)
+    if own and own != section and message.startswith(own + "."):
+        return section + message[len(own):]
+    return message
 
 
 def builtins() -> dict[str, str]:
@@ -146,6 +143,8 @@ def load(path: str | os.PathLike[str]) -> Scene:
         raise ValueError(f"scene file not found: {path}") from None
     except _toml.TOMLDecodeError as e:
         raise ValueError(f"{path}: not valid TOML: {e}") from None
+    except RecursionError:
+        raise ValueError(f"{path}: not valid TOML: arrays or tables nested too deeply") from None
     scene = from_dict(data, source=path)
     if "name" not in data:
         scene.name = os.path.splitext(os.path.basename(path))[0]

@@ -25,12 +25,17 @@ def test_self_collision_params_validation():
 def test_pole_params_validation():
     p = flagsim.PoleParams()
     assert p.radius == 0.055
-    with pytest.raises(ValueError, match=r"pole\.radius should be finite and > 0, got 0"):
+    with pytest.raises(ValueError, match=r"pole\.radius should be in \(0, 1e\+06\] m, got 0"):
         p.radius = 0.0
-    with pytest.raises(ValueError, match=r"pole\.height should be finite and > 0, got nan"):
+    with pytest.raises(ValueError, match=r"pole\.height should be in \(0, 1e\+06\] m, got nan"):
         p.height = float("nan")
     with pytest.raises(ValueError, match=r"pole\.base should be finite"):
         p.base = [0.0, float("inf"), 0.0]
+    # accepted extremes used to pass here and fail in POV-Ray after the export
+    with pytest.raises(ValueError, match=r"pole\.base should be within 1e\+06 m of the origin"):
+        p.base = [1e308, 0.0, 0.0]
+    with pytest.raises(ValueError, match=r"pole\.height should be in \(0, 1e\+06\] m, got 1e\+300"):
+        p.height = 1e300
     assert p.radius == 0.055 and list(p.base) == [0.0, -2.5, 0.0]
     p.base = [1.0, -2.0, 0.5]
     assert list(p.base) == [1.0, -2.0, 0.5]

@@ -151,7 +151,7 @@ def test_invalid_collision_parameters_raise():
     with pytest.raises(ValueError, match=r"self_collision\.thickness should be finite and > 0, "
                                          r"got -0\.001"):
         s.self_collision.thickness = -0.001
-    with pytest.raises(ValueError, match=r"pole\.radius should be finite and > 0, got 0"):
+    with pytest.raises(ValueError, match=r"pole\.radius should be in \(0, 1e\+06\] m, got 0"):
         s.pole.radius = 0.0
     # a thickness beyond the flat flag's own vertex-to-triangle gap is refused
     s.flag.rows, s.flag.cols = 64, 96

@@ -151,7 +151,7 @@ direction = [0.0, -1.0, 0.0]
 @pytest.mark.parametrize("text,match", [
     ('[air]\nmodel = "grid"\nresolution = [16, 0, 16]\n', r"air.resolution should be 3 cell counts in \[1, 4096\]"),
     ('[air]\nmodel = "grid"\nadvection = "upwind"\n', r'air.advection should be one of "semi_lagrangian"'),
-    ('[[air.fans]]\nradius = -1.0\n', r"radius should be finite and > 0, got -1"),
+    ('[[air.fans]]\nradius = -1.0\n', r"air\.fans\[0\]\.radius should be in \(0, 1e\+06\] m, got -1"),
     ('[[air.fans]]\nspeed = 2.0\n', r"unknown key 'speed' in section \[air.fans\[0\]\]"),
 ])
 def test_toml_air_errors_name_the_key(tmp_path, text, match):

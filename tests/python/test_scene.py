@@ -10,8 +10,8 @@ import flagsim
 BAD_VALUES = [
     ("flag", "rows", 1, r"flag.rows should be >= 2, got 1"),
     ("flag", "cols", 0, r"flag.cols should be >= 2, got 0"),
-    ("flag", "width", -1.0, r"flag.width should be finite and > 0, got -1"),
-    ("flag", "height", float("nan"), r"flag.height should be finite and > 0, got nan"),
+    ("flag", "width", -1.0, r"flag.width should be in \(0, 1e\+06\] m, got -1"),
+    ("flag", "height", float("nan"), r"flag.height should be in \(0, 1e\+06\] m, got nan"),
     ("flag", "areal_density", 0.0, r"flag.areal_density should be finite and > 0, got 0"),
     ("flag", "stretch_stiffness", -5.0, r"flag.stretch_stiffness should be finite and >= 0"),
     ("flag", "damping", float("inf"), r"flag.damping should be finite and >= 0, got inf"),

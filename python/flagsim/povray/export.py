@@ -24,6 +24,7 @@ from .mesh import format_mesh2, mesh_arrays
 MANIFEST = "export.json"
 MANIFEST_FORMAT = 1
 MAX_FRAMES = 100_000  # frame files are numbered with 5 digits
+MAX_STEPS = 10**9  # ~2 days of the paper scene at 5,000 steps/s: a typo, not a shot
 
 
 class ExportConflict(ValueError):
@@ -51,7 +52,13 @@ def frame_steps(seconds, fps, dt):
     if fps * dt > 1.0 + 1e-9:
         raise ValueError(f"fps should be <= 1 / dt = {1.0 / dt:g} (one frame per step at most), "
                          f"got {fps}")
-    n = int(math.floor(seconds * fps + 1e-9)) + 1
+    if not seconds / dt <= MAX_STEPS:
+        raise ValueError(f"seconds / dt should be at most {MAX_STEPS:.0e} steps, got "
+                         f"{seconds / dt:.3g} (seconds = {seconds:g}, dt = {dt:g})")
+    frames = seconds * fps
+    if not frames < MAX_FRAMES:  # also an overflow to inf
+        raise ValueError(f"seconds * fps should be < {MAX_FRAMES} frames, got {frames:g}")
+    n = int(math.floor(frames + 1e-9)) + 1
     if n > MAX_FRAMES:
         raise ValueError(f"seconds * fps should be < {MAX_FRAMES} frames, got {n}")
     return [int(round(k / (fps * dt))) for k in range(n)]

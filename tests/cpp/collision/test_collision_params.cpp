@@ -37,10 +37,10 @@ TEST(PoleParams, ValidateNamesTheParameter) {
   PoleParams p;
   EXPECT_EQ(message(p, "pole"), "no error");
   p.radius = 0;
-  EXPECT_EQ(message(p, "pole"), "pole.radius should be finite and > 0, got 0");
+  EXPECT_EQ(message(p, "pole"), "pole.radius should be in (0, 1e+06] m, got 0");
   p = PoleParams{};
   p.height = -2;
-  EXPECT_EQ(message(p, "pole"), "pole.height should be finite and > 0, got -2");
+  EXPECT_EQ(message(p, "pole"), "pole.height should be in (0, 1e+06] m, got -2");
   p = PoleParams{};
   p.base.y() = INFINITY;
   EXPECT_EQ(message(p, "pole").rfind("pole.base should be finite, got (", 0), 0u);
