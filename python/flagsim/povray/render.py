@@ -111,6 +111,18 @@ def povray_command(job):
     return cmd
 
 
+def _povray_preexec():
+    # In a pool worker (single-threaded) POV-Ray is tied to the worker's life; in the head
+    # process, which may run threads, preexec_fn is unsafe and the head's own exit handles it.
+    import multiprocessing
+
+    if multiprocessing.parent_process() is None:
+        return None
+    from .._pool import child_dies_with_us
+
+    return child_dies_with_us
+
+
 def render_frame(job):
     """Render one frame into a temporary image, renamed into place only when POV-Ray succeeded
     (so an image in render/ is always whole). Never raises for a POV-Ray failure: returns it."""
@@ -122,7 +134,8 @@ def render_frame(job):
     cmd = povray_command(replace(job, image=tmp_rel))
     try:
         proc = subprocess.run(cmd, cwd=out, env=povray_env(out), capture_output=True, text=True,
-                              errors="replace", timeout=job.timeout, check=False)
+                              errors="replace", timeout=job.timeout, check=False,
+                              preexec_fn=_povray_preexec())
     except (OSError, subprocess.TimeoutExpired) as e:
         tmp.unlink(missing_ok=True)
         return FrameResult(job.frame, False, f"{type(e).__name__}: {e}",
@@ -212,11 +225,9 @@ class RenderResult:
 
 
 def _default_executor(jobs):
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
+    from .._pool import worker_pool
 
-    # spawn: the parent may run OpenMP threads, and fork after threads is unsafe.
-    return ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"))
+    return worker_pool(jobs)  # workers (and their POV-Ray processes) die with this process
 
 
 def render(out_dir, *, width=None, height=None, executor=None, jobs=None, retries=1,

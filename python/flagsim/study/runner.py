@@ -12,6 +12,8 @@ import csv
 import os
 from typing import Any, Callable, Iterable, Sequence
 
+from .._pool import worker_pool
+
 
 def read_rows(path: str) -> list[dict[str, str]]:
     """Rows of a results CSV; a torn last line (interrupted write) is dropped."""
@@ -86,7 +88,7 @@ def run_cases(cases: Sequence[dict[str, Any]], fn: Callable[[dict[str, Any]], di
                 record(c, fn(c))
         else:
             own = executor is None
-            ex = executor or cf.ProcessPoolExecutor(max_workers=jobs)
+            ex = executor or worker_pool(jobs)  # workers die with this process
             try:
                 futures = {ex.submit(fn, c): c for c in todo}
                 for fut in cf.as_completed(futures):
