@@ -10,7 +10,7 @@ CTEST := $(VENV)/bin/ctest
 APT_PACKAGES := g++ make python3-venv python3-dev libeigen3-dev libfftw3-dev libgtest-dev povray
 JOBS ?= 2
 
-.PHONY: all demo test test-cpp test-python build bench bench-deps study clean system-deps
+.PHONY: all demo test test-cpp test-python build bench bench-deps study clean system-deps lint format
 
 all: build
 
@@ -34,7 +34,7 @@ $(VENV)/.deps: pyproject.toml tools/requirements.py | system-deps
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q "tomli>=2.0; python_version < '3.11'" cmake ninja
-	$(PY) -m pip install -q -r <($(PY) tools/requirements.py build project test)
+	$(PY) -m pip install -q -r <($(PY) tools/requirements.py build project test lint)
 	@touch $@
 
 # Incremental: scikit-build-core reuses build/ and ninja rebuilds only what changed.
@@ -43,7 +43,20 @@ build: $(VENV)/.deps
 	    -Cbuild-dir=$(BUILD) -Ccmake.define.FLAGSIM_BUILD_TESTS=ON \
 	    -Ccmake.build-type=Release -Cbuild.tool-args=-j$(JOBS)
 
-test: build bench-deps
+# Layout and lint: ruff (Python: pycodestyle, pyflakes, bugbear, imports; pyproject.toml) and
+# clang-format (C++, .clang-format), both at 100 columns. `make format` applies both.
+CXX_SOURCES = $(shell find csrc tests/cpp examples/cpp -name '*.cpp' -o -name '*.h')
+lint: $(VENV)/.deps
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+	$(VENV)/bin/clang-format --dry-run --Werror $(CXX_SOURCES)
+
+format: $(VENV)/.deps
+	$(VENV)/bin/ruff check --fix .
+	$(VENV)/bin/ruff format .
+	$(VENV)/bin/clang-format -i $(CXX_SOURCES)
+
+test: lint build bench-deps
 	$(CTEST) --test-dir $(BUILD) --output-on-failure -j$(JOBS)
 	$(PY) -m pytest -q
 

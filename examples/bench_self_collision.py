@@ -11,14 +11,14 @@ median. Prints markdown tables and the slope of log(cost) against log(vertices):
 
     python examples/bench_self_collision.py [--threads 1] [--quick] [--csv out.csv]
 """
+
 import argparse
 import math
 import statistics
 import time
 
-import numpy as np
-
 import flagsim
+import numpy as np
 from flagsim.testing.shapes import folded_onto_itself
 
 
@@ -26,8 +26,13 @@ def wind_scene(n_side):
     s = flagsim.Scene.paper()
     s.name = f"self-collision {n_side}x{n_side}"
     s.air.model = "uniform"
-    s.air.wind = [(0.0, (6.0, 0.0, 0.0)), (0.2, (6.0, 0.0, 2.0)), (0.4, (4.0, 0.0, -2.0)),
-                  (0.6, (7.0, 0.0, 1.0)), (0.8, (5.0, 0.0, -1.0))]
+    s.air.wind = [
+        (0.0, (6.0, 0.0, 0.0)),
+        (0.2, (6.0, 0.0, 2.0)),
+        (0.4, (4.0, 0.0, -2.0)),
+        (0.6, (7.0, 0.0, 1.0)),
+        (0.8, (5.0, 0.0, -1.0)),
+    ]
     s.flag.rows = s.flag.cols = n_side
     s.flag.width = s.flag.height = 0.01 * (n_side - 1)
     s.pole.height = s.flag.height + 2.6
@@ -70,9 +75,13 @@ def measure(workload, n_side, warmup, seconds):
     wall = time.perf_counter() - t0
     after = sim.timings
     per_step = (after["self_collision"] - before["self_collision"]) / steps
-    return dict(vertices=n_side * n_side, seconds_per_step=per_step, step_wall=wall / steps,
-                candidates_per_vertex=candidates / steps / (n_side * n_side),
-                candidates=candidates / steps)
+    return dict(
+        vertices=n_side * n_side,
+        seconds_per_step=per_step,
+        step_wall=wall / steps,
+        candidates_per_vertex=candidates / steps / (n_side * n_side),
+        candidates=candidates / steps,
+    )
 
 
 def main():
@@ -92,24 +101,36 @@ def main():
             results = [measure(workload, n_side, warmup, seconds) for _ in range(runs)]
             best = min(results, key=lambda r: r["seconds_per_step"])
             median = statistics.median(r["seconds_per_step"] for r in results)
-            rows.append(dict(workload=workload, vertices=best["vertices"],
-                             min_ms=1e3 * best["seconds_per_step"], median_ms=1e3 * median,
-                             us_per_vertex=1e6 * median / best["vertices"],
-                             candidates_per_vertex=best["candidates_per_vertex"],
-                             us_per_candidate=1e6 * median / best["candidates"],
-                             step_ms=1e3 * best["step_wall"]))
+            rows.append(
+                dict(
+                    workload=workload,
+                    vertices=best["vertices"],
+                    min_ms=1e3 * best["seconds_per_step"],
+                    median_ms=1e3 * median,
+                    us_per_vertex=1e6 * median / best["vertices"],
+                    candidates_per_vertex=best["candidates_per_vertex"],
+                    us_per_candidate=1e6 * median / best["candidates"],
+                    step_ms=1e3 * best["step_wall"],
+                )
+            )
         n = np.log([r["vertices"] for r in rows])
         slope = float(np.polyfit(n, np.log([r["median_ms"] for r in rows]), 1)[0])
         ok = ok and math.isfinite(slope)
-        print(f"\n{workload}: self-collision stage, {args.threads} thread(s), median of {runs} "
-              f"run(s)\n")
-        print("| vertices | min ms/step | median ms/step | us/vertex | candidates/vertex | "
-              "us/candidate | whole step ms |")
+        print(
+            f"\n{workload}: self-collision stage, {args.threads} thread(s), median of {runs} "
+            f"run(s)\n"
+        )
+        print(
+            "| vertices | min ms/step | median ms/step | us/vertex | candidates/vertex | "
+            "us/candidate | whole step ms |"
+        )
         print("|---:|---:|---:|---:|---:|---:|---:|")
         for r in rows:
-            print(f"| {r['vertices']} | {r['min_ms']:.3f} | {r['median_ms']:.3f} | "
-                  f"{r['us_per_vertex']:.2f} | {r['candidates_per_vertex']:.1f} | "
-                  f"{r['us_per_candidate']:.3f} | {r['step_ms']:.2f} |")
+            print(
+                f"| {r['vertices']} | {r['min_ms']:.3f} | {r['median_ms']:.3f} | "
+                f"{r['us_per_vertex']:.2f} | {r['candidates_per_vertex']:.1f} | "
+                f"{r['us_per_candidate']:.3f} | {r['step_ms']:.2f} |"
+            )
         print(f"\nlog-log slope of cost against vertices: {slope:.3f}")
         out += rows
     if args.csv:

@@ -8,11 +8,11 @@ displacement at four moments, like Fig. 6.
 
     python examples/flapping_demo.py [--mode displace|force|visual] [--seconds 2] [--png out.png]
 """
+
 import argparse
 
-import numpy as np
-
 import flagsim
+import numpy as np
 
 
 def pattern_shift(a, b, max_lag=9):
@@ -20,7 +20,7 @@ def pattern_shift(a, b, max_lag=9):
     cols = a.shape[1]
     err = {}
     for lag in range(-max_lag, max_lag + 1):
-        d = b[:, lag:] - a[:, :cols - lag] if lag >= 0 else b[:, :cols + lag] - a[:, -lag:]
+        d = b[:, lag:] - a[:, : cols - lag] if lag >= 0 else b[:, : cols + lag] - a[:, -lag:]
         err[lag] = float(np.mean(d**2))
     return min(err, key=err.get)
 
@@ -38,8 +38,10 @@ def main():
     rows, cols = scene.flag.rows, scene.flag.cols
     f = scene.flapping
     print(f"flapping_demo, mode '{args.mode}': stages {', '.join(sim.stages)}")
-    print(f"eq. 5 expects: moved {f.speed * 0.25 * (cols - 1):.1f} columns per print, "
-          f"middle row ahead by {f.parabola / 4 * (cols - 1):.1f} columns")
+    print(
+        f"eq. 5 expects: moved {f.speed * 0.25 * (cols - 1):.1f} columns per print, "
+        f"middle row ahead by {f.parabola / 4 * (cols - 1):.1f} columns"
+    )
     print("   t s | pattern moved, columns | middle row ahead of the top row, columns")
 
     def field():  # out-of-plane displacement of the drawn flag (the flag lies in z = 0)
@@ -51,12 +53,14 @@ def main():
         sim.step(every)
         z = field()
         moved = "" if previous is None else f"{pattern_shift(previous, z):+d}"
-        lead = pattern_shift(z[:1], z[rows // 2:rows // 2 + 1])
+        lead = pattern_shift(z[:1], z[rows // 2 : rows // 2 + 1])
         print(f"{sim.time:6.2f} | {moved:>22} | {lead:+d}")
         previous = z
         snapshots.append((sim.time, z))
-    print("self-reported cost per step: " + ", ".join(
-        f"{k} {1e6 * v / sim.step_count:.1f} us" for k, v in sim.timings.items()))
+    print(
+        "self-reported cost per step: "
+        + ", ".join(f"{k} {1e6 * v / sim.step_count:.1f} us" for k, v in sim.timings.items())
+    )
 
     if args.png:
         import matplotlib  # only when a picture is asked for
@@ -68,8 +72,14 @@ def main():
         fig, axes = plt.subplots(1, len(picks), figsize=(3.2 * len(picks), 2.6))
         lim = max(np.abs(z).max() for _, z in picks)
         for ax, (t, z) in zip(np.atleast_1d(axes), picks):
-            ax.imshow(z, cmap="coolwarm", vmin=-lim, vmax=lim, origin="upper",
-                      extent=(0, scene.flag.width, -scene.flag.height, 0))
+            ax.imshow(
+                z,
+                cmap="coolwarm",
+                vmin=-lim,
+                vmax=lim,
+                origin="upper",
+                extent=(0, scene.flag.width, -scene.flag.height, 0),
+            )
             ax.set_title(f"t = {t:.2f} s")
             ax.set_xlabel("x from the pole, m")
         fig.suptitle("eq. 5 flapping: out-of-plane displacement (pole on the left)")

@@ -8,12 +8,12 @@ exported for POV-Ray (`flagsim render DIR` then renders it).
 
     python examples/pole_wrap.py [--speed 8] [--seconds 2.5] [--out out/pole_wrap]
 """
+
 import argparse
 import math
 
-import numpy as np
-
 import flagsim
+import numpy as np
 
 
 def scene(speed):
@@ -23,8 +23,14 @@ def scene(speed):
     s.flag.rows, s.flag.cols = 12, 16
     s.self_collision.enabled = True
     w = speed
-    s.air.wind = [(0.0, (w, 0.0, 0.0)), (0.6, (w, 0.0, 0.0)), (0.9, (-w, 0.0, 0.3 * w)),
-                  (1.6, (-w, 0.0, 0.3 * w)), (1.9, (w, 0.0, -0.3 * w)), (2.5, (w, 0.0, -0.3 * w))]
+    s.air.wind = [
+        (0.0, (w, 0.0, 0.0)),
+        (0.6, (w, 0.0, 0.0)),
+        (0.9, (-w, 0.0, 0.3 * w)),
+        (1.6, (-w, 0.0, 0.3 * w)),
+        (1.9, (w, 0.0, -0.3 * w)),
+        (2.5, (w, 0.0, -0.3 * w)),
+    ]
     return s
 
 
@@ -40,8 +46,10 @@ def main():
     pole = s.pole
     free = ~np.asarray(sim.pinned)
     print(f"stages: {', '.join(sim.stages)}")
-    print("   t s | wind, m/s        | wrapped, deg | closest to pole, mm | contacts | crossings "
-          "stopped | frozen | self-collision us/step")
+    print(
+        "   t s | wind, m/s        | wrapped, deg | closest to pole, mm | contacts | crossings "
+        "stopped | frozen | self-collision us/step"
+    )
     every = round(0.25 / s.dt)
     last = 0.0
     for _ in range(round(args.seconds / 0.25)):
@@ -55,13 +63,19 @@ def main():
         cost = (sim.timings["self_collision"] - last) / every * 1e6
         last = sim.timings["self_collision"]
         w = sim.air_velocity(np.zeros((1, 3)))[0]
-        print(f"{sim.time:6.2f} | ({w[0]:+5.1f},{w[2]:+5.1f}) | {angle:12.0f} | {gap:19.2f} | "
-              f"{st['contacts']:8d} | {st['crossings']:17d} | {st['frozen']:6d} | {cost:10.0f}")
+        print(
+            f"{sim.time:6.2f} | ({w[0]:+5.1f},{w[2]:+5.1f}) | {angle:12.0f} | {gap:19.2f} | "
+            f"{st['contacts']:8d} | {st['crossings']:17d} | {st['frozen']:6d} | {cost:10.0f}"
+        )
     x = np.asarray(sim.positions)
     r2 = (x[:, 0] - pole.base[0]) ** 2 + (x[:, 2] - pole.base[2]) ** 2
-    inside = (r2 < pole.radius**2) & (x[:, 1] > pole.base[1]) & (x[:, 1] < pole.base[1] + pole.height)
-    print(f"masses inside the pole at the end: {int(inside.sum())}; largest strain "
-          f"{sim.max_strain():.3f}")
+    inside = (
+        (r2 < pole.radius**2) & (x[:, 1] > pole.base[1]) & (x[:, 1] < pole.base[1] + pole.height)
+    )
+    print(
+        f"masses inside the pole at the end: {int(inside.sum())}; largest strain "
+        f"{sim.max_strain():.3f}"
+    )
 
     if args.out:
         from flagsim import povray  # only when exporting

@@ -5,6 +5,7 @@ usage: python tools/requirements.py GROUP...
 GROUP: "build" (build-system.requires), "project" (project.dependencies), or the name of an
 optional-dependency extra ("test", "bench", ...).
 """
+
 import pathlib
 import sys
 
@@ -18,7 +19,9 @@ def main(groups: list[str]) -> int:
     if not groups:
         print(__doc__.strip(), file=sys.stderr)
         return 2
-    meta = tomllib.loads((pathlib.Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
+    meta = tomllib.loads(
+        (pathlib.Path(__file__).resolve().parents[1] / "pyproject.toml").read_text()
+    )
     extras = meta["project"].get("optional-dependencies", {})
     for group in groups:
         if group == "build":
@@ -29,7 +32,10 @@ def main(groups: list[str]) -> int:
             reqs = extras[group]
         else:
             known = ", ".join(["build", "project", *extras])
-            print(f"requirements.py: unknown group {group!r}; expected one of {known}", file=sys.stderr)
+            print(
+                f"requirements.py: unknown group {group!r}; expected one of {known}",
+                file=sys.stderr,
+            )
             return 2
         print("\n".join(reqs))
     return 0

@@ -59,8 +59,8 @@ void bind_cloth(py::module_& m) {
             "strain beyond which a step raises DivergenceError");
   def_field(in, "strain_limit", &IntegratorParams::strain_limit, "integrator",
             "> 0: Provot strain limiting to (1 + strain_limit) x rest length");
-  def_field(in, "strain_limit_iterations", &IntegratorParams::strain_limit_iterations,
-            "integrator", "Gauss-Seidel sweeps of strain limiting");
+  def_field(in, "strain_limit_iterations", &IntegratorParams::strain_limit_iterations, "integrator",
+            "Gauss-Seidel sweeps of strain limiting");
   def_field(in, "energy_tolerance", &IntegratorParams::energy_tolerance, "integrator",
             "energy a step may make beyond its stages' work, as a fraction of "
             "Simulation.energy_scale, before DivergenceError('energy'); 0 = off");

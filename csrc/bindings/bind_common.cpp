@@ -46,11 +46,12 @@ py::dict build_info() {
   d["build_type"] = FLAGSIM_BUILD_TYPE;
   d["cxx_flags"] = FLAGSIM_CXX_FLAGS;
   d["cxx_standard"] = long(__cplusplus);
-  d["eigen"] = std::to_string(EIGEN_WORLD_VERSION) + "." + std::to_string(EIGEN_MAJOR_VERSION) + "." +
-               std::to_string(EIGEN_MINOR_VERSION);
+  d["eigen"] = std::to_string(EIGEN_WORLD_VERSION) + "." + std::to_string(EIGEN_MAJOR_VERSION) +
+               "." + std::to_string(EIGEN_MINOR_VERSION);
   d["eigen_simd"] = std::string(Eigen::SimdInstructionSetsInUse());
-  d["pybind11"] = std::to_string(PYBIND11_VERSION_MAJOR) + "." + std::to_string(PYBIND11_VERSION_MINOR) +
-                  "." + std::to_string(PYBIND11_VERSION_PATCH);
+  d["pybind11"] = std::to_string(PYBIND11_VERSION_MAJOR) + "." +
+                  std::to_string(PYBIND11_VERSION_MINOR) + "." +
+                  std::to_string(PYBIND11_VERSION_PATCH);
 #ifdef _OPENMP
   d["openmp"] = true;
   d["openmp_version"] = long(_OPENMP);
@@ -117,7 +118,8 @@ void bind_common(py::module_& m) {
 #ifdef FLAGSIM_HAVE_FFTW
   m.def("has_fftw", []() { return true; }, "True when the FFT pressure solver (FFTW) is built in.");
 #else
-  m.def("has_fftw", []() { return false; }, "True when the FFT pressure solver (FFTW) is built in.");
+  m.def(
+      "has_fftw", []() { return false; }, "True when the FFT pressure solver (FFTW) is built in.");
 #endif
 }
 

@@ -79,9 +79,8 @@ void bind_flapping(py::module_& m) {
       "Definition in csrc/flapping/perlin.h. Seeds are integers in [0, 2**32).");
 
   m.def(
-      "flapping_ramp", [](double L, const FlappingParams& p) { return flapping_ramp(L, p); },
-      "L"_a, "params"_a,
-      "A(L) = amplitude * S(min(L / l_max, 1)), S(u) = 3u^2 - 2u^3 (m per m/s).");
+      "flapping_ramp", [](double L, const FlappingParams& p) { return flapping_ramp(L, p); }, "L"_a,
+      "params"_a, "A(L) = amplitude * S(min(L / l_max, 1)), S(u) = 3u^2 - 2u^3 (m per m/s).");
 
   m.def(
       "flapping_displacement",

@@ -35,14 +35,16 @@ WindSchedule to_wind(const py::handle& h) {
       fail_param("wind", expected, std::string(py::str(h)));
     auto pair = py::reinterpret_borrow<py::sequence>(item);
     const std::string key = "wind[" + std::to_string(w.keys.size()) + "]";
-    w.keys.push_back({from_py<double>(key + ".time", pair[0]), from_py<Vec3>(key + ".velocity", pair[1])});
+    w.keys.push_back(
+        {from_py<double>(key + ".time", pair[0]), from_py<Vec3>(key + ".velocity", pair[1])});
   }
   return w;
 }
 
 py::list wind_to_list(const WindSchedule& w) {
   py::list out;
-  for (const auto& k : w.keys) out.append(py::make_tuple(k.time, py::make_tuple(k.velocity[0], k.velocity[1], k.velocity[2])));
+  for (const auto& k : w.keys)
+    out.append(py::make_tuple(k.time, py::make_tuple(k.velocity[0], k.velocity[1], k.velocity[2])));
   return out;
 }
 
@@ -61,8 +63,8 @@ void set_component_from(Fluid& f, int c, const py::handle& values) {
   const std::string name = std::string(1, "uvw"[c]);
   if (!a || std::size_t(a.size()) != sh.size())
     fail_param(name,
-               "an array of shape (" + std::to_string(sh.n[0]) + ", " + std::to_string(sh.n[1]) + ", " +
-                   std::to_string(sh.n[2]) + ")",
+               "an array of shape (" + std::to_string(sh.n[0]) + ", " + std::to_string(sh.n[1]) +
+                   ", " + std::to_string(sh.n[2]) + ")",
                a ? std::to_string(a.size()) + " values" : std::string(py::str(values)));
   f.set_component(c, a.data());
 }
@@ -72,24 +74,30 @@ void set_component_from(Fluid& f, int c, const py::handle& values) {
 void def_fluid_fields(py::class_<AirParams>& cls, const std::string& section) {
   cls.def_property(
       "resolution",
-      [](const AirParams& a) { return py::make_tuple(a.resolution[0], a.resolution[1], a.resolution[2]); },
+      [](const AirParams& a) {
+        return py::make_tuple(a.resolution[0], a.resolution[1], a.resolution[2]);
+      },
       [section](AirParams& a, const py::object& o) {
         const auto n = from_py<std::array<long long, 3>>(section + ".resolution", o);
         AirParams copy = a;
-        for (int d = 0; d < 3; ++d) copy.resolution[d] = (n[d] < -1000000 || n[d] > 1000000) ? -1 : int(n[d]);
+        for (int d = 0; d < 3; ++d)
+          copy.resolution[d] = (n[d] < -1000000 || n[d] > 1000000) ? -1 : int(n[d]);
         copy.validate(section);
         a = copy;
       },
       "grid cells (nx, ny, nz) ('grid')");
   def_field<AirParams, double>(cls, "cell_size", &AirParams::cell_size, section, "m ('grid')");
-  def_vec3_field<AirParams>(cls, "origin", &AirParams::origin, section, "m, min corner of the grid ('grid')");
-  def_field<AirParams, std::string>(cls, "boundary", &AirParams::boundary, section,
-                                    "'periodic' (mean flow = wind) | 'tunnel' (inflow = wind through x-min)");
+  def_vec3_field<AirParams>(cls, "origin", &AirParams::origin, section,
+                            "m, min corner of the grid ('grid')");
+  def_field<AirParams, std::string>(
+      cls, "boundary", &AirParams::boundary, section,
+      "'periodic' (mean flow = wind) | 'tunnel' (inflow = wind through x-min)");
   def_field<AirParams, std::string>(cls, "advection", &AirParams::advection, section,
                                     "'semi_lagrangian' | 'maccormack'");
   def_field<AirParams, std::string>(cls, "pressure", &AirParams::pressure, section,
                                     "'fft' (periodic, FFTW) | 'pcg' (MIC(0) conjugate gradient)");
-  def_field<AirParams, std::string>(cls, "precision", &AirParams::precision, section, "'double' | 'float'");
+  def_field<AirParams, std::string>(cls, "precision", &AirParams::precision, section,
+                                    "'double' | 'float'");
   def_field<AirParams, double>(cls, "pcg_tolerance", &AirParams::pcg_tolerance, section,
                                "relative max-norm residual of the pcg solves");
   def_field<AirParams, int>(cls, "pcg_max_iterations", &AirParams::pcg_max_iterations, section,
@@ -106,28 +114,31 @@ void def_fluid_fields(py::class_<AirParams>& cls, const std::string& section) {
 }
 
 void bind_fluid(py::module_& m) {
-  py::class_<FanParams> fan_cls(m, "FanParams",
-                        "A region pushing the air: force density (N/m^3) along direction inside a box "
-                        "or a sphere, times a keyframed strength.");
-  fan_cls.def(py::init([](const py::object& shape, const py::object& center, const py::object& half_size,
-                       const py::object& radius, const py::object& direction, const py::object& force_density,
-                       const py::object& max_speed, const py::object& strength) {
-             FanParams f;
-             f.shape = from_py<std::string>("shape", shape);
-             f.center = from_py<Vec3>("center", center);
-             f.half_size = from_py<Vec3>("half_size", half_size);
-             f.radius = from_py<double>("radius", radius);
-             f.direction = from_py<Vec3>("direction", direction);
-             f.force_density = from_py<double>("force_density", force_density);
-             f.max_speed = from_py<double>("max_speed", max_speed);
-             f.strength.keys = from_py<std::vector<std::pair<double, double>>>("strength", strength);
-             f.validate("");
-             return f;
-           }),
-           py::kw_only(), py::arg("shape") = "box", py::arg("center") = py::make_tuple(0.0, 0.0, 0.0),
-           py::arg("half_size") = py::make_tuple(0.25, 0.25, 0.25), py::arg("radius") = 0.25,
-           py::arg("direction") = py::make_tuple(1.0, 0.0, 0.0), py::arg("force_density") = 20.0,
-           py::arg("max_speed") = 0.0, py::arg("strength") = py::list());
+  py::class_<FanParams> fan_cls(
+      m, "FanParams",
+      "A region pushing the air: force density (N/m^3) along direction inside a box "
+      "or a sphere, times a keyframed strength.");
+  fan_cls.def(
+      py::init([](const py::object& shape, const py::object& center, const py::object& half_size,
+                  const py::object& radius, const py::object& direction,
+                  const py::object& force_density, const py::object& max_speed,
+                  const py::object& strength) {
+        FanParams f;
+        f.shape = from_py<std::string>("shape", shape);
+        f.center = from_py<Vec3>("center", center);
+        f.half_size = from_py<Vec3>("half_size", half_size);
+        f.radius = from_py<double>("radius", radius);
+        f.direction = from_py<Vec3>("direction", direction);
+        f.force_density = from_py<double>("force_density", force_density);
+        f.max_speed = from_py<double>("max_speed", max_speed);
+        f.strength.keys = from_py<std::vector<std::pair<double, double>>>("strength", strength);
+        f.validate("");
+        return f;
+      }),
+      py::kw_only(), py::arg("shape") = "box", py::arg("center") = py::make_tuple(0.0, 0.0, 0.0),
+      py::arg("half_size") = py::make_tuple(0.25, 0.25, 0.25), py::arg("radius") = 0.25,
+      py::arg("direction") = py::make_tuple(1.0, 0.0, 0.0), py::arg("force_density") = 20.0,
+      py::arg("max_speed") = 0.0, py::arg("strength") = py::list());
   py::class_<FanParams>& fan = fan_cls;
   def_field<FanParams, std::string>(fan, "shape", &FanParams::shape, "fan", "'box' | 'sphere'");
   def_vec3_field<FanParams>(fan, "center", &FanParams::center, "fan", "m");
@@ -135,18 +146,18 @@ void bind_fluid(py::module_& m) {
   def_field<FanParams, double>(fan, "radius", &FanParams::radius, "fan", "m, sphere radius");
   def_vec3_field<FanParams>(fan, "direction", &FanParams::direction, "fan", "normalised on use");
   def_field<FanParams, double>(fan, "force_density", &FanParams::force_density, "fan", "N/m^3");
-  def_field<FanParams, double>(fan, "max_speed", &FanParams::max_speed, "fan",
-                               "m/s: the force fades to 0 as the air reaches max_speed along direction; 0 = constant");
-  fan
-      .def_property(
-          "strength", [](const FanParams& f) { return f.strength.keys; },
-          [](FanParams& f, const py::object& k) {
-            FanParams copy = f;
-            copy.strength.keys = from_py<std::vector<std::pair<double, double>>>("fan.strength", k);
-            copy.validate("fan");
-            f = copy;
-          },
-          "(time s, factor) keyframes; empty = always 1")
+  def_field<FanParams, double>(
+      fan, "max_speed", &FanParams::max_speed, "fan",
+      "m/s: the force fades to 0 as the air reaches max_speed along direction; 0 = constant");
+  fan.def_property(
+         "strength", [](const FanParams& f) { return f.strength.keys; },
+         [](FanParams& f, const py::object& k) {
+           FanParams copy = f;
+           copy.strength.keys = from_py<std::vector<std::pair<double, double>>>("fan.strength", k);
+           copy.validate("fan");
+           f = copy;
+         },
+         "(time s, factor) keyframes; empty = always 1")
       .def("validate", &FanParams::validate, py::arg("prefix") = "");
 
   py::class_<Fluid>(m, "Fluid", R"doc(
@@ -157,11 +168,13 @@ nx x ny x nz of each; tunnel grids one more face along the component's own axis.
 Pressure: "fft" (FFTW, periodic only; divergence at round-off) or "pcg" (MIC(0)-preconditioned
 CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip walls.
 )doc")
-      .def(py::init([](const py::object& resolution, const py::object& cell_size, const py::object& origin,
-                       const py::object& boundary, const py::object& viscosity, const py::object& density,
-                       const py::object& advection, const py::object& pressure, const py::object& precision,
-                       const py::object& pcg_tolerance, const py::object& pcg_max_iterations,
-                       const py::object& wind, const py::object& fans) {
+      .def(py::init([](const py::object& resolution, const py::object& cell_size,
+                       const py::object& origin, const py::object& boundary,
+                       const py::object& viscosity, const py::object& density,
+                       const py::object& advection, const py::object& pressure,
+                       const py::object& precision, const py::object& pcg_tolerance,
+                       const py::object& pcg_max_iterations, const py::object& wind,
+                       const py::object& fans) {
              FluidParams p;
              const auto res = from_py<std::array<long long, 3>>("resolution", resolution);
              for (int d = 0; d < 3; ++d)
@@ -180,12 +193,13 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
              p.fans = from_py<std::vector<FanParams>>("fans", fans);
              return std::make_unique<Fluid>(p);
            }),
-           py::kw_only(), py::arg("resolution") = py::make_tuple(16, 16, 16), py::arg("cell_size") = 0.125,
-           py::arg("origin") = py::make_tuple(-0.5, -1.0, -1.0), py::arg("boundary") = "periodic",
-           py::arg("viscosity") = 1.5e-5, py::arg("density") = 1.2, py::arg("advection") = "semi_lagrangian",
-           py::arg("pressure") = FluidParams().pressure, py::arg("precision") = "double", py::arg("pcg_tolerance") = 1e-8,
-           py::arg("pcg_max_iterations") = 500, py::arg("wind") = py::none(),
-           py::arg("fans") = py::list(),
+           py::kw_only(), py::arg("resolution") = py::make_tuple(16, 16, 16),
+           py::arg("cell_size") = 0.125, py::arg("origin") = py::make_tuple(-0.5, -1.0, -1.0),
+           py::arg("boundary") = "periodic", py::arg("viscosity") = 1.5e-5,
+           py::arg("density") = 1.2, py::arg("advection") = "semi_lagrangian",
+           py::arg("pressure") = FluidParams().pressure, py::arg("precision") = "double",
+           py::arg("pcg_tolerance") = 1e-8, py::arg("pcg_max_iterations") = 500,
+           py::arg("wind") = py::none(), py::arg("fans") = py::list(),
            "resolution (nx, ny, nz) cells; cell_size m; origin m (min corner); viscosity m^2/s; "
            "density kg/m^3; wind: None, a 3-vector (m/s) or [(time s, (vx, vy, vz)), ...]: the "
            "periodic mean flow or the tunnel inflow; fans: [FanParams, ...].")
@@ -208,11 +222,14 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
               const MatX3 x = f.face_positions(c);
               py::array pts = py::cast(x);
               py::object result = fn(pts);
-              auto val = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(result);
-              if (result.is_none() || !val || val.ndim() != 2 || val.shape(0) != x.rows() || val.shape(1) != 3)
-                fail_param("fn(points)", "an (M, 3) array for M = " + std::to_string(x.rows()) + " points",
-                           !result.is_none() && val ? "shape " + std::string(py::str(val.attr("shape")))
-                                                    : repr_of(result));
+              auto val =
+                  py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(result);
+              if (result.is_none() || !val || val.ndim() != 2 || val.shape(0) != x.rows() ||
+                  val.shape(1) != 3)
+                fail_param(
+                    "fn(points)", "an (M, 3) array for M = " + std::to_string(x.rows()) + " points",
+                    !result.is_none() && val ? "shape " + std::string(py::str(val.attr("shape")))
+                                             : repr_of(result));
               std::vector<double> col(std::size_t(x.rows()));
               for (py::ssize_t r = 0; r < x.rows(); ++r) col[std::size_t(r)] = val.at(r, c);
               f.set_component(c, col.data());
@@ -226,7 +243,8 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
           [](const Fluid& f, const py::object& points) {
             auto p = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(points);
             if (!p || p.ndim() != 2 || p.shape(1) != 3)
-              fail_param("points", "an (M, 3) array", p ? "ndim " + std::to_string(p.ndim()) : "not an array");
+              fail_param("points", "an (M, 3) array",
+                         p ? "ndim " + std::to_string(p.ndim()) : "not an array");
             py::array_t<double> out({p.shape(0), py::ssize_t(3)});
             const double* src = p.data();
             double* dst = out.mutable_data();
@@ -238,7 +256,8 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
             return out;
           },
           py::arg("points"),
-          "Trilinear air velocity (M, 3) m/s at points (M, 3) m. Points outside the domain take the "
+          "Trilinear air velocity (M, 3) m/s at points (M, 3) m. Points outside the domain take "
+          "the "
           "nearest boundary value and are counted in stats['samples_outside'].")
       .def(
           "divergence",
@@ -248,28 +267,34 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
             f.divergence(out.mutable_data());
             return out;
           },
-          "Cell divergence (nx, ny, nz) of the current field, 1/s (after a step: after its projection).")
+          "Cell divergence (nx, ny, nz) of the current field, 1/s (after a step: after its "
+          "projection).")
       .def("max_divergence", &Fluid::max_divergence, "max |divergence|, 1/s.")
       .def_property(
           "u", [](py::object self) { return component_view(self, 0); },
-          [](Fluid& f, const py::object& a) { set_component_from(f, 0, a); }, "x-face velocities (view), m/s")
+          [](Fluid& f, const py::object& a) { set_component_from(f, 0, a); },
+          "x-face velocities (view), m/s")
       .def_property(
           "v", [](py::object self) { return component_view(self, 1); },
-          [](Fluid& f, const py::object& a) { set_component_from(f, 1, a); }, "y-face velocities (view), m/s")
+          [](Fluid& f, const py::object& a) { set_component_from(f, 1, a); },
+          "y-face velocities (view), m/s")
       .def_property(
           "w", [](py::object self) { return component_view(self, 2); },
-          [](Fluid& f, const py::object& a) { set_component_from(f, 2, a); }, "z-face velocities (view), m/s")
+          [](Fluid& f, const py::object& a) { set_component_from(f, 2, a); },
+          "z-face velocities (view), m/s")
       .def(
-          "face_positions", [](const Fluid& f, const py::object& c_) {
+          "face_positions",
+          [](const Fluid& f, const py::object& c_) {
             const long c = from_py<long>("component", c_);
             if (c < 0 || c > 2) fail_param("component", "0, 1 or 2", c);
             return f.face_positions(c);
           },
           py::arg("component"), "World positions (size, 3) of the u (0), v (1) or w (2) nodes, m.")
-      .def_property_readonly("resolution", [](const Fluid& f) {
-        const GridGeometry& g = f.geometry();
-        return py::make_tuple(g.nx, g.ny, g.nz);
-      })
+      .def_property_readonly("resolution",
+                             [](const Fluid& f) {
+                               const GridGeometry& g = f.geometry();
+                               return py::make_tuple(g.nx, g.ny, g.nz);
+                             })
       .def_property_readonly("cell_size", [](const Fluid& f) { return f.geometry().h; })
       .def_property_readonly("origin", [](const Fluid& f) { return f.geometry().origin; })
       .def_property_readonly("boundary", [](const Fluid& f) { return f.params().boundary; })
@@ -279,27 +304,28 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
       .def_property_readonly("viscosity", [](const Fluid& f) { return f.params().viscosity; })
       .def_property_readonly("density", [](const Fluid& f) { return f.params().density; })
       .def_property_readonly("wind", [](const Fluid& f) { return wind_to_list(f.params().wind); })
-      .def_property_readonly("stats", [](const Fluid& f) {
-        const FluidStats& s = f.stats();
-        py::dict d;
-        d["steps"] = s.steps;
-        d["pressure_iterations"] = s.pressure_iterations;
-        d["pressure_residual"] = s.pressure_residual;
-        d["pressure_converged"] = s.pressure_converged;
-        d["diffusion_iterations"] = s.diffusion_iterations;
-        d["samples_outside"] = s.samples_outside;
-        d["seconds_advect"] = s.seconds_advect;
-        d["seconds_forces"] = s.seconds_forces;
-        d["seconds_project"] = s.seconds_project;
-        return d;
-      })
+      .def_property_readonly("stats",
+                             [](const Fluid& f) {
+                               const FluidStats& s = f.stats();
+                               py::dict d;
+                               d["steps"] = s.steps;
+                               d["pressure_iterations"] = s.pressure_iterations;
+                               d["pressure_residual"] = s.pressure_residual;
+                               d["pressure_converged"] = s.pressure_converged;
+                               d["diffusion_iterations"] = s.diffusion_iterations;
+                               d["samples_outside"] = s.samples_outside;
+                               d["seconds_advect"] = s.seconds_advect;
+                               d["seconds_forces"] = s.seconds_forces;
+                               d["seconds_project"] = s.seconds_project;
+                               return d;
+                             })
       .def("__repr__", [](const Fluid& f) {
         const GridGeometry& g = f.geometry();
         const FluidParams& p = f.params();
         return "Fluid(resolution=(" + std::to_string(g.nx) + ", " + std::to_string(g.ny) + ", " +
-               std::to_string(g.nz) + "), cell_size=" + detail::to_text(g.h) + ", boundary='" + p.boundary +
-               "', advection='" + p.advection + "', pressure='" + p.pressure + "', precision='" + p.precision +
-               "', time=" + detail::to_text(f.time()) + ")";
+               std::to_string(g.nz) + "), cell_size=" + detail::to_text(g.h) + ", boundary='" +
+               p.boundary + "', advection='" + p.advection + "', pressure='" + p.pressure +
+               "', precision='" + p.precision + "', time=" + detail::to_text(f.time()) + ")";
       });
 }
 

@@ -29,8 +29,8 @@ void bind_io(py::module_& m) {
     try {
       if (p) std::rethrow_exception(p);
     } catch (const IoError& e) {
-      py::object exc = py::module_::import("builtins")
-                           .attr("OSError")(e.error_number, e.reason, e.path);
+      py::object exc =
+          py::module_::import("builtins").attr("OSError")(e.error_number, e.reason, e.path);
       PyErr_SetObject(reinterpret_cast<PyObject*>(Py_TYPE(exc.ptr())), exc.ptr());
     }
   });

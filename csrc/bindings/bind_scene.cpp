@@ -20,7 +20,8 @@ template <class Mat>
 py::array view_of(Mat& m, py::handle owner, bool writeable) {
   using Scalar = typename Mat::Scalar;
   std::vector<py::ssize_t> shape{m.rows(), m.cols()};
-  std::vector<py::ssize_t> strides{py::ssize_t(sizeof(Scalar) * m.cols()), py::ssize_t(sizeof(Scalar))};
+  std::vector<py::ssize_t> strides{py::ssize_t(sizeof(Scalar) * m.cols()),
+                                   py::ssize_t(sizeof(Scalar))};
   py::array a(py::dtype::of<Scalar>(), shape, strides, m.data(), owner);
   if (!writeable) a.attr("setflags")(py::arg("write") = false);
   return a;
@@ -28,14 +29,16 @@ py::array view_of(Mat& m, py::handle owner, bool writeable) {
 
 template <class Vec>
 py::array view_of_vec(const Vec& v, py::handle owner) {
-  py::array a(py::dtype::of<typename Vec::Scalar>(), {v.size()}, {py::ssize_t(sizeof(typename Vec::Scalar))},
-              v.data(), owner);
+  py::array a(py::dtype::of<typename Vec::Scalar>(), {v.size()},
+              {py::ssize_t(sizeof(typename Vec::Scalar))}, v.data(), owner);
   a.attr("setflags")(py::arg("write") = false);
   return a;
 }
 
-// Copy an (N, 3) array-like into m in place (views stay valid); rejects other shapes and non-finite.
-void assign_rows(MatX3& m, const std::string& name, const py::array_t<double, py::array::c_style | py::array::forcecast>& a) {
+// Copy an (N, 3) array-like into m in place (views stay valid); rejects other shapes and
+// non-finite.
+void assign_rows(MatX3& m, const std::string& name,
+                 const py::array_t<double, py::array::c_style | py::array::forcecast>& a) {
   if (a.ndim() != 2 || a.shape(0) != m.rows() || a.shape(1) != 3)
     throw InvalidArgument(name + " should have shape (" + std::to_string(m.rows()) + ", 3), got " +
                           std::string(py::str(a.attr("shape"))));
@@ -57,18 +60,21 @@ py::list wind_to_list(const WindSchedule& w) {
 WindSchedule wind_from(const std::string& name, const py::object& o) {
   auto seq = py::reinterpret_borrow<py::sequence>(o);
   if (!py::isinstance<py::sequence>(o) || py::isinstance<py::str>(o))
-    throw InvalidArgument(name + " should be a velocity (vx, vy, vz) or keyframes [(time, (vx, vy, vz)), ...], got " +
-                          std::string(py::str(py::repr(o))));
+    throw InvalidArgument(
+        name + " should be a velocity (vx, vy, vz) or keyframes [(time, (vx, vy, vz)), ...], got " +
+        std::string(py::str(py::repr(o))));
   bool constant = seq.size() == 3;
   if (constant)
-    for (auto item : seq) constant = constant && (py::isinstance<py::float_>(item) || py::isinstance<py::int_>(item));
+    for (auto item : seq)
+      constant = constant && (py::isinstance<py::float_>(item) || py::isinstance<py::int_>(item));
   if (constant) return WindSchedule(vec3_from(name, o));
   WindSchedule w;
   for (size_t i = 0; i < seq.size(); ++i) {
     const std::string key = name + "[" + std::to_string(i) + "]";
     py::object item = seq[i];
     if (!py::isinstance<py::sequence>(item) || py::len(item) != 2)
-      throw InvalidArgument(key + " should be a pair (time, (vx, vy, vz)), got " + std::string(py::str(py::repr(item))));
+      throw InvalidArgument(key + " should be a pair (time, (vx, vy, vz)), got " +
+                            std::string(py::str(py::repr(item))));
     const double t = from_py<double>(key + ".time", item[py::int_(0)]);
     w.keys.push_back({t, vec3_from(key + ".velocity", item[py::int_(1)])});
   }
@@ -78,8 +84,8 @@ WindSchedule wind_from(const std::string& name, const py::object& o) {
 }  // namespace
 
 void bind_scene(py::module_& m) {
-  py::class_<AirParams> air(m, "AirParams",
-                            "The air: 'none', 'uniform' (analytic wind) or 'grid' (Stable Fluids).");
+  py::class_<AirParams> air(
+      m, "AirParams", "The air: 'none', 'uniform' (analytic wind) or 'grid' (Stable Fluids).");
   air.def(py::init<>());
   def_field(air, "model", &AirParams::model, "air", "'none' | 'uniform' | 'grid'");
   air.def_property(
@@ -90,7 +96,8 @@ void bind_scene(py::module_& m) {
         copy.validate("air");
         a = copy;
       },
-      "m/s: a constant (vx, vy, vz) or keyframes [(time s, (vx, vy, vz)), ...], linear between keys; "
+      "m/s: a constant (vx, vy, vz) or keyframes [(time s, (vx, vy, vz)), ...], linear between "
+      "keys; "
       "reads back as keyframes");
   def_field<AirParams, double>(air, "density", &AirParams::density, "air", "kg/m^3");
   def_field<AirParams, double>(air, "viscosity", &AirParams::viscosity, "air",
@@ -103,8 +110,10 @@ Sections: flag, air, drag, integrator (and the areas' own sections); top-level d
 Every assignment is validated: a bad value raises ValueError naming the parameter and leaves
 the scene unchanged. Build one with Scene.paper(), Scene.named(name) or Scene.load(path).)doc");
   scene.def(py::init<>());
-  scene.def_static("paper", &Scene::paper, "Paper §5: 8 x 11 flag, 0.54 m tall, dt = 0.01 s, 2 m/s air.");
-  scene.def_static("banner", &Scene::banner, "Banner hanging from its top edge in a 3 m/s wind along +z.");
+  scene.def_static("paper", &Scene::paper,
+                   "Paper §5: 8 x 11 flag, 0.54 m tall, dt = 0.01 s, 2 m/s air.");
+  scene.def_static("banner", &Scene::banner,
+                   "Banner hanging from its top edge in a 3 m/s wind along +z.");
   scene.def_static("flapping_demo", &Scene::flapping_demo,
                    "Paper §4.3 (Fig. 6): eq. 5 flapping alone; no air solver, no gravity, every "
                    "mass pulled along +x.");
@@ -177,44 +186,70 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
       py::arg("n") = 1, "Advance n steps of scene.dt. Raises DivergenceError (state restored).");
   sim.def_property_readonly("time", &Simulation::time, "simulated time, s");
   sim.def_property_readonly("step_count", &Simulation::step_count);
-  sim.def_property_readonly("scene", [](const Simulation& s) { return Scene(s.scene()); },
-                            "a copy of the scene this simulation was built from");
+  sim.def_property_readonly(
+      "scene", [](const Simulation& s) { return Scene(s.scene()); },
+      "a copy of the scene this simulation was built from");
   sim.def_property(
-      "positions", [](py::object self) { return view_of(self.cast<Simulation&>().positions(), self, true); },
+      "positions",
+      [](py::object self) { return view_of(self.cast<Simulation&>().positions(), self, true); },
       [](Simulation& s, const py::array_t<double, py::array::c_style | py::array::forcecast>& a) {
         assign_rows(s.positions(), "positions", a);
         s.update_normals();
       },
       "(N, 3) m, view");
   sim.def_property(
-      "velocities", [](py::object self) { return view_of(self.cast<Simulation&>().velocities(), self, true); },
+      "velocities",
+      [](py::object self) { return view_of(self.cast<Simulation&>().velocities(), self, true); },
       [](Simulation& s, const py::array_t<double, py::array::c_style | py::array::forcecast>& a) {
         assign_rows(s.velocities(), "velocities", a);
       },
       "(N, 3) m/s, view");
   sim.def_property_readonly(
-      "normals", [](py::object self) { return view_of(const_cast<MatX3&>(self.cast<Simulation&>().normals()), self, false); },
+      "normals",
+      [](py::object self) {
+        return view_of(const_cast<MatX3&>(self.cast<Simulation&>().normals()), self, false);
+      },
       "(N, 3) unit vertex normals, read-only view");
   sim.def_property_readonly(
-      "triangles", [](py::object self) { return view_of(const_cast<MatX3i&>(self.cast<Simulation&>().topology().triangles), self, false); },
+      "triangles",
+      [](py::object self) {
+        return view_of(const_cast<MatX3i&>(self.cast<Simulation&>().topology().triangles), self,
+                       false);
+      },
       "(T, 3) int32 vertex indices, counter-clockwise seen from +z at rest");
   sim.def_property_readonly(
-      "uv", [](py::object self) { return view_of(const_cast<MatX2&>(self.cast<Simulation&>().topology().uv), self, false); },
+      "uv",
+      [](py::object self) {
+        return view_of(const_cast<MatX2&>(self.cast<Simulation&>().topology().uv), self, false);
+      },
       "(N, 2) texture coordinates in [0, 1]");
   sim.def_property_readonly(
-      "rest_positions", [](py::object self) { return view_of(const_cast<MatX3&>(self.cast<Simulation&>().topology().rest_positions), self, false); },
+      "rest_positions",
+      [](py::object self) {
+        return view_of(const_cast<MatX3&>(self.cast<Simulation&>().topology().rest_positions), self,
+                       false);
+      },
       "(N, 3) m");
   sim.def_property_readonly(
-      "springs", [](py::object self) { return view_of(const_cast<MatX2i&>(self.cast<Simulation&>().topology().springs), self, false); },
+      "springs",
+      [](py::object self) {
+        return view_of(const_cast<MatX2i&>(self.cast<Simulation&>().topology().springs), self,
+                       false);
+      },
       "(S, 2) int32 vertex pairs (structural, shear, bend)");
   sim.def_property_readonly(
-      "rest_lengths", [](py::object self) { return view_of_vec(self.cast<Simulation&>().topology().rest_length, self); },
+      "rest_lengths",
+      [](py::object self) {
+        return view_of_vec(self.cast<Simulation&>().topology().rest_length, self);
+      },
       "(S,) m");
   sim.def_property_readonly(
-      "node_mass", [](py::object self) { return view_of_vec(self.cast<Simulation&>().topology().mass, self); },
+      "node_mass",
+      [](py::object self) { return view_of_vec(self.cast<Simulation&>().topology().mass, self); },
       "(N,) kg, areal density x node_area");
   sim.def_property_readonly(
-      "node_area", [](py::object self) { return view_of_vec(self.cast<Simulation&>().topology().area, self); },
+      "node_area",
+      [](py::object self) { return view_of_vec(self.cast<Simulation&>().topology().area, self); },
       "(N,) m^2, a third of each adjacent triangle's rest area (S of eq. 3)");
   sim.def_property_readonly(
       "pinned",
@@ -226,8 +261,9 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
         return out;
       },
       "(N,) bool, pinned vertices (inverse mass 0)");
-  sim.def_property_readonly("stages", [](const Simulation& s) { return py::tuple(py::cast(s.stages())); },
-                            "names of the stages this scene runs, in step order");
+  sim.def_property_readonly(
+      "stages", [](const Simulation& s) { return py::tuple(py::cast(s.stages())); },
+      "names of the stages this scene runs, in step order");
   sim.def_property_readonly(
       "timings",
       [](const Simulation& s) {
@@ -266,7 +302,8 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
   sim.def_property_readonly(
       "render_positions",
       [](py::object self) {
-        return view_of(const_cast<MatX3&>(self.cast<Simulation&>().render_positions()), self, false);
+        return view_of(const_cast<MatX3&>(self.cast<Simulation&>().render_positions()), self,
+                       false);
       },
       "(N, 3) m, read-only view of the geometry to export: with flapping.mode 'visual' the "
       "positions displaced by eq. 5 along the normals (physics untouched), else the positions");
@@ -278,7 +315,9 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
       "(N, 3) unit normals of render_positions, read-only view");
   sim.def_property_readonly(
       "flap_displacement",
-      [](py::object self) { return view_of_vec(self.cast<Simulation&>().flap_displacement(), self); },
+      [](py::object self) {
+        return view_of_vec(self.cast<Simulation&>().flap_displacement(), self);
+      },
       "(N,) m, eq. 5 displacement z of each vertex at the current time (zeros when off)");
   sim.def_property_readonly("pole_air_speed", &Simulation::pole_air_speed,
                             "u_p of eq. 5 at the last flap stage: mean air speed along the "
@@ -322,7 +361,8 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
       "stats['samples_outside'] counts masses that sampled it from outside its domain");
   sim.def(
       "air_velocity",
-      [](const Simulation& s, const py::array_t<double, py::array::c_style | py::array::forcecast>& pts) {
+      [](const Simulation& s,
+         const py::array_t<double, py::array::c_style | py::array::forcecast>& pts) {
         if (pts.ndim() != 2 || pts.shape(1) != 3)
           throw InvalidArgument("points should have shape (M, 3), got " +
                                 std::string(py::str(pts.attr("shape"))));

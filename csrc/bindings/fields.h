@@ -26,7 +26,8 @@ inline std::string repr_of(py::handle o) {
 }
 
 /// TypeError "<name> should be <expected>, got <repr>".
-[[noreturn]] inline void wrong_type(const std::string& name, const std::string& expected, py::handle o) {
+[[noreturn]] inline void wrong_type(const std::string& name, const std::string& expected,
+                                    py::handle o) {
   throw py::type_error(name + " should be " + expected + ", got " + repr_of(o));
 }
 
@@ -119,14 +120,19 @@ T from_py(const std::string& name, py::handle o) {
     return out;
   } else {  // a bound struct
     if (!py::isinstance<T>(o))
-      wrong_type(name, std::string("a ") + py::str(py::type::of<T>().attr("__name__")).cast<std::string>(), o);
+      wrong_type(
+          name, std::string("a ") + py::str(py::type::of<T>().attr("__name__")).cast<std::string>(),
+          o);
     return o.cast<T>();
   }
 }
 
-/// Vec3 <-> tuple of 3 floats (a tuple, so `p.origin[0] = 1` fails loudly instead of editing a copy).
+/// Vec3 <-> tuple of 3 floats (a tuple, so `p.origin[0] = 1` fails loudly instead of editing a
+/// copy).
 inline py::tuple vec3_to_tuple(const Vec3& v) { return py::make_tuple(v.x(), v.y(), v.z()); }
-inline Vec3 vec3_from(const std::string& name, const py::object& o) { return from_py<Vec3>(name, o); }
+inline Vec3 vec3_from(const std::string& name, const py::object& o) {
+  return from_py<Vec3>(name, o);
+}
 
 template <class S, class T>
 void def_field(py::class_<S>& cls, const char* name, T S::*member, std::string section,

@@ -2,9 +2,9 @@
 
 #include <cmath>
 
-#include "common/parallel.h"
 #include <algorithm>
 #include <limits>
+#include "common/parallel.h"
 
 namespace flagsim {
 
@@ -98,8 +98,8 @@ void spring_position_jacobians(const ClothTopology& topo, const MatX3& x, bool c
       K[s].e.setZero();
       return;
     }
-    // k [a (I - P) + P] = k a I + k (1 - a) P, a = 1 - L/l (clamped: max(0, that)), P = d d^T / l^2;
-    // 1 - a = L/l >= 0 either way, so e is real.
+    // k [a (I - P) + P] = k a I + k (1 - a) P, a = 1 - L/l (clamped: max(0, that)), P = d d^T /
+    // l^2; 1 - a = L/l >= 0 either way, so e is real.
     const double a = clamp_compression ? std::max(0.0, 1.0 - L / l) : 1.0 - L / l;
     K[s].a = k * a;
     K[s].e = (std::sqrt(k * (1.0 - a)) / l) * d;
@@ -120,8 +120,8 @@ void apply_position_jacobian(const ClothTopology& topo, const std::vector<Spring
 }
 
 void drag_velocity_jacobians(const ClothTopology& topo, const DragParams& drag, double rho,
-                             const MatX3& x, const MatX3& v, const MatX3& u,
-                             std::vector<Mat3>& Dv, std::vector<Mat3>& Jw) {
+                             const MatX3& x, const MatX3& v, const MatX3& u, std::vector<Mat3>& Dv,
+                             std::vector<Mat3>& Jw) {
   const Index n = topo.num_vertices();
   const double c = 0.5 * drag.coefficient * rho;
   Dv.resize(n);
@@ -173,7 +173,8 @@ void apply_velocity_jacobian(const ClothTopology& topo, const std::vector<Mat3>&
     if (!Jw.empty())
       for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k) {
         const int32_t t = topo.tri_adj[k];
-        const Vec3 sum = p.row(topo.triangles(t, 0)) + p.row(topo.triangles(t, 1)) + p.row(topo.triangles(t, 2));
+        const Vec3 sum =
+            p.row(topo.triangles(t, 0)) + p.row(topo.triangles(t, 1)) + p.row(topo.triangles(t, 2));
         acc -= Jw[t] * sum / 9.0;
       }
     out.row(i) = acc;
@@ -194,7 +195,8 @@ double stable_step_estimate(const ClothTopology& topo, const DragParams& drag, d
     for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k) {
       const int32_t s = topo.adj_spring[k], j = topo.adj_other[k];
       const double l = (x.row(j) - x.row(i)).norm(), L = topo.rest_length[s];
-      const double stiff = topo.stiffness[s] * std::max(1.0, l > kTinyLength ? std::abs(1 - L / l) : 1.0);
+      const double stiff =
+          topo.stiffness[s] * std::max(1.0, l > kTinyLength ? std::abs(1 - L / l) : 1.0);
       const double w = 1.0 / mi + 1.0 / std::sqrt(mi * topo.mass[j]);
       ki += stiff * w;
       ci += topo.damping[s] * w;

@@ -30,11 +30,11 @@ struct SpringBlock {
   Mat3 matrix() const { return a * Mat3::Identity() + e * e.transpose(); }
 };
 
-/// Per spring s = (i, j): K_s = d f_i / d x_j = k [(1 - L/l)(I - d d^T) + d d^T], d = unit(x_j - x_i),
-/// l = |x_j - x_i| (Baraff-Witkin 1998 §5), as the block k (1 - L/l) I + k (L/l) d d^T
-/// (e = sqrt(k L/l) d). d f_i/d x_i = -K_s. With `clamp_compression`, the factor (1 - L/l) is
-/// clamped at 0 so every K_s is positive semi-definite (Choi-Ko 2002), which keeps the implicit
-/// system SPD (the solver's form); without, it is the exact Jacobian. Writes K (S).
+/// Per spring s = (i, j): K_s = d f_i / d x_j = k [(1 - L/l)(I - d d^T) + d d^T], d = unit(x_j -
+/// x_i), l = |x_j - x_i| (Baraff-Witkin 1998 §5), as the block k (1 - L/l) I + k (L/l) d d^T (e =
+/// sqrt(k L/l) d). d f_i/d x_i = -K_s. With `clamp_compression`, the factor (1 - L/l) is clamped at
+/// 0 so every K_s is positive semi-definite (Choi-Ko 2002), which keeps the implicit system SPD
+/// (the solver's form); without, it is the exact Jacobian. Writes K (S).
 void spring_position_jacobians(const ClothTopology& topo, const MatX3& x, bool clamp_compression,
                                std::vector<SpringBlock>& K);
 
@@ -44,8 +44,9 @@ void apply_position_jacobian(const ClothTopology& topo, const std::vector<Spring
 
 /// Velocity Jacobians of drag. Per-vertex models ("paper", "relative"): Dv[i] = -d f_i / d v_i
 /// (positive semi-definite). For "paper" the stabilised form c S ((|v| + |u|) I + v v^T/|v|) is
-/// used (see forces.cpp); pass u = 0 to get the exact Jacobian. "triangle": Jw[t] = d F_t / d w (w = mean air - mean vertex velocity
-/// of triangle t), and d f_i / d v_m = -Jw[t] / 9 for i, m in t. Resizes Dv (N) and Jw (T or 0).
+/// used (see forces.cpp); pass u = 0 to get the exact Jacobian. "triangle": Jw[t] = d F_t / d w (w
+/// = mean air - mean vertex velocity of triangle t), and d f_i / d v_m = -Jw[t] / 9 for i, m in t.
+/// Resizes Dv (N) and Jw (T or 0).
 void drag_velocity_jacobians(const ClothTopology& topo, const DragParams& drag, double rho,
                              const MatX3& x, const MatX3& v, const MatX3& u_air,
                              std::vector<Mat3>& Dv, std::vector<Mat3>& Jw);

@@ -86,8 +86,8 @@ double pin_work(const ClothTopology& topo, const MatX3& f, const MatX3& v, doubl
 // The work of the forces as the integrator applied them over the displacement h v (J, into
 // work): the drag s.fd, the external force, spring damping at velocities a, and the pins (s.f on
 // pinned vertices that move; their v is the same before and after a step). A drift books its own.
-void book_force_work(const ClothTopology& topo, const ForceSet& fs, const MatX3& a,
-                     const MatX3& v, double h, const IntegratorScratch& s, StepWork& work) {
+void book_force_work(const ClothTopology& topo, const ForceSet& fs, const MatX3& a, const MatX3& v,
+                     double h, const IntegratorScratch& s, StepWork& work) {
   if (fs.drag) work.drag += work_over(s.fd, v, h);
   if (fs.external) work.external += work_over(*fs.external, v, h);
   work.damping += damping_work(topo, a, v, h);
@@ -126,7 +126,8 @@ double drift_work(const ClothTopology& topo, const ForceSet& fs, const MatX3& f,
 // Multigrid when asked for ("auto": on grids of at least kAutoMultigridVertices vertices, where it
 // measured faster; docs/design.md) and when the topology is a grid it can coarsen.
 constexpr Index kAutoMultigridVertices = 200;
-bool use_multigrid(const ClothTopology& topo, const IntegratorParams& ip, const IntegratorScratch& s) {
+bool use_multigrid(const ClothTopology& topo, const IntegratorParams& ip,
+                   const IntegratorScratch& s) {
   if (s.mg.levels.empty() || ip.preconditioner == "jacobi") return false;
   return ip.preconditioner == "multigrid" || topo.num_vertices() >= kAutoMultigridVertices;
 }
@@ -430,7 +431,8 @@ IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const I
     } else if (ip.method == "implicit") {
       st = implicit_step(topo, fs, ip, hs, u, x, v, s, stats, E, work, t);
     } else {
-      throw std::logic_error("integrate: unknown method '" + ip.method + "' (validate() lets none through)");
+      throw std::logic_error("integrate: unknown method '" + ip.method +
+                             "' (validate() lets none through)");
     }
     if (st != IntegrateStatus::kOk) return st;
   }

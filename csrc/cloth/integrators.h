@@ -18,11 +18,11 @@ struct ForceSet {
   bool springs = false;
   Vec3 g{0, -9.81, 0};  ///< m/s^2
   DragParams drag_params;
-  double rho = 1.2;     ///< air density, kg/m^3
+  double rho = 1.2;  ///< air density, kg/m^3
   /// J. Implicit: a piece of a step whose energy gain beyond the work of the forces (the
   /// positive parts of its remainder and of its strain-limit work, StepWork) exceeds this is
-  /// redone as two pieces of half the length (as a failed CG solve is); 0 = off. The Simulation sets integrator.energy_tolerance x its energy
-  /// scale.
+  /// redone as two pieces of half the length (as a failed CG solve is); 0 = off. The Simulation
+  /// sets integrator.energy_tolerance x its energy scale.
   double energy_guard = 0;
   /// Explicit adaptive: substeps are at most refine x safety x the stable step estimate. A
   /// step redone in 2^k pieces after an implausible one runs at refine = 2^-k: shorter pieces
@@ -89,10 +89,10 @@ struct StepWork {
 };
 
 struct IntegratorStats {
-  long substeps = 0;       ///< explicit: substeps of the last step
-  long cg_iterations = 0;  ///< implicit: CG iterations of the last step (all solves)
-  long halvings = 0;       ///< implicit: step halvings of the last step
-  double stable_step = 0;  ///< explicit: stable step estimate at the start of the last step, s
+  long substeps = 0;         ///< explicit: substeps of the last step
+  long cg_iterations = 0;    ///< implicit: CG iterations of the last step (all solves)
+  long halvings = 0;         ///< implicit: step halvings of the last step
+  double stable_step = 0;    ///< explicit: stable step estimate at the start of the last step, s
   long energy_halvings = 0;  ///< implicit: halvings of the last step caused by energy gain
   StepWork work;             ///< the last step's energy bookkeeping
   double energy_before = 0;  ///< J, total_energy at the start of the last step

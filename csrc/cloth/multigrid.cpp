@@ -24,8 +24,8 @@ inline bool free_vertex(const ClothTopology& topo, Index i) { return topo.inv_ma
 // Adds B x_{nb} of the slots k.. (one per lane of S: double, or a 16- or 32-byte vector) to
 // (sx, sy, sz).
 template <class S>
-FLAGSIM_INLINE void add_spring_blocks(const NeighbourBlocks& n, const double* x, size_t k, S& sx, S& sy,
-                                      S& sz) {
+FLAGSIM_INLINE void add_spring_blocks(const NeighbourBlocks& n, const double* x, size_t k, S& sx,
+                                      S& sy, S& sz) {
   const double* p = x + 3 * std::size_t(n.nb[k]);
   S X, Y, Z;
   if constexpr (std::is_same<S, double>::value) {
@@ -59,13 +59,15 @@ FLAGSIM_INLINE void add_spring_blocks(const NeighbourBlocks& n, const double* x,
 // same operations on every lane type, so every width gives the same bits. One kernel for the CG
 // product and the smoother.
 template <class L>
-FLAGSIM_INLINE Vec3 spring_blocks_times(const NeighbourBlocks& n, const double* x, int32_t k, int32_t end) {
+FLAGSIM_INLINE Vec3 spring_blocks_times(const NeighbourBlocks& n, const double* x, int32_t k,
+                                        int32_t end) {
   double sx = 0, sy = 0, sz = 0;
   if (k + 4 <= end) {
     if constexpr (std::is_void<L>::value) {
       double ax[4] = {}, ay[4] = {}, az[4] = {};
       for (; k + 4 <= end; k += 4)
-        for (int lane = 0; lane < 4; ++lane) add_spring_blocks(n, x, size_t(k + lane), ax[lane], ay[lane], az[lane]);
+        for (int lane = 0; lane < 4; ++lane)
+          add_spring_blocks(n, x, size_t(k + lane), ax[lane], ay[lane], az[lane]);
       sx = (ax[0] + ax[1]) + (ax[2] + ax[3]);
       sy = (ay[0] + ay[1]) + (ay[2] + ay[3]);
       sz = (az[0] + az[1]) + (az[2] + az[3]);
@@ -95,13 +97,17 @@ FLAGSIM_INLINE Vec3 spring_blocks_times(const NeighbourBlocks& n, const double* 
 // -B_s, triangles J_t. kLower / kUpper: only j < i / j > i.
 enum class Side { kAll, kLower, kUpper };
 template <class L, Side side>
-FLAGSIM_INLINE Vec3 minus_offdiagonal(const ClothTopology& topo, const ClothSystem& A, const MatX3& x, Index i) {
+FLAGSIM_INLINE Vec3 minus_offdiagonal(const ClothTopology& topo, const ClothSystem& A,
+                                      const MatX3& x, Index i) {
   const NeighbourBlocks& n = A.off;
   const int32_t begin = side == Side::kUpper ? n.lower_end[size_t(i)] : topo.adj_offset[size_t(i)];
-  const int32_t end = side == Side::kLower ? n.lower_end[size_t(i)] : topo.adj_offset[size_t(i) + 1];
+  const int32_t end =
+      side == Side::kLower ? n.lower_end[size_t(i)] : topo.adj_offset[size_t(i) + 1];
   Vec3 acc = spring_blocks_times<L>(n, x.data(), begin, end);
   if (!A.J.empty()) {
-    auto take = [i](Index j) { return side == Side::kAll ? j != i : side == Side::kLower ? j < i : j > i; };
+    auto take = [i](Index j) {
+      return side == Side::kAll ? j != i : side == Side::kLower ? j < i : j > i;
+    };
     for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k) {
       const int32_t t = topo.tri_adj[k];
       Vec3 sum = Vec3::Zero();
@@ -119,33 +125,39 @@ struct FinePasses {
   // Block Gauss-Seidel: x_i <- D_i^-1 (b_i - sum_{j != i} A_ij x_j), D_i A's diagonal block, over
   // the free vertices in increasing (forward) or decreasing order. from_zero: the forward sweep
   // that starts from x = 0 reads only the j < i it has already set.
-  FLAGSIM_INLINE static void gauss_seidel(const ClothTopology& topo, const ClothSystem& A, const MatX3& b, MatX3& x,
-                                          bool forward, bool from_zero) {
+  FLAGSIM_INLINE static void gauss_seidel(const ClothTopology& topo, const ClothSystem& A,
+                                          const MatX3& b, MatX3& x, bool forward, bool from_zero) {
     const Index N = topo.num_vertices();
     for (Index n = 0; n < N; ++n) {
       const Index i = forward ? n : N - 1 - n;
       if (!free_vertex(topo, i)) continue;
-      const Vec3 acc = Vec3(b.row(i)) + (from_zero ? minus_offdiagonal<L, Side::kLower>(topo, A, x, i)
-                                                   : minus_offdiagonal<L, Side::kAll>(topo, A, x, i));
+      const Vec3 acc =
+          Vec3(b.row(i)) + (from_zero ? minus_offdiagonal<L, Side::kLower>(topo, A, x, i)
+                                      : minus_offdiagonal<L, Side::kAll>(topo, A, x, i));
       x.row(i) = (A.Pinv[i] * acc).transpose();
     }
   }
   // out_i = (A p)_i = diag_i p_i + sum_{j != i} A_ij p_j for the vertices [begin, end).
-  FLAGSIM_INLINE static void product(const ClothTopology& topo, const ClothSystem& A, const MatX3& p, MatX3& out,
-                                     Index begin, Index end) {
+  FLAGSIM_INLINE static void product(const ClothTopology& topo, const ClothSystem& A,
+                                     const MatX3& p, MatX3& out, Index begin, Index end) {
     for (Index i = begin; i < end; ++i) {
       if (!free_vertex(topo, i)) {
         out.row(i).setZero();
         continue;
       }
-      out.row(i) = (A.diag[size_t(i)] * Vec3(p.row(i)) - minus_offdiagonal<L, Side::kAll>(topo, A, p, i)).transpose();
+      out.row(i) =
+          (A.diag[size_t(i)] * Vec3(p.row(i)) - minus_offdiagonal<L, Side::kAll>(topo, A, p, i))
+              .transpose();
     }
   }
   // out_i = -sum_{j > i} A_ij x_j (zero on pinned rows).
-  FLAGSIM_INLINE static void upper_half(const ClothTopology& topo, const ClothSystem& A, const MatX3& x, MatX3& out) {
+  FLAGSIM_INLINE static void upper_half(const ClothTopology& topo, const ClothSystem& A,
+                                        const MatX3& x, MatX3& out) {
     for (Index i = 0; i < topo.num_vertices(); ++i)
-      if (free_vertex(topo, i)) out.row(i) = minus_offdiagonal<L, Side::kUpper>(topo, A, x, i).transpose();
-      else out.row(i).setZero();
+      if (free_vertex(topo, i))
+        out.row(i) = minus_offdiagonal<L, Side::kUpper>(topo, A, x, i).transpose();
+      else
+        out.row(i).setZero();
   }
 };
 
@@ -154,16 +166,16 @@ using FineNarrow = FinePasses<NarrowLanes<double>>;
 // The same passes compiled for AVX (32-byte lanes), chosen at run time by vector_bytes().
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
 using FineWide = FinePasses<Lanes32<double>>;
-FLAGSIM_TARGET_AVX void gauss_seidel_wide(const ClothTopology& topo, const ClothSystem& A, const MatX3& b,
-                                          MatX3& x, bool forward, bool from_zero) {
+FLAGSIM_TARGET_AVX void gauss_seidel_wide(const ClothTopology& topo, const ClothSystem& A,
+                                          const MatX3& b, MatX3& x, bool forward, bool from_zero) {
   FineWide::gauss_seidel(topo, A, b, x, forward, from_zero);
 }
-FLAGSIM_TARGET_AVX void product_wide(const ClothTopology& topo, const ClothSystem& A, const MatX3& p,
-                                     MatX3& out, Index begin, Index end) {
+FLAGSIM_TARGET_AVX void product_wide(const ClothTopology& topo, const ClothSystem& A,
+                                     const MatX3& p, MatX3& out, Index begin, Index end) {
   FineWide::product(topo, A, p, out, begin, end);
 }
-FLAGSIM_TARGET_AVX void upper_half_wide(const ClothTopology& topo, const ClothSystem& A, const MatX3& x,
-                                        MatX3& out) {
+FLAGSIM_TARGET_AVX void upper_half_wide(const ClothTopology& topo, const ClothSystem& A,
+                                        const MatX3& x, MatX3& out) {
   FineWide::upper_half(topo, A, x, out);
 }
 #endif
@@ -245,7 +257,8 @@ FLAGSIM_INLINE Vec3 b_minus_stencil_at(const MultigridLevel& L, int r, int c) {
   for (int dr = -1; dr <= 1; ++dr) {
     if (!interior && (r + dr < 0 || r + dr >= R)) continue;
     for (int dc = -1; dc <= 1; ++dc) {
-      if ((!interior && (c + dc < 0 || c + dc >= C)) || (!with_centre && dr == 0 && dc == 0)) continue;
+      if ((!interior && (c + dc < 0 || c + dc >= C)) || (!with_centre && dr == 0 && dc == 0))
+        continue;
       if (last != 0 && dr == 0 && dc == last) continue;
       acc.sub(a + 9 * slot(dr, dc), L.x.data() + 3 * (v + dr * C + dc));
     }
@@ -272,18 +285,23 @@ struct CoarsePasses {
     for (Index m = 0; m < n; ++m) {
       const Index v = forward ? m : n - 1 - m;
       if (!L.active[v]) continue;
-      L.x.row(v) = (L.Dinv[v] * b_minus_stencil<false, forward ? -1 : 1>(L, int(v / C), int(v % C))).transpose();
+      L.x.row(v) =
+          (L.Dinv[v] * b_minus_stencil < false, forward ? -1 : 1 > (L, int(v / C), int(v % C)))
+              .transpose();
     }
   }
   FLAGSIM_INLINE static void gauss_seidel(MultigridLevel& L, bool forward) {
-    if (forward) sweep<true>(L);
-    else sweep<false>(L);
+    if (forward)
+      sweep<true>(L);
+    else
+      sweep<false>(L);
   }
   // L.r = L.b - A L.x
   FLAGSIM_INLINE static void residual(MultigridLevel& L) {
     const int R = L.rows, C = L.cols;
     for (int r = 0; r < R; ++r)
-      for (int c = 0; c < C; ++c) L.r.row(Index(r) * C + c) = b_minus_stencil<true, 0>(L, r, c).transpose();
+      for (int c = 0; c < C; ++c)
+        L.r.row(Index(r) * C + c) = b_minus_stencil<true, 0>(L, r, c).transpose();
   }
 };
 
@@ -292,7 +310,9 @@ using CoarseNarrow = CoarsePasses<NarrowLanes<double>>;
 FLAGSIM_TARGET_AVX void gauss_seidel_level_wide(MultigridLevel& L, bool forward) {
   CoarsePasses<Lanes32<double>>::gauss_seidel(L, forward);
 }
-FLAGSIM_TARGET_AVX void residual_level_wide(MultigridLevel& L) { CoarsePasses<Lanes32<double>>::residual(L); }
+FLAGSIM_TARGET_AVX void residual_level_wide(MultigridLevel& L) {
+  CoarsePasses<Lanes32<double>>::residual(L);
+}
 #endif
 
 void gauss_seidel_level(MultigridLevel& L, bool forward) {
@@ -313,7 +333,8 @@ void residual_level(MultigridLevel& L) {
 void restrict_to(int rows, int cols, const MatX3& r, MultigridLevel& out) {
   out.b.setZero();
   for (int i = 0; i < rows; ++i)
-    for (int j = 0; j < cols; ++j) out.b.row(Index(i / 2) * out.cols + j / 2) += r.row(Index(i) * cols + j);
+    for (int j = 0; j < cols; ++j)
+      out.b.row(Index(i / 2) * out.cols + j / 2) += r.row(Index(i) * cols + j);
 }
 
 // x_v += the correction of v's 2 x 2 aggregate in Lc, for the vertices v of a rows x cols level
@@ -358,7 +379,7 @@ void cycle_level(Multigrid& mg, size_t l);
 // the outer CG is the flexible one (integrators.cpp).
 void coarse_correction(Multigrid& mg, size_t l) {
   MultigridLevel& Lc = mg.levels[l + 1];
-  cycle_level(mg, l + 1);  // c1 in Lc.x
+  cycle_level(mg, l + 1);                 // c1 in Lc.x
   if (l + 2 == mg.levels.size()) return;  // the coarsest level is solved exactly
   Lc.b_in = Lc.b;
   residual_level(Lc);
@@ -446,7 +467,8 @@ void NeighbourBlocks::build(const ClothTopology& topo) {
     const int32_t b = topo.adj_offset[size_t(i)], e = topo.adj_offset[size_t(i) + 1];
     std::iota(entry.begin() + b, entry.begin() + e, b);
     std::sort(entry.begin() + b, entry.begin() + e, [&](int32_t p, int32_t q) {
-      return std::make_pair(topo.adj_other[size_t(p)], p) < std::make_pair(topo.adj_other[size_t(q)], q);
+      return std::make_pair(topo.adj_other[size_t(p)], p) <
+             std::make_pair(topo.adj_other[size_t(q)], q);
     });
     lower_end[size_t(i)] = e;
     for (int32_t k = b; k < e; ++k) {
@@ -471,12 +493,14 @@ void apply_system(const ClothTopology& topo, const ClothSystem& A, const MatX3& 
   // in chunks of vertices (the wide kernel is a call, not inlined into the loop's body).
   constexpr Index kChunk = 256;
   const Index N = topo.num_vertices(), chunks = (N + kChunk - 1) / kChunk;
-  void (*rows)(const ClothTopology&, const ClothSystem&, const MatX3&, MatX3&, Index, Index) = &FineNarrow::product;
+  void (*rows)(const ClothTopology&, const ClothSystem&, const MatX3&, MatX3&, Index, Index) =
+      &FineNarrow::product;
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
   if (wide()) rows = &product_wide;
 #endif
-  parallel_for_if(N >= kParallelGrain, chunks,
-                  [&](Index c) { rows(topo, A, p, out, c * kChunk, std::min(N, (c + 1) * kChunk)); });
+  parallel_for_if(N >= kParallelGrain, chunks, [&](Index c) {
+    rows(topo, A, p, out, c * kChunk, std::min(N, (c + 1) * kChunk));
+  });
 }
 
 bool multigrid_applies(const ClothTopology& topo) {
@@ -547,7 +571,8 @@ void multigrid_setup(const ClothTopology& topo, const ClothSystem& A, Multigrid&
     const int32_t* k = &mg.spring_block[3 * size_t(s)];
     if (k[0] < 0 && k[1] < 0) continue;
     const SpringBlock& B = A.B[size_t(s)];
-    // B = a I + e e^T entry by entry into the blocks (no Mat3 temporary; see assemble_implicit_system).
+    // B = a I + e e^T entry by entry into the blocks (no Mat3 temporary; see
+    // assemble_implicit_system).
     const double b[3][3] = {{B.a + B.e[0] * B.e[0], B.e[0] * B.e[1], B.e[0] * B.e[2]},
                             {B.e[1] * B.e[0], B.a + B.e[1] * B.e[1], B.e[1] * B.e[2]},
                             {B.e[2] * B.e[0], B.e[2] * B.e[1], B.a + B.e[2] * B.e[2]}};
@@ -627,8 +652,8 @@ void multigrid_setup(const ClothTopology& topo, const ClothSystem& A, Multigrid&
   }
 }
 
-void multigrid_vcycle(const ClothTopology& topo, const ClothSystem& A, Multigrid& mg, const MatX3& r,
-                      MatX3& z) {
+void multigrid_vcycle(const ClothTopology& topo, const ClothSystem& A, Multigrid& mg,
+                      const MatX3& r, MatX3& z) {
   z.setZero();
   gauss_seidel_fine(topo, A, r, z, true, true);
   // After a forward sweep x_i solves row i against the x_j, j < i, it had: the residual of row i
@@ -636,7 +661,8 @@ void multigrid_vcycle(const ClothTopology& topo, const ClothSystem& A, Multigrid
   upper_half(topo, A, z, mg.fine_r);
   restrict_to(topo.rows, topo.cols, mg.fine_r, mg.levels.front());
   cycle_level(mg, 0);
-  prolong_add(topo.rows, topo.cols, mg.levels.front(), [&](Index v) { return free_vertex(topo, v); }, z);
+  prolong_add(
+      topo.rows, topo.cols, mg.levels.front(), [&](Index v) { return free_vertex(topo, v); }, z);
   gauss_seidel_fine(topo, A, r, z, false, false);
 }
 

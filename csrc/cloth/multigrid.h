@@ -15,9 +15,9 @@ namespace flagsim {
 /// i first, up to lower_end[i]), each block B_s = a I + e e^T of the spring (i, j) in four arrays.
 /// The shape is fixed by the topology (build); fill copies a step's blocks in.
 struct NeighbourBlocks {
-  std::vector<int32_t> nb;         ///< (2 S) the neighbour j
-  std::vector<int32_t> entry;      ///< (2 S) the topology's adjacency slot (adj_spring) it holds
-  std::vector<int32_t> lower_end;  ///< (N)
+  std::vector<int32_t> nb;            ///< (2 S) the neighbour j
+  std::vector<int32_t> entry;         ///< (2 S) the topology's adjacency slot (adj_spring) it holds
+  std::vector<int32_t> lower_end;     ///< (N)
   std::vector<double> a, ex, ey, ez;  ///< (2 S)
   void build(const ClothTopology& topo);
   void fill(const ClothTopology& topo, const std::vector<SpringBlock>& B);
@@ -48,12 +48,12 @@ inline double dot(const MatX3& a, const MatX3& b) { return (a.array() * b.array(
 /// 3x3 identity blocks) couples each vertex to its 8 neighbours at most.
 struct MultigridLevel {
   int rows = 0, cols = 0;
-  std::vector<Mat3> A;           ///< (9 rows cols + 1): A[9 v + 3 (dr + 1) + dc + 1] couples v, v + (dr, dc);
-                                 ///< the last block is padding (zero) for the vector loads
-  std::vector<Mat3> Dinv;        ///< (rows cols) inverse diagonal blocks (identity if inactive)
-  std::vector<uint8_t> active;   ///< (rows cols) 1 if it aggregates at least one free vertex
-  MatX3 x, b, r;                 ///< (rows cols x 3) solution, right-hand side, residual
-  MatX3 x_sum, b_in, v1;         ///< (rows cols x 3) K-cycle: first pass's x, the level's b, A x
+  std::vector<Mat3> A;  ///< (9 rows cols + 1): A[9 v + 3 (dr + 1) + dc + 1] couples v, v + (dr,
+                        ///< dc); the last block is padding (zero) for the vector loads
+  std::vector<Mat3> Dinv;       ///< (rows cols) inverse diagonal blocks (identity if inactive)
+  std::vector<uint8_t> active;  ///< (rows cols) 1 if it aggregates at least one free vertex
+  MatX3 x, b, r;                ///< (rows cols x 3) solution, right-hand side, residual
+  MatX3 x_sum, b_in, v1;        ///< (rows cols x 3) K-cycle: first pass's x, the level's b, A x
 };
 
 /// Levels are sized once per topology (multigrid_build); no allocation afterwards.
@@ -84,7 +84,7 @@ void multigrid_setup(const ClothTopology& topo, const ClothSystem& A, Multigrid&
 /// that is positive definite but, through the K-cycle's weights, not exactly linear: use it in
 /// flexible CG.
 /// r, z (N x 3); r's pinned rows must be zero, z's come out zero.
-void multigrid_vcycle(const ClothTopology& topo, const ClothSystem& A, Multigrid& mg, const MatX3& r,
-                      MatX3& z);
+void multigrid_vcycle(const ClothTopology& topo, const ClothSystem& A, Multigrid& mg,
+                      const MatX3& r, MatX3& z);
 
 }  // namespace flagsim

@@ -7,7 +7,8 @@ namespace flagsim {
 void FlagParams::validate(const std::string& p) const {
   if (rows < 2) fail_param(p + ".rows", ">= 2", rows);
   if (cols < 2) fail_param(p + ".cols", ">= 2", cols);
-  if (static_cast<long long>(rows) * cols > 50'000'000) fail_param(p + ".rows * cols", "<= 5e7", 1LL * rows * cols);
+  if (static_cast<long long>(rows) * cols > 50'000'000)
+    fail_param(p + ".rows * cols", "<= 5e7", 1LL * rows * cols);
   check_length(p + ".width", width);
   check_length(p + ".height", height);
   check_position(p + ".origin", origin);
@@ -39,14 +40,18 @@ void IntegratorParams::validate(const std::string& p) const {
   if (substeps < 1 || substeps > 1000000) fail_param(p + ".substeps", "in [1, 1000000]", substeps);
   if (!(safety > 0 && safety <= 1)) fail_param(p + ".safety", "in (0, 1]", safety);
   if (max_substeps < 1) fail_param(p + ".max_substeps", ">= 1", max_substeps);
-  if (!(cg_tolerance > 0 && cg_tolerance < 1)) fail_param(p + ".cg_tolerance", "in (0, 1)", cg_tolerance);
+  if (!(cg_tolerance > 0 && cg_tolerance < 1))
+    fail_param(p + ".cg_tolerance", "in (0, 1)", cg_tolerance);
   if (preconditioner != "auto" && preconditioner != "jacobi" && preconditioner != "multigrid")
-    fail_param(p + ".preconditioner", "one of 'auto', 'jacobi', 'multigrid'", "'" + preconditioner + "'");
+    fail_param(p + ".preconditioner", "one of 'auto', 'jacobi', 'multigrid'",
+               "'" + preconditioner + "'");
   if (cg_max_iterations < 1) fail_param(p + ".cg_max_iterations", ">= 1", cg_max_iterations);
-  if (max_halvings < 0 || max_halvings > 30) fail_param(p + ".max_halvings", "in [0, 30]", max_halvings);
+  if (max_halvings < 0 || max_halvings > 30)
+    fail_param(p + ".max_halvings", "in [0, 30]", max_halvings);
   check_positive(p + ".max_strain", max_strain);
   check_nonnegative(p + ".strain_limit", strain_limit);
-  if (strain_limit_iterations < 1) fail_param(p + ".strain_limit_iterations", ">= 1", strain_limit_iterations);
+  if (strain_limit_iterations < 1)
+    fail_param(p + ".strain_limit_iterations", ">= 1", strain_limit_iterations);
   check_nonnegative(p + ".energy_tolerance", energy_tolerance);
 }
 

@@ -54,9 +54,10 @@ class NearestPin {
     }
     int axis = 0;
     (mx - mn).maxCoeff(&axis);
-    std::nth_element(pins_.begin() + lo, pins_.begin() + mid, pins_.begin() + hi, [&](int a, int b) {
-      return x_(a, axis) < x_(b, axis) || (x_(a, axis) == x_(b, axis) && a < b);
-    });
+    std::nth_element(pins_.begin() + lo, pins_.begin() + mid, pins_.begin() + hi,
+                     [&](int a, int b) {
+                       return x_(a, axis) < x_(b, axis) || (x_(a, axis) == x_(b, axis) && a < b);
+                     });
     lo_.row(mid) = mn.transpose();
     hi_.row(mid) = mx.transpose();
     build(lo, mid);
@@ -69,7 +70,8 @@ class NearestPin {
     // A lower bound of the distance to any pin of the range; equal distances are visited (for
     // the lowest-index tie-break), with a margin for the bound's own rounding.
     const Vec3 q = x_.row(i).transpose();
-    const Vec3 gap = (lo_.row(mid).transpose() - q).cwiseMax(q - hi_.row(mid).transpose()).cwiseMax(0.0);
+    const Vec3 gap =
+        (lo_.row(mid).transpose() - q).cwiseMax(q - hi_.row(mid).transpose()).cwiseMax(0.0);
     if (gap.norm() > best_d_ * (1 + 1e-12)) return;
     const int a = pins_[mid];
     const double d = (x_.row(i) - x_.row(a)).norm();
@@ -80,8 +82,9 @@ class NearestPin {
     // the half nearer the query first
     const int left_mid = (lo + mid) / 2, right_mid = (mid + 1 + hi) / 2;
     const bool left_first =
-        mid - lo > 0 && (hi - mid - 1 <= 0 || (x_.row(i) - x_.row(pins_[left_mid])).squaredNorm() <=
-                                                   (x_.row(i) - x_.row(pins_[right_mid])).squaredNorm());
+        mid - lo > 0 &&
+        (hi - mid - 1 <= 0 || (x_.row(i) - x_.row(pins_[left_mid])).squaredNorm() <=
+                                  (x_.row(i) - x_.row(pins_[right_mid])).squaredNorm());
     search(left_first ? lo : mid + 1, left_first ? mid : hi, i);
     search(left_first ? mid + 1 : lo, left_first ? hi : mid, i);
   }
@@ -146,8 +149,10 @@ ClothTopology build_flag_topology(const FlagParams& p) {
   // Lumped area: a third of every adjacent triangle's rest area; mass = areal density x area.
   t.area.setZero(N);
   for (Index f = 0; f < t.triangles.rows(); ++f) {
-    const Vec3 e1 = t.rest_positions.row(t.triangles(f, 1)) - t.rest_positions.row(t.triangles(f, 0));
-    const Vec3 e2 = t.rest_positions.row(t.triangles(f, 2)) - t.rest_positions.row(t.triangles(f, 0));
+    const Vec3 e1 =
+        t.rest_positions.row(t.triangles(f, 1)) - t.rest_positions.row(t.triangles(f, 0));
+    const Vec3 e2 =
+        t.rest_positions.row(t.triangles(f, 2)) - t.rest_positions.row(t.triangles(f, 0));
     const double a3 = 0.5 * e1.cross(e2).norm() / 3.0;
     for (int q = 0; q < 3; ++q) t.area[t.triangles(f, q)] += a3;
   }
@@ -218,8 +223,10 @@ void compute_vertex_normals(const ClothTopology& topo, const MatX3& x, MatX3& n)
   }
   for (Index i = 0; i < n.rows(); ++i) {
     const double len = n.row(i).norm();
-    if (len > 0) n.row(i) /= len;
-    else n.row(i) << 0, 0, 1;
+    if (len > 0)
+      n.row(i) /= len;
+    else
+      n.row(i) << 0, 0, 1;
   }
 }
 

@@ -17,18 +17,19 @@ struct ClothTopology {
   MatX3i triangles;      ///< (T x 3) counter-clockwise seen from +z at rest (normal +z)
   MatX2i springs;        ///< (S x 2) vertex pairs
   std::vector<SpringKind> spring_kind;  ///< (S)
-  VecX rest_length;      ///< (S) m
-  VecX stiffness;        ///< (S) N/m
-  VecX damping;          ///< (S) N s/m
-  VecX area;             ///< (N) m^2, one third of each adjacent triangle's rest area (S in eq. 3)
-  VecX mass;             ///< (N) kg, areal density x area
-  VecX inv_mass;         ///< (N) 1/kg, 0 for pinned vertices
+  VecX rest_length;                     ///< (S) m
+  VecX stiffness;                       ///< (S) N/m
+  VecX damping;                         ///< (S) N s/m
+  VecX area;      ///< (N) m^2, one third of each adjacent triangle's rest area (S in eq. 3)
+  VecX mass;      ///< (N) kg, areal density x area
+  VecX inv_mass;  ///< (N) 1/kg, 0 for pinned vertices
   // Vertex -> incident springs (CSR), so spring forces are gathered per vertex: parallel and
   // bit-identical for any thread count. adj_spring[k] for k in [adj_offset[i], adj_offset[i+1]).
   std::vector<int32_t> adj_offset;  ///< (N + 1)
   std::vector<int32_t> adj_spring;  ///< (2 S)
   std::vector<int32_t> adj_other;   ///< (2 S) the spring's other vertex
-  // Vertex -> incident triangles (CSR): tri_adj[k] for k in [tri_adj_offset[i], tri_adj_offset[i+1]).
+  // Vertex -> incident triangles (CSR): tri_adj[k] for k in [tri_adj_offset[i],
+  // tri_adj_offset[i+1]).
   std::vector<int32_t> tri_adj_offset;  ///< (N + 1)
   std::vector<int32_t> tri_adj;         ///< (3 T)
 

@@ -44,7 +44,8 @@ int32_t BoxTree::build_range(int32_t begin, int32_t end, const std::vector<doubl
     const int32_t mid = begin + (end - begin) / 2;
     std::nth_element(order_.begin() + begin, order_.begin() + mid, order_.begin() + end,
                      [&](int32_t a, int32_t b) {
-                       const double ca = centre[3 * size_t(a) + axis], cb = centre[3 * size_t(b) + axis];
+                       const double ca = centre[3 * size_t(a) + axis],
+                                    cb = centre[3 * size_t(b) + axis];
                        return ca < cb || (!(cb < ca) && a < b);
                      });
     build_range(begin, mid, centre);

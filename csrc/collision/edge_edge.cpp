@@ -45,8 +45,8 @@ bool edge_edge_ccd(const Vec3& p1_0, const Vec3& p2_0, const Vec3& q1_0, const V
   }
   // ((p2 - p1) x (q2 - q1)) . (q1 - p1) is the coplanarity cubic of "vertex" q1 against the
   // "triangle" (p1, p2, p1 + q2 - q1), every point moving linearly.
-  const Eigen::Vector4d k = coplanarity_cubic(q1_0, p1_0, p2_0, p1_0 + q2_0 - q1_0, q1_1, p1_1,
-                                              p2_1, p1_1 + q2_1 - q1_1);
+  const Eigen::Vector4d k =
+      coplanarity_cubic(q1_0, p1_0, p2_0, p1_0 + q2_0 - q1_0, q1_1, p1_1, p2_1, p1_1 + q2_1 - q1_1);
   double roots[3];
   const int n = cubic_roots_in_unit_interval(k, roots);
   for (int i = 0; i < n; ++i) {
@@ -67,9 +67,9 @@ bool edge_edge_ccd(const Vec3& p1_0, const Vec3& p2_0, const Vec3& q1_0, const V
   return false;
 }
 
-double edge_separation_time(const Vec3& p1_0, const Vec3& p2_0, const Vec3& q1_0,
-                            const Vec3& q2_0, const Vec3& p1_1, const Vec3& p2_1,
-                            const Vec3& q1_1, const Vec3& q2_1, double t_hit, double gap) {
+double edge_separation_time(const Vec3& p1_0, const Vec3& p2_0, const Vec3& q1_0, const Vec3& q2_0,
+                            const Vec3& p1_1, const Vec3& p2_1, const Vec3& q1_1, const Vec3& q2_1,
+                            double t_hit, double gap) {
   auto distance = [&](double t) {  // signed distance between the two lines at time t
     const Vec3 p1 = p1_0 + t * (p1_1 - p1_0), q1 = q1_0 + t * (q1_1 - q1_0);
     const Vec3 n = (p2_0 + t * (p2_1 - p2_0) - p1).cross(q2_0 + t * (q2_1 - q2_0) - q1);

@@ -24,8 +24,8 @@ bool edge_edge_ccd(const Vec3& p1_0, const Vec3& p2_0, const Vec3& q1_0, const V
 /// For edges crossing at t_hit: the latest time in [0, t_hit] at which the edges' lines are still
 /// min(gap, d(0)) apart on the side they started on, d(t) being the signed distance between the
 /// lines along (p2 - p1) x (q2 - q1), by bisection (1e-9 in t); 0 if they start on one line.
-double edge_separation_time(const Vec3& p1_0, const Vec3& p2_0, const Vec3& q1_0,
-                            const Vec3& q2_0, const Vec3& p1_1, const Vec3& p2_1,
-                            const Vec3& q1_1, const Vec3& q2_1, double t_hit, double gap);
+double edge_separation_time(const Vec3& p1_0, const Vec3& p2_0, const Vec3& q1_0, const Vec3& q2_0,
+                            const Vec3& p1_1, const Vec3& p2_1, const Vec3& q1_1, const Vec3& q2_1,
+                            double t_hit, double gap);
 
 }  // namespace flagsim

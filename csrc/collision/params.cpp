@@ -7,7 +7,8 @@ namespace flagsim {
 void SelfCollisionParams::validate(const std::string& p) const {
   check_positive(p + ".thickness", thickness);
   check_nonnegative(p + ".friction", friction);
-  if (iterations < 1 || iterations > 1000) fail_param(p + ".iterations", "in [1, 1000]", iterations);
+  if (iterations < 1 || iterations > 1000)
+    fail_param(p + ".iterations", "in [1, 1000]", iterations);
 }
 
 void PoleParams::validate(const std::string& p) const {

@@ -17,9 +17,9 @@ struct SelfCollisionParams {
 /// Vertical cylinder along +y the flag is pinned to; vertices collide with it.
 struct PoleParams {
   bool enabled = true;
-  double radius = 0.055;       ///< m (paper §4.1: 11 cm diameter)
-  double height = 2.6;         ///< m
-  Vec3 base{0.0, -2.5, 0.0};   ///< m, centre of the bottom cap
+  double radius = 0.055;      ///< m (paper §4.1: 11 cm diameter)
+  double height = 2.6;        ///< m
+  Vec3 base{0.0, -2.5, 0.0};  ///< m, centre of the bottom cap
   void validate(const std::string& prefix) const;
 };
 

@@ -18,7 +18,7 @@ bool inside_pole(const PoleParams& pole, const Vec3& p, double tolerance = 0.0);
 /// entered. The velocity's component into the surface (outward normal n, v . n < 0) is removed.
 /// Returns the number of vertices moved (and the largest move, m, in *max_move if given).
 /// Vertices inside the pole at x0 are projected to its surface like the rest.
-Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
-                   double* max_move = nullptr);
+Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
+                   const VecX& inv_mass, double* max_move = nullptr);
 
 }  // namespace flagsim

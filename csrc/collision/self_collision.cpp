@@ -167,7 +167,8 @@ double SelfCollision::next_skin(const Vec3& centre) {
   double motion = 0, size = 0;
   for (Index i = 0; i < n_; ++i) {
     motion = std::max(motion, (vhi_.row(i) - vlo_.row(i)).maxCoeff());
-    size = std::max(size, std::max(vlo_.row(i).cwiseAbs().maxCoeff(), vhi_.row(i).cwiseAbs().maxCoeff()));
+    size = std::max(size,
+                    std::max(vlo_.row(i).cwiseAbs().maxCoeff(), vhi_.row(i).cwiseAbs().maxCoeff()));
   }
   const double h = params_.thickness;
   skin_ = std::min(std::max(kSkinSteps * motion, h), 4 * h);
@@ -229,12 +230,15 @@ bool SelfCollision::query_trees(double wide, const VecX* inv_mass, std::vector<P
     const Vec3 qhi = ehi_.row(e).transpose().array() + (h + wide);
     const size_t begin = buffer.size();
     const int32_t a = edges_(e, 0), b = edges_(e, 1);
-    edge_tree_.query(elo_, ehi_, qlo, qhi, [&](int32_t f) {  // f > e: each pair once
-      const int32_t c = edges_(f, 0), d = edges_(f, 1);
-      if (a == c || a == d || b == c || b == d) return;  // edges sharing a vertex never cross
-      if (inv_mass && none_free(*inv_mass, a, b, c, d)) return;
-      buffer.push_back({static_cast<int32_t>(e), f, true});
-    }, static_cast<int32_t>(e));
+    edge_tree_.query(
+        elo_, ehi_, qlo, qhi,
+        [&](int32_t f) {  // f > e: each pair once
+          const int32_t c = edges_(f, 0), d = edges_(f, 1);
+          if (a == c || a == d || b == c || b == d) return;  // edges sharing a vertex never cross
+          if (inv_mass && none_free(*inv_mass, a, b, c, d)) return;
+          buffer.push_back({static_cast<int32_t>(e), f, true});
+        },
+        static_cast<int32_t>(e));
     std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(), by_b);
   };
   const Index E = edges_.rows();
@@ -370,7 +374,8 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
   // Each pair's distance at the start of the step: with it, a pair whose points cannot have
   // closed that gap (see out_of_reach) needs no test at all.
   const auto P = static_cast<Index>(pairs_.size());
-  parallel_for_if(P >= kPairGrain, P, [&](Index k) { start_gap_[k] = start_distance(pairs_[k], x0); });
+  parallel_for_if(P >= kPairGrain, P,
+                  [&](Index k) { start_gap_[k] = start_distance(pairs_[k], x0); });
 }
 
 // The distance between the pair's two sides at x0.
@@ -394,7 +399,8 @@ void SelfCollision::measure_motion(const MatX3& x0, const MatX3& x) {
   double scale = 0;
   for (Index i = 0; i < n_; ++i) {
     motion_[i] = (row(x, i) - row(x0, i) - shift_).norm();
-    scale = std::max(scale, std::max(x.row(i).cwiseAbs().maxCoeff(), x0.row(i).cwiseAbs().maxCoeff()));
+    scale =
+        std::max(scale, std::max(x.row(i).cwiseAbs().maxCoeff(), x0.row(i).cwiseAbs().maxCoeff()));
   }
   motion_guard_ = roundoff_guard(scale + shift_.norm());
 }
@@ -482,7 +488,8 @@ void SelfCollision::detect(const Pair& pr, const MatX3& x0, const MatX3& x, Cont
     // Edges p0a0 -> p1a1 (points 0, 1) and b0c0 -> b1c1 (points 2, 3).
     Vec2 su;
     if (edge_edge_ccd(p0, a0, b0, c0, p1, a1, b1, c1, t, su)) {
-      const Vec3 n = ((1 - t) * (a0 - p0) + t * (a1 - p1)).cross((1 - t) * (c0 - b0) + t * (c1 - b1));
+      const Vec3 n =
+          ((1 - t) * (a0 - p0) + t * (a1 - p1)).cross((1 - t) * (c0 - b0) + t * (c1 - b1));
       const double len = n.norm();
       if (!(len > 0)) {
         ct.kind = Contact::kDegenerate;

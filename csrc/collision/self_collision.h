@@ -12,10 +12,10 @@
 // Pipeline:
 //   broad phase: swept boxes of vertices and triangles over the step in a frame moving with the
 //     cloth's mean displacement (crossings are invariant under a common translation, so a 30 m/s
-//     gust does not stretch the boxes) -> box trees (box_tree.h) -> candidate pairs: (vertex, triangle),
-//     the vertex not in the triangle, and (edge, edge) sharing no vertex. The trees are queried
-//     wider than needed (a skin) into a pair list that later broad phases filter by the same
-//     box test for as long as no vertex box has left its box at the list's build by more than
+//     gust does not stretch the boxes) -> box trees (box_tree.h) -> candidate pairs: (vertex,
+//     triangle), the vertex not in the triangle, and (edge, edge) sharing no vertex. The trees are
+//     queried wider than needed (a skin) into a pair list that later broad phases filter by the
+//     same box test for as long as no vertex box has left its box at the list's build by more than
 //     the skin (a Verlet list): the same candidates, in the same order, without the queries.
 //     Used only while it pays (see next_skin);
 //   sweeps (<= params.iterations), each detecting on one state (in parallel), then answering in
@@ -55,8 +55,8 @@
 #include <functional>
 #include <vector>
 
-#include "collision/params.h"
 #include "collision/box_tree.h"
+#include "collision/params.h"
 #include "common/types.h"
 
 namespace flagsim {
@@ -107,8 +107,8 @@ class SelfCollision {
     // The constraint C = (sum_k g_k x_k) . n - thickness >= 0 on the pair's four points:
     // vertex-triangle g = (1, -b_a, -b_b, -b_c), edge-edge g = (1 - s, s, -(1 - u), -u).
     double g[4];
-    Vec3 n;          // unit direction, from the second point set to the first
-    double C;        // proximity: distance - thickness at detection, < 0
+    Vec3 n;    // unit direction, from the second point set to the first
+    double C;  // proximity: distance - thickness at detection, < 0
   };
   void corners(const Pair& pr, int32_t idx[4]) const;
   void detect(const Pair& pr, const MatX3& x0, const MatX3& x, Contact& ct) const;
@@ -133,8 +133,8 @@ class SelfCollision {
              const Projector* constraints, bool first);
   void freeze_fallback(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
                        const PoleParams* pole);
-  bool weights(const int32_t idx[4], const Contact& c, const VecX& inv_mass, double w[4],
-               double& W, double& limit) const;
+  bool weights(const int32_t idx[4], const Contact& c, const VecX& inv_mass, double w[4], double& W,
+               double& limit) const;
   void project(const int32_t idx[4], const Contact& c, double C, MatX3& x,
                const VecX& inv_mass) const;
   void accumulate_impulse(const int32_t idx[4], const Contact& c, const MatX3& v,
@@ -145,26 +145,26 @@ class SelfCollision {
   Index n_;
   SelfCollisionParams params_;
   BoxTree tri_tree_, edge_tree_;  // shaped on the first broad phase, refitted after
-  Vec3 shift_ = Vec3::Zero();    // mean displacement over the step (broad-phase frame)
-  MatX3 vlo_, vhi_;              // N x 3 swept vertex boxes in the shifted frame
-  MatX3 tlo_, thi_;              // T x 3 swept triangle boxes, grown by the margin
-  MatX3 elo_, ehi_;              // E x 3 swept edge boxes, grown by the margin
+  Vec3 shift_ = Vec3::Zero();     // mean displacement over the step (broad-phase frame)
+  MatX3 vlo_, vhi_;               // N x 3 swept vertex boxes in the shifted frame
+  MatX3 tlo_, thi_;               // T x 3 swept triangle boxes, grown by the margin
+  MatX3 elo_, ehi_;               // E x 3 swept edge boxes, grown by the margin
   std::vector<std::vector<Pair>> thread_pairs_, thread_edge_pairs_;
-  std::vector<Pair> pairs_;      // vertex-triangle pairs by vertex, then edge-edge pairs by edge
+  std::vector<Pair> pairs_;  // vertex-triangle pairs by vertex, then edge-edge pairs by edge
   // The pair list (a Verlet list): every pair whose boxes come within 2 skin_ of the query, from
   // the vertex boxes ref_lo_/ref_hi_ (less their mean position) of the step that built it.
-  std::vector<Pair> list_;       // ordered as pairs_
-  MatX3 ref_lo_, ref_hi_;        // N x 3
-  double skin_ = 0;              // m; 0: no list (direct queries)
-  double ref_scale_ = 0;         // m, largest coordinate of those boxes (round-off guard)
-  bool list_valid_ = false;      // false: the next broad phase builds the list
-  int served_ = 0;               // broad phases the list has served
-  Index last_candidates_ = 0;    // candidates of the last broad phase
-  int direct_left_ = kDirectBuilds;  // queries still to make without a list
+  std::vector<Pair> list_;             // ordered as pairs_
+  MatX3 ref_lo_, ref_hi_;              // N x 3
+  double skin_ = 0;                    // m; 0: no list (direct queries)
+  double ref_scale_ = 0;               // m, largest coordinate of those boxes (round-off guard)
+  bool list_valid_ = false;            // false: the next broad phase builds the list
+  int served_ = 0;                     // broad phases the list has served
+  Index last_candidates_ = 0;          // candidates of the last broad phase
+  int direct_left_ = kDirectBuilds;    // queries still to make without a list
   int direct_streak_ = kDirectBuilds;  // how many after the next miss (doubles per miss)
   static constexpr double kSkinSteps = 6, kListRatio = 1.5;
   static constexpr int kDirectBuilds = 8, kMaxDirectBuilds = 512;
-  std::vector<uint8_t> flag_;    // per pair: violation found by the parallel pass
+  std::vector<uint8_t> flag_;      // per pair: violation found by the parallel pass
   std::vector<double> start_gap_;  // per pair: distance at x0, m
   std::vector<Contact> contacts_;  // per pair, in a sweep
   MatX3 x_sweep_;                  // N x 3 positions at the start of a sweep

@@ -45,8 +45,8 @@ Vec3 closest_point_barycentric(const Vec3& p, const Vec3& a, const Vec3& b, cons
 
 bool beyond_reach(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c, double gap) {
   const Vec3 m = (a + b + c) / 3;
-  const double r = std::sqrt(std::max({(a - m).squaredNorm(), (b - m).squaredNorm(),
-                                       (c - m).squaredNorm()}));
+  const double r =
+      std::sqrt(std::max({(a - m).squaredNorm(), (b - m).squaredNorm(), (c - m).squaredNorm()}));
   return (p - m).norm() > r + gap;
 }
 
@@ -120,9 +120,9 @@ bool vertex_triangle_ccd(const Vec3& p0, const Vec3& a0, const Vec3& b0, const V
   // end; p - m moves linearly, so its closest approach has a closed form.
   {
     const Vec3 m0 = (a0 + b0 + c0) / 3, m1 = (a1 + b1 + c1) / 3;
-    const double r2 = std::max({(a0 - m0).squaredNorm(), (b0 - m0).squaredNorm(),
-                                (c0 - m0).squaredNorm(), (a1 - m1).squaredNorm(),
-                                (b1 - m1).squaredNorm(), (c1 - m1).squaredNorm()});
+    const double r2 =
+        std::max({(a0 - m0).squaredNorm(), (b0 - m0).squaredNorm(), (c0 - m0).squaredNorm(),
+                  (a1 - m1).squaredNorm(), (b1 - m1).squaredNorm(), (c1 - m1).squaredNorm()});
     const Vec3 q0 = p0 - m0, dq = (p1 - m1) - q0;
     const double dd = dq.squaredNorm();
     const double s = dd > 0 ? std::clamp(-q0.dot(dq) / dd, 0.0, 1.0) : 0.0;
@@ -182,8 +182,8 @@ int cubic_roots_in_unit_interval(const Eigen::Vector4d& k, double roots[3]) {
 }
 
 double separation_time(const Vec3& p0, const Vec3& a0, const Vec3& b0, const Vec3& c0,
-                       const Vec3& p1, const Vec3& a1, const Vec3& b1, const Vec3& c1,
-                       double t_hit, double gap) {
+                       const Vec3& p1, const Vec3& a1, const Vec3& b1, const Vec3& c1, double t_hit,
+                       double gap) {
   auto distance = [&](double t) {  // signed distance of p(t) to the plane of abc(t)
     const Vec3 a = a0 + t * (a1 - a0);
     const Vec3 n = (b0 + t * (b1 - b0) - a).cross(c0 + t * (c1 - c0) - a);

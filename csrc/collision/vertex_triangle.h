@@ -1,8 +1,8 @@
 // Vertex-triangle geometry for self-collision (paper §1: mass point vs triangle only): the closest
 // point of a triangle and the continuous-time (linear motion) crossing test.
 #pragma once
-#include <algorithm>
 #include <Eigen/Geometry>
+#include <algorithm>
 
 #include "common/types.h"
 
@@ -49,9 +49,8 @@ bool vertex_triangle_ccd(const Vec3& p0, const Vec3& a0, const Vec3& b0, const V
 /// on, d(t) being that signed distance, found by bisection (1e-9 in t); 0 if it starts on the
 /// plane. Moving every point back to that time stops the vertex short of the triangle.
 double separation_time(const Vec3& p0, const Vec3& a0, const Vec3& b0, const Vec3& c0,
-                       const Vec3& p1, const Vec3& a1, const Vec3& b1, const Vec3& c1,
-                       double t_hit, double gap);
-
+                       const Vec3& p1, const Vec3& a1, const Vec3& b1, const Vec3& c1, double t_hit,
+                       double gap);
 
 /// The last time in [0, t_hit] at which a signed distance d(t) (d(0) != 0 fixes the side) is still
 /// at least min(gap, |d(0)|) on its starting side: bisection to 1e-9, assuming d(t_hit) is past

@@ -98,7 +98,8 @@ void check_position(const std::string& name, const V& v) {
     if (std::fabs(v[i]) > kMaxCoordinate) {
       std::ostringstream s;
       s << "(" << v.transpose() << ")";
-      fail_param(name, "within " + detail::to_text(kMaxCoordinate) + " m of the origin in each component",
+      fail_param(name,
+                 "within " + detail::to_text(kMaxCoordinate) + " m of the origin in each component",
                  s.str());
     }
 }

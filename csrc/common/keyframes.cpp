@@ -43,8 +43,9 @@ double ScalarSchedule::at(double t, double fallback) const {
   if (keys.empty()) return fallback;
   if (t <= keys.front().first) return keys.front().second;
   if (t >= keys.back().first) return keys.back().second;
-  auto hi = std::upper_bound(keys.begin(), keys.end(), t,
-                             [](double x, const std::pair<double, double>& k) { return x < k.first; });
+  auto hi =
+      std::upper_bound(keys.begin(), keys.end(), t,
+                       [](double x, const std::pair<double, double>& k) { return x < k.first; });
   auto lo = hi - 1;
   const double s = (t - lo->first) / (hi->first - lo->first);
   return (1 - s) * lo->second + s * hi->second;

@@ -10,7 +10,7 @@
 namespace flagsim {
 
 struct WindKey {
-  double time = 0;   ///< s
+  double time = 0;         ///< s
   Vec3 velocity{0, 0, 0};  ///< m/s
 };
 
@@ -21,7 +21,7 @@ struct WindSchedule {
   WindSchedule() = default;
   explicit WindSchedule(const Vec3& constant) : keys{{0.0, constant}} {}
   Vec3 at(double t) const;
-  bool constant() const;   ///< true when every key has the same velocity (or there are none)
+  bool constant() const;     ///< true when every key has the same velocity (or there are none)
   double max_speed() const;  ///< max |velocity| over keys, m/s
   void validate(const std::string& name) const;
 };

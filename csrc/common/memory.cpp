@@ -54,7 +54,8 @@ std::uint64_t available_memory() {
   if (const char* env = std::getenv("FLAGSIM_MEMORY_LIMIT")) {
     char* end = nullptr;
     const double v = std::strtod(env, &end);
-    if (end != env && v > 0) avail = avail > 0 ? std::min(avail, std::uint64_t(v)) : std::uint64_t(v);
+    if (end != env && v > 0)
+      avail = avail > 0 ? std::min(avail, std::uint64_t(v)) : std::uint64_t(v);
   }
   return avail;
 }

@@ -10,8 +10,8 @@
 
 namespace flagsim {
 
-constexpr double kBytesPerVertex = 2300;     ///< upper bound, implicit integrator
-constexpr double kValuesPerCell = 26;        ///< times sizeof(double) or sizeof(float)
+constexpr double kBytesPerVertex = 2300;  ///< upper bound, implicit integrator
+constexpr double kValuesPerCell = 26;     ///< times sizeof(double) or sizeof(float)
 
 /// Bytes this process can still allocate without swapping: MemAvailable, lowered to what the
 /// cgroup (container) limit leaves and to $FLAGSIM_MEMORY_LIMIT (bytes) when set; 0 when not

@@ -5,12 +5,14 @@
 // times a fade-in over the first `ramp` seconds (flapping_fade_in; ramp = 0: none).
 //
 // Normalisation (paper §4.2 leaves it open): x and y are the vertex's rest texture coordinates,
-//   x = distance along the flag away from the pole / flag length   (0 at the pole edge, 1 at the fly)
-//   y = distance across the flag / flag height                      (0 and 1 at the top and bottom)
+//   x = distance along the flag away from the pole / flag length   (0 at the pole edge, 1 at the
+//   fly) y = distance across the flag / flag height                      (0 and 1 at the top and
+//   bottom)
 // so y (1 - y) peaks (1/4) mid-edge and the wave front x = v t + a (1 - y) y + const is a parabola
-// leading at the middle of the pole edge, as observed in paper §4.1. v is in flag lengths per second,
-// a in flag lengths, k = frequency is noise lattice cells per flag length, f_n = Perlin1D(seed).
-// The ramp A(L) (paper: "rises with L, constant once L >= L_max") is the C1 smoothstep
+// leading at the middle of the pole edge, as observed in paper §4.1. v is in flag lengths per
+// second, a in flag lengths, k = frequency is noise lattice cells per flag length, f_n =
+// Perlin1D(seed). The ramp A(L) (paper: "rises with L, constant once L >= L_max") is the C1
+// smoothstep
 //   A(L) = amplitude * S(min(L / l_max, 1)),  S(u) = 3u^2 - 2u^3,
 // so pinned vertices (L = 0) do not move and A has no kink at L = l_max.
 // z is along the vertex normal, in metres: amplitude is metres per m/s of u_p.

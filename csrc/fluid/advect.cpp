@@ -1,5 +1,5 @@
-#include "common/parallel.h"
 #include "fluid/advect.h"
+#include "common/parallel.h"
 #include "common/simd.h"
 
 #include <algorithm>
@@ -72,9 +72,15 @@ struct Interpolator {
     const Axis x = locate(px - o0, n0, periodic);
     const Axis y = locate(py - o1, n1, periodic);
     const Axis z = locate(pz - o2, n2, periodic);
-    return {(std::size_t(x.i0) * n1 + y.i0) * n2, (std::size_t(x.i0) * n1 + y.i1) * n2,
-            (std::size_t(x.i1) * n1 + y.i0) * n2, (std::size_t(x.i1) * n1 + y.i1) * n2,
-            z.i0, z.i1, x.f, y.f, z.f};
+    return {(std::size_t(x.i0) * n1 + y.i0) * n2,
+            (std::size_t(x.i0) * n1 + y.i1) * n2,
+            (std::size_t(x.i1) * n1 + y.i0) * n2,
+            (std::size_t(x.i1) * n1 + y.i1) * n2,
+            z.i0,
+            z.i1,
+            x.f,
+            y.f,
+            z.f};
   }
 
   inline T operator()(const Corners& c) const {
@@ -84,7 +90,9 @@ struct Interpolator {
     const T c11 = lerp(q[c.r11 + c.k0], q[c.r11 + c.k1], c.fz);
     return lerp(lerp(c00, c01, c.fy), lerp(c10, c11, c.fy), c.fx);
   }
-  inline T operator()(double px, double py, double pz) const { return (*this)(corners(px, py, pz)); }
+  inline T operator()(double px, double py, double pz) const {
+    return (*this)(corners(px, py, pz));
+  }
 
   /// Extrema of the 8 nodes of an interpolation (Selle et al. 2008 §4 limiter).
   inline void extrema(const Corners& c, T& lo, T& hi) const {
@@ -127,12 +135,18 @@ struct RowVelocity {
       comp[slot] = e;
       n2e[slot] = sh.n[2];
       int q = 0;
-      for (int a = 0; a < 2; ++a)    // along c: ijk[c] - 1 + a
+      for (int a = 0; a < 2; ++a)      // along c: ijk[c] - 1 + a
         for (int b = 0; b < 2; ++b) {  // along e: ijk[e] + b
           int idx[3] = {i, j, 0};
           int dk = 0;
-          if (c == 2) dk += a - 1; else idx[c] = node(idx[c] - 1 + a, sh.n[c], periodic);
-          if (e == 2) dk += b; else idx[e] = node(idx[e] + b, sh.n[e], periodic);
+          if (c == 2)
+            dk += a - 1;
+          else
+            idx[c] = node(idx[c] - 1 + a, sh.n[c], periodic);
+          if (e == 2)
+            dk += b;
+          else
+            idx[e] = node(idx[e] + b, sh.n[e], periodic);
           rows[slot][q] = g.comp[e].data() + sh.index(idx[0], idx[1], 0);
           shift[slot][q] = dk;
           ++q;
@@ -170,7 +184,9 @@ struct RowVelocity {
   }
 };
 
-inline bool upstream_of_inflow(const GridGeometry& geo, double px) { return !geo.periodic && px < 0; }
+inline bool upstream_of_inflow(const GridGeometry& geo, double px) {
+  return !geo.periodic && px < 0;
+}
 
 /// Runs row(c, i, j, index of (i, j, 0)) over every row of every component, in parallel.
 template <class T, class F>
@@ -178,7 +194,9 @@ void for_each_row(const MacGrid<T>& g, F&& row) {
   for (int c = 0; c < 3; ++c) {
     const Shape3 sh = g.shape[c];
     const long rows = long(sh.n[0]) * sh.n[1];
-    parallel_for_if(sh.size() > 16384, rows, [&](Index r) { row(c, int(r / sh.n[1]), int(r % sh.n[1]), std::size_t(r) * sh.n[2]); });
+    parallel_for_if(sh.size() > 16384, rows, [&](Index r) {
+      row(c, int(r / sh.n[1]), int(r % sh.n[1]), std::size_t(r) * sh.n[2]);
+    });
   }
 }
 
@@ -222,7 +240,8 @@ long sample_velocity(const MacGrid<T>& g, const double* points, long m, double* 
 }
 
 template <class T>
-void advect_semi_lagrangian(const MacGrid<T>& u, double dt, const SampleBoundary& bc, MacGrid<T>& out) {
+void advect_semi_lagrangian(const MacGrid<T>& u, double dt, const SampleBoundary& bc,
+                            MacGrid<T>& out) {
   const double s = dt / u.geo.h;
   for_each_row(u, [&](int c, int i, int j, std::size_t base) {
     const Interpolator<T> q(u, c);
@@ -274,7 +293,6 @@ void advect_maccormack(const MacGrid<T>& u, double dt, const SampleBoundary& bc,
   });
 }
 
-
 // ---- periodic fast path on ghost-padded copies -------------------------------------------------
 
 template <class T>
@@ -290,7 +308,9 @@ void PaddedComponent<T>::fill(const T* src) {
   constexpr int G = kGhost;
   const int n0 = n[0], n1 = n[1], n2 = n[2];
   // i in [-G, n + G): one conditional add or subtract when n >= G, a modulo otherwise.
-  auto wrap = [](int i, int n) { return n >= G ? (i < 0 ? i + n : i >= n ? i - n : i) : ((i % n) + n) % n; };
+  auto wrap = [](int i, int n) {
+    return n >= G ? (i < 0 ? i + n : i >= n ? i - n : i) : ((i % n) + n) % n;
+  };
   parallel_for_if(data.size() > 32768, n0 + 2 * G, [&](Index plane) {
     const int a = int(plane) - G;
     const T* s_plane = src + std::size_t(wrap(a, n0)) * n1 * n2;
@@ -355,7 +375,12 @@ struct PaddedSampler {
   int n0, n1, n2;
   std::size_t sx, sy;
   explicit PaddedSampler(const PaddedComponent<T>& p)
-      : q(p.data.data()), n0(p.n[0]), n1(p.n[1]), n2(p.n[2]), sx(std::size_t(p.p1) * p.p2), sy(std::size_t(p.p2)) {}
+      : q(p.data.data()),
+        n0(p.n[0]),
+        n1(p.n[1]),
+        n2(p.n[2]),
+        sx(std::size_t(p.p1) * p.p2),
+        sy(std::size_t(p.p2)) {}
 
   struct Corner {
     std::size_t base;
@@ -363,18 +388,21 @@ struct PaddedSampler {
   };
   inline Corner corner(const PaddedComponent<T>& p, double g0, double g1, double g2) const {
     constexpr int G = PaddedComponent<T>::kGhost;
-    const PaddedAxis x = locate_padded<G>(g0, n0), y = locate_padded<G>(g1, n1), z = locate_padded<G>(g2, n2);
+    const PaddedAxis x = locate_padded<G>(g0, n0), y = locate_padded<G>(g1, n1),
+                     z = locate_padded<G>(g2, n2);
     return {p.index(x.i0, y.i0, z.i0), x.f, y.f, z.f};
   }
   /// corner() for a departure within one cell of node (i, j, k) on every axis (|d| <= 1, so the
   /// lower node is in [i - 2, i + 1], inside the ghosts): no clamping, no range checks.
-  inline Corner near_corner(std::size_t node, int i, int j, int k, double g0, double g1, double g2) const {
+  inline Corner near_corner(std::size_t node, int i, int j, int k, double g0, double g1,
+                            double g2) const {
     const int x = ifloor(g0), y = ifloor(g1), z = ifloor(g2);
-    return {node + std::ptrdiff_t(x - i) * std::ptrdiff_t(sx) + std::ptrdiff_t(y - j) * std::ptrdiff_t(sy) + (z - k),
+    return {node + std::ptrdiff_t(x - i) * std::ptrdiff_t(sx) +
+                std::ptrdiff_t(y - j) * std::ptrdiff_t(sy) + (z - k),
             g0 - x, g1 - y, g2 - z};
   }
-  inline Corner any_corner(const PaddedComponent<T>& p, std::size_t node, int i, int j, int k, double d0,
-                           double d1, double d2, double g0, double g1, double g2) const {
+  inline Corner any_corner(const PaddedComponent<T>& p, std::size_t node, int i, int j, int k,
+                           double d0, double d1, double d2, double g0, double g1, double g2) const {
     if (std::fabs(d0) <= 1 && std::fabs(d1) <= 1 && std::fabs(d2) <= 1)  // false for NaN
       return near_corner(node, i, j, k, g0, g1, g2);
     return corner(p, g0, g1, g2);
@@ -428,7 +456,7 @@ inline void padded_velocity(const std::array<PaddedComponent<T>, 3>& u, std::siz
 /// y offset b (a, b in -1..1) from the node's row. A uniform field comes out exactly.
 template <class S, class T>
 FLAGSIM_INLINE S upwind_sample(const T* const rows[9], int k, S d0, S d1, S d2) {
-  const S zero = S{};  // 0 in every lane
+  const S zero = S{};                                            // 0 in every lane
   const auto lo0 = d0 > zero, lo1 = d1 > zero, lo2 = d2 > zero;  // upwind is the lower neighbour
   const S w0 = lo0 ? d0 : (d0 < zero ? -d0 : zero);              // |d|, 0 for NaN
   const S w1 = lo1 ? d1 : (d1 < zero ? -d1 : zero);
@@ -455,7 +483,8 @@ FLAGSIM_INLINE S upwind_sample(const T* const rows[9], int k, S d0, S d1, S d2) 
     ua0 = pick(lo0, ul, uh);
   }
   {
-    S m_ll, u_ll, m_lh, u_lh, m_hl, u_hl, m_hh, u_hh;  // (x, y) = (-1, -1), (-1, 1), (1, -1), (1, 1)
+    S m_ll, u_ll, m_lh, u_lh, m_hl, u_hl, m_hh,
+        u_hh;  // (x, y) = (-1, -1), (-1, 1), (1, -1), (1, 1)
     at(rows[0], m_ll, u_ll);
     at(rows[2], m_lh, u_lh);
     at(rows[6], m_hl, u_hl);
@@ -477,7 +506,7 @@ struct SlRow {
   const T *own, *e1, *e2;  // the row's start in the padded component and in the other two
   const T* rows9[9];       // see upwind_sample
   std::ptrdiff_t dc, d1s, d2s;
-  T st;                    // dt / h
+  T st;  // dt / h
   T* dst;
 };
 
@@ -486,10 +515,14 @@ struct SlRow {
 template <int C, class S, class T>
 FLAGSIM_INLINE void departure(const SlRow<T>& w, int k, S& d0, S& d1, S& d2) {
   const S vc = load_lanes<S>(w.own + k);
-  const S v1 = T(0.25) * (((load_lanes<S>(w.e1 + k - w.dc) + load_lanes<S>(w.e1 + k + w.d1s - w.dc)) +
-                           load_lanes<S>(w.e1 + k)) + load_lanes<S>(w.e1 + k + w.d1s));
-  const S v2 = T(0.25) * (((load_lanes<S>(w.e2 + k - w.dc) + load_lanes<S>(w.e2 + k + w.d2s - w.dc)) +
-                           load_lanes<S>(w.e2 + k)) + load_lanes<S>(w.e2 + k + w.d2s));
+  const S v1 =
+      T(0.25) * (((load_lanes<S>(w.e1 + k - w.dc) + load_lanes<S>(w.e1 + k + w.d1s - w.dc)) +
+                  load_lanes<S>(w.e1 + k)) +
+                 load_lanes<S>(w.e1 + k + w.d1s));
+  const S v2 =
+      T(0.25) * (((load_lanes<S>(w.e2 + k - w.dc) + load_lanes<S>(w.e2 + k + w.d2s - w.dc)) +
+                  load_lanes<S>(w.e2 + k)) +
+                 load_lanes<S>(w.e2 + k + w.d2s));
   d0 = w.st * (C == 0 ? vc : v1);
   d1 = w.st * (C == 1 ? vc : C == 0 ? v1 : v2);
   d2 = w.st * (C == 2 ? vc : v2);
@@ -596,7 +629,8 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
       for (int k = 0; k < n2; ++k, ++idx) {
         double vel[3];  // each exactly a T: the fast path's velocity, summed in the same order
         padded_velocity<C>(sc.u, idx, stride, vel);
-        if (std::fabs(st * T(vel[0])) < 1 && std::fabs(st * T(vel[1])) < 1 && std::fabs(st * T(vel[2])) < 1)
+        if (std::fabs(st * T(vel[0])) < 1 && std::fabs(st * T(vel[1])) < 1 &&
+            std::fabs(st * T(vel[2])) < 1)
           continue;  // the fast path's departure (same T arithmetic): its value stands
         const double e0 = s * vel[0], e1v = s * vel[1], e2v = s * vel[2];
         const double px = i + o0 - e0, py = j + o1 - e1v, pz = k + o2 - e2v;
@@ -608,7 +642,8 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
 
 /// MacCormack correction and limiter of component C (Selle et al. 2008 eq. 9, §4) into out.
 template <int C, class T>
-void padded_mc(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, double s, const T* h, T* out) {
+void padded_mc(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, double s, const T* h,
+               T* out) {
   const PaddedComponent<T>& p = sc.u[C];
   const PaddedSampler<T> q(p), qhat(sc.hat[C]);
   const std::ptrdiff_t stride[3] = {std::ptrdiff_t(p.p1) * p.p2, std::ptrdiff_t(p.p2), 1};
@@ -626,7 +661,8 @@ void padded_mc(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
       const double d0 = s * vel[0], d1 = s * vel[1], d2 = s * vel[2];
       const double bx = x0 - d0, by = y0 - d1, bz = z0 - d2;
       const double fx = x0 + d0, fy = y0 + d1, fz = z0 + d2;
-      const T bar = qhat.value(qhat.any_corner(sc.hat[C], idx, i, j, k, d0, d1, d2, fx - o0, fy - o1, fz - o2));
+      const T bar = qhat.value(
+          qhat.any_corner(sc.hat[C], idx, i, j, k, d0, d1, d2, fx - o0, fy - o1, fz - o2));
       const T own = p.data[idx];
       const T corrected = T(h[row + k] + 0.5 * (own - bar));
       T lo, hi;
@@ -655,16 +691,17 @@ void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, PeriodicAdvectSc
   padded_mc<2>(scratch, u.geo, s, hat.comp[2].data(), u.comp[2].data());
 }
 
-#define FLAGSIM_INSTANTIATE_ADVECT(T)                                                             \
-  template T sample_component<T>(const MacGrid<T>&, int, const double[3]);                       \
-  template long sample_velocity<T>(const MacGrid<T>&, const double*, long, double*);             \
-  template void advect_semi_lagrangian<T>(const MacGrid<T>&, double, const SampleBoundary&,      \
-                                          MacGrid<T>&);                                          \
-  template void advect_maccormack<T>(const MacGrid<T>&, double, const SampleBoundary&,           \
-                                     MacGrid<T>&, MacGrid<T>&);                                \
-  template struct PaddedComponent<T>;                                                            \
-  template struct PeriodicAdvectScratch<T>;                                                      \
-  template void advect_periodic<T>(MacGrid<T>&, double, bool, PeriodicAdvectScratch<T>&, MacGrid<T>&);
+#define FLAGSIM_INSTANTIATE_ADVECT(T)                                                       \
+  template T sample_component<T>(const MacGrid<T>&, int, const double[3]);                  \
+  template long sample_velocity<T>(const MacGrid<T>&, const double*, long, double*);        \
+  template void advect_semi_lagrangian<T>(const MacGrid<T>&, double, const SampleBoundary&, \
+                                          MacGrid<T>&);                                     \
+  template void advect_maccormack<T>(const MacGrid<T>&, double, const SampleBoundary&,      \
+                                     MacGrid<T>&, MacGrid<T>&);                             \
+  template struct PaddedComponent<T>;                                                       \
+  template struct PeriodicAdvectScratch<T>;                                                 \
+  template void advect_periodic<T>(MacGrid<T>&, double, bool, PeriodicAdvectScratch<T>&,    \
+                                   MacGrid<T>&);
 FLAGSIM_INSTANTIATE_ADVECT(float)
 FLAGSIM_INSTANTIATE_ADVECT(double)
 

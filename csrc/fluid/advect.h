@@ -27,7 +27,8 @@ long sample_velocity(const MacGrid<T>& g, const double* points, long m, double* 
 /// Semi-Lagrangian self-advection: out = u(x - dt u(x)) at every face (Stam 1999).
 /// u, out: same geometry, distinct; dt in s.
 template <class T>
-void advect_semi_lagrangian(const MacGrid<T>& u, double dt, const SampleBoundary& bc, MacGrid<T>& out);
+void advect_semi_lagrangian(const MacGrid<T>& u, double dt, const SampleBoundary& bc,
+                            MacGrid<T>& out);
 
 /// MacCormack (Selle et al. 2008 eq. 9): hat = A(u), bar = A^R(hat), out = hat + (u - bar) / 2,
 /// clamped to the extrema of the 8 nodes the first backtrace interpolated from (§4). hat is

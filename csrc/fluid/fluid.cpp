@@ -36,8 +36,8 @@ namespace {
 
 template <class T>
 struct TypedSolver final : Fluid::Solver {
-  MacGrid<T> u, prev, hat;          // current field; advection source; MacCormack / rhs scratch
-  AlignedVector<T> phi, div;        // nx*ny*nz: potential dt p / rho (m^2/s), divergence (1/s)
+  MacGrid<T> u, prev, hat;           // current field; advection source; MacCormack / rhs scratch
+  AlignedVector<T> phi, div;         // nx*ny*nz: potential dt p / rho (m^2/s), divergence (1/s)
   mutable AlignedVector<T> div_out;  // divergence() scratch
   std::unique_ptr<FftProjector<T>> fft;
   Laplace7 pressure_op;
@@ -167,8 +167,9 @@ struct TypedSolver final : Fluid::Solver {
     const double beta = nu_dt / (geo.h * geo.h);
     for (int c = 0; c < 3; ++c) {
       std::copy(u.comp[c].begin(), u.comp[c].end(), hat.comp[c].begin());
-      const CgResult r = solve_cg(diffusion_op[c], 1.0, beta, hat.comp[c].data(), u.comp[c].data(), tol,
-                                  params.pcg_max_iterations, static_cast<const MicPreconditioner<T>*>(nullptr), cg);
+      const CgResult r = solve_cg(diffusion_op[c], 1.0, beta, hat.comp[c].data(), u.comp[c].data(),
+                                  tol, params.pcg_max_iterations,
+                                  static_cast<const MicPreconditioner<T>*>(nullptr), cg);
       stats.diffusion_iterations = std::max(stats.diffusion_iterations, r.iterations);
     }
   }
@@ -212,7 +213,8 @@ struct TypedSolver final : Fluid::Solver {
 
   double max_divergence() const override {
     divergence_into(div_out.data());
-    return parallel_max(div_out.size(), [&](std::size_t i) { return std::fabs(double(div_out[i])); });
+    return parallel_max(div_out.size(),
+                        [&](std::size_t i) { return std::fabs(double(div_out[i])); });
   }
 };
 
@@ -229,7 +231,8 @@ Fluid::Fluid(const FluidParams& params, const std::string& prefix) {
   const double cells = double(params.resolution[0]) * params.resolution[1] * params.resolution[2];
   check_memory("a grid of " + detail::to_text(cells) + " cells",
                cells * kValuesPerCell * (params.precision == "float" ? 4 : 8),
-               "use a coarser " + (prefix.empty() ? std::string("resolution") : prefix + ".resolution") +
+               "use a coarser " +
+                   (prefix.empty() ? std::string("resolution") : prefix + ".resolution") +
                    " or precision 'float'");
   if (params.precision == "float")
     s_ = std::make_unique<TypedSolver<float>>(params);
@@ -273,7 +276,8 @@ MatX3 Fluid::face_positions(int c) const {
   Index r = 0;
   for (int i = 0; i < sh.n[0]; ++i)
     for (int j = 0; j < sh.n[1]; ++j)
-      for (int k = 0; k < sh.n[2]; ++k) out.row(r++) = s_->geo.face_position(c, i, j, k).transpose();
+      for (int k = 0; k < sh.n[2]; ++k)
+        out.row(r++) = s_->geo.face_position(c, i, j, k).transpose();
   return out;
 }
 
@@ -287,7 +291,9 @@ void Fluid::set_uniform(const Vec3& velocity) {
     typed<float>(*s_).set_uniform(velocity);
 }
 
-long Fluid::sample(const double* points, long m, double* out) const { return s_->sample(points, m, out); }
+long Fluid::sample(const double* points, long m, double* out) const {
+  return s_->sample(points, m, out);
+}
 void Fluid::divergence(double* out) const { s_->divergence(out); }
 double Fluid::max_divergence() const { return s_->max_divergence(); }
 

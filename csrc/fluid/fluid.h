@@ -18,11 +18,11 @@ namespace flagsim {
 /// Counters of the last step (and of sampling), for Simulation stats and tests.
 struct FluidStats {
   long steps = 0;
-  int pressure_iterations = 0;      ///< pcg: CG iterations of the last projection; fft: 0
-  double pressure_residual = 0;     ///< pcg: max|div u| / max|div u*| after the last projection
-  bool pressure_converged = true;   ///< pcg reached its tolerance in the last projection
-  int diffusion_iterations = 0;     ///< iterative diffusion: max CG iterations over components
-  long samples_outside = 0;         ///< points sampled outside the domain box, cumulative
+  int pressure_iterations = 0;     ///< pcg: CG iterations of the last projection; fft: 0
+  double pressure_residual = 0;    ///< pcg: max|div u| / max|div u*| after the last projection
+  bool pressure_converged = true;  ///< pcg reached its tolerance in the last projection
+  int diffusion_iterations = 0;    ///< iterative diffusion: max CG iterations over components
+  long samples_outside = 0;        ///< points sampled outside the domain box, cumulative
   /// Cumulative wall-clock seconds per stage of step().
   double seconds_advect = 0, seconds_forces = 0, seconds_project = 0;
 };
@@ -41,10 +41,10 @@ class Fluid {
 
   /// Advances the air by dt (s, finite and > 0). No heap allocation.
   void step(double dt);
-  double time() const;               ///< s
+  double time() const;  ///< s
   const FluidParams& params() const;
   const GridGeometry& geometry() const;
-  bool is_double() const;            ///< params.precision == "double"
+  bool is_double() const;  ///< params.precision == "double"
   const FluidStats& stats() const;
 
   /// Shape of component c (0 = u, 1 = v, 2 = w), see grid.h.
@@ -54,13 +54,15 @@ class Fluid {
   const void* component_data(int c) const;
   /// World positions of the nodes of component c, (size x 3), m, C order of component_shape(c).
   MatX3 face_positions(int c) const;
-  /// Copies values (component_shape(c).size(), m/s) into component c. Non-finite -> InvalidArgument.
+  /// Copies values (component_shape(c).size(), m/s) into component c. Non-finite ->
+  /// InvalidArgument.
   void set_component(int c, const double* values);
   /// Sets every component to a uniform velocity (m/s); tunnel wall normals stay 0.
   void set_uniform(const Vec3& velocity);
 
   /// Trilinear velocity at points (m x 3, m) into out (m x 3, m/s). Points outside the domain get
-  /// the nearest boundary value; returns how many were outside (also added to stats). No allocation.
+  /// the nearest boundary value; returns how many were outside (also added to stats). No
+  /// allocation.
   long sample(const double* points, long m, double* out) const;
   long sample(const MatX3& points, MatX3& out) const {
     return sample(points.data(), long(points.rows()), out.data());

@@ -5,8 +5,8 @@
 namespace flagsim {
 
 template <class T>
-std::vector<FanStencil<T>> build_fan_stencils(const GridGeometry& geo, const std::vector<FanParams>& fans,
-                                              double rho) {
+std::vector<FanStencil<T>> build_fan_stencils(const GridGeometry& geo,
+                                              const std::vector<FanParams>& fans, double rho) {
   std::vector<FanStencil<T>> out;
   out.reserve(fans.size());
   for (const FanParams& f : fans) {
@@ -21,8 +21,9 @@ std::vector<FanStencil<T>> build_fan_stencils(const GridGeometry& geo, const std
         for (int j = 0; j < sh.n[1]; ++j)
           for (int k = 0; k < sh.n[2]; ++k) {
             const Vec3 d = geo.face_position(c, i, j, k) - f.center;
-            const bool inside = f.shape == "sphere" ? d.squaredNorm() <= f.radius * f.radius
-                                                    : (d.array().abs() <= f.half_size.array()).all();
+            const bool inside = f.shape == "sphere"
+                                    ? d.squaredNorm() <= f.radius * f.radius
+                                    : (d.array().abs() <= f.half_size.array()).all();
             if (inside) s.faces[c].emplace_back(uint32_t(sh.index(i, j, k)), T(acc[c]));
           }
     }
@@ -52,10 +53,14 @@ void apply_fans(const std::vector<FanStencil<T>>& fans, double t, double dt, Mac
 }
 
 template std::vector<FanStencil<float>> build_fan_stencils<float>(const GridGeometry&,
-                                                                  const std::vector<FanParams>&, double);
+                                                                  const std::vector<FanParams>&,
+                                                                  double);
 template std::vector<FanStencil<double>> build_fan_stencils<double>(const GridGeometry&,
-                                                                    const std::vector<FanParams>&, double);
-template void apply_fans<float>(const std::vector<FanStencil<float>>&, double, double, MacGrid<float>&);
-template void apply_fans<double>(const std::vector<FanStencil<double>>&, double, double, MacGrid<double>&);
+                                                                    const std::vector<FanParams>&,
+                                                                    double);
+template void apply_fans<float>(const std::vector<FanStencil<float>>&, double, double,
+                                MacGrid<float>&);
+template void apply_fans<double>(const std::vector<FanStencil<double>>&, double, double,
+                                 MacGrid<double>&);
 
 }  // namespace flagsim

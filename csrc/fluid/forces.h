@@ -23,8 +23,8 @@ struct FanStencil {
 /// Stencils of `fans` on grid `geo` for air of density rho (kg/m^3). A face belongs to a fan when
 /// its centre lies inside the box (closed) or the sphere.
 template <class T>
-std::vector<FanStencil<T>> build_fan_stencils(const GridGeometry& geo, const std::vector<FanParams>& fans,
-                                              double rho);
+std::vector<FanStencil<T>> build_fan_stencils(const GridGeometry& geo,
+                                              const std::vector<FanParams>& fans, double rho);
 
 /// u += dt * strength(t) * f / rho * (1 - u / target)_+ on every covered face (the last factor
 /// only when the fan has a max_speed). t, dt in s. No allocation.

@@ -35,7 +35,8 @@ void FanParams::validate(const std::string& prefix) const {
                  detail::to_text(half_size.transpose()));
   check_length(join(prefix, "radius"), radius);
   check_finite_vec(join(prefix, "direction"), direction);
-  if (!(direction.norm() > 0)) fail_param(join(prefix, "direction"), "a non-zero vector", "(0 0 0)");
+  if (!(direction.norm() > 0))
+    fail_param(join(prefix, "direction"), "a non-zero vector", "(0 0 0)");
   check_finite(join(prefix, "force_density"), force_density);
   check_nonnegative(join(prefix, "max_speed"), max_speed);
   strength.validate(join(prefix, "strength"));
@@ -63,9 +64,11 @@ void FluidParams::validate(const std::string& prefix) const {
   check_positive(join(prefix, "density"), density);
   if (!(std::isfinite(pcg_tolerance) && pcg_tolerance > 0 && pcg_tolerance < 1))
     fail_param(join(prefix, "pcg_tolerance"), "in (0, 1)", pcg_tolerance);
-  if (pcg_max_iterations < 1) fail_param(join(prefix, "pcg_max_iterations"), ">= 1", pcg_max_iterations);
+  if (pcg_max_iterations < 1)
+    fail_param(join(prefix, "pcg_max_iterations"), ">= 1", pcg_max_iterations);
   wind.validate(join(prefix, "wind"));
-  for (size_t i = 0; i < fans.size(); ++i) fans[i].validate(join(prefix, "fans[" + std::to_string(i) + "]"));
+  for (size_t i = 0; i < fans.size(); ++i)
+    fans[i].validate(join(prefix, "fans[" + std::to_string(i) + "]"));
 }
 
 void FluidParams::validate_combination(const std::string& prefix) const {

@@ -1,4 +1,5 @@
-// Parameters of the air solver (Stable Fluids on a MAC grid). Plain struct, validated by validate().
+// Parameters of the air solver (Stable Fluids on a MAC grid). Plain struct, validated by
+// validate().
 #pragma once
 #include <array>
 #include <string>
@@ -11,16 +12,16 @@ namespace flagsim {
 
 /// A region that pushes the air: force density f (N/m^3) along `direction` inside a box or sphere.
 struct FanParams {
-  std::string shape = "box";            ///< "box" | "sphere"
-  Vec3 center{0, 0, 0};                 ///< m
-  Vec3 half_size{0.25, 0.25, 0.25};     ///< m, box half extents (shape "box")
-  double radius = 0.25;                 ///< m (shape "sphere")
-  Vec3 direction{1, 0, 0};              ///< normalised on use
-  double force_density = 20.0;          ///< N/m^3
+  std::string shape = "box";         ///< "box" | "sphere"
+  Vec3 center{0, 0, 0};              ///< m
+  Vec3 half_size{0.25, 0.25, 0.25};  ///< m, box half extents (shape "box")
+  double radius = 0.25;              ///< m (shape "sphere")
+  Vec3 direction{1, 0, 0};           ///< normalised on use
+  double force_density = 20.0;       ///< N/m^3
   /// m/s, fan curve: along each axis the force fades linearly to 0 as the air reaches
   /// max_speed * direction (a fan pushes no faster than it blows); 0 = constant force.
   double max_speed = 0.0;
-  ScalarSchedule strength;              ///< (time s, factor) keyframes; empty = always 1
+  ScalarSchedule strength;  ///< (time s, factor) keyframes; empty = always 1
   /// Throws InvalidArgument naming "<prefix>.<field>" (e.g. "air.fans[0].radius").
   void validate(const std::string& prefix) const;
 };
@@ -40,16 +41,16 @@ struct FluidParams {
   std::string boundary = "periodic";          ///< "periodic" | "tunnel"
   std::string advection = "semi_lagrangian";  ///< "semi_lagrangian" | "maccormack"
 #ifdef FLAGSIM_HAVE_FFTW
-  std::string pressure = "fft";               ///< "fft" (periodic only, FFTW) | "pcg"
+  std::string pressure = "fft";  ///< "fft" (periodic only, FFTW) | "pcg"
 #else
-  std::string pressure = "pcg";               ///< "fft" (periodic only, FFTW: not in this build) | "pcg"
+  std::string pressure = "pcg";  ///< "fft" (periodic only, FFTW: not in this build) | "pcg"
 #endif
-  std::string precision = "double";           ///< "double" | "float"
-  double viscosity = 1.5e-5;                  ///< m^2/s, kinematic; 0 = no diffusion stage
-  double density = 1.2;                       ///< kg/m^3
-  double pcg_tolerance = 1e-8;                ///< relative residual
-  int pcg_max_iterations = 500;               ///< per solve (pressure and each diffusion solve)
-  WindSchedule wind;        ///< periodic: mean flow (k = 0 mode); tunnel: inflow velocity
+  std::string precision = "double";  ///< "double" | "float"
+  double viscosity = 1.5e-5;         ///< m^2/s, kinematic; 0 = no diffusion stage
+  double density = 1.2;              ///< kg/m^3
+  double pcg_tolerance = 1e-8;       ///< relative residual
+  int pcg_max_iterations = 500;      ///< per solve (pressure and each diffusion solve)
+  WindSchedule wind;                 ///< periodic: mean flow (k = 0 mode); tunnel: inflow velocity
   std::vector<FanParams> fans;
   /// Each field on its own: throws InvalidArgument naming "<prefix>.<field>" ("resolution" when
   /// prefix is empty). Field setters run this, so fields can be set in any order.

@@ -1,5 +1,5 @@
-#include "common/parallel.h"
 #include "fluid/poisson.h"
+#include "common/parallel.h"
 
 #include <algorithm>
 #include <cmath>
@@ -8,7 +8,7 @@ namespace flagsim {
 
 namespace {
 
-constexpr double kMicTau = 0.97;   // Bridson §5.4: modified incomplete Cholesky weight
+constexpr double kMicTau = 0.97;    // Bridson §5.4: modified incomplete Cholesky weight
 constexpr double kMicSigma = 0.25;  // safety: fall back to the plain diagonal below this
 
 /// Neighbour of node i along an axis of n nodes, -1 when there is none (beyond a non-periodic end).
@@ -92,10 +92,9 @@ void apply_laplace7(const Laplace7& op, double alpha, double beta, const T* x, T
     const int ip = neighbour(i, +1, n0, op.lo[0], op.hi[0]);
     const int jm = neighbour(j, -1, n1, op.lo[1], op.hi[1]);
     const int jp = neighbour(j, +1, n1, op.lo[1], op.hi[1]);
-    const T* nb[4] = {im >= 0 ? x + sh.index(im, j, 0) : nullptr,
-                      ip >= 0 ? x + sh.index(ip, j, 0) : nullptr,
-                      jm >= 0 ? x + sh.index(i, jm, 0) : nullptr,
-                      jp >= 0 ? x + sh.index(i, jp, 0) : nullptr};
+    const T* nb[4] = {
+        im >= 0 ? x + sh.index(im, j, 0) : nullptr, ip >= 0 ? x + sh.index(ip, j, 0) : nullptr,
+        jm >= 0 ? x + sh.index(i, jm, 0) : nullptr, jp >= 0 ? x + sh.index(i, jp, 0) : nullptr};
     // Missing neighbours contribute x_c (GhostZero) or nothing (Neumann): a constant count.
     double ghost = 0;
     if (im < 0 && op.lo[0] == Side::kGhostZero) ghost += 1;
@@ -114,8 +113,14 @@ void apply_laplace7(const Laplace7& op, double alpha, double beta, const T* x, T
       const int km = neighbour(k, -1, n2, op.lo[2], op.hi[2]);
       const int kp = neighbour(k, +1, n2, op.lo[2], op.hi[2]);
       double g = ghost;
-      if (km >= 0) acc += xc - xr[km]; else g += ghost_lo2;
-      if (kp >= 0) acc += xc - xr[kp]; else g += ghost_hi2;
+      if (km >= 0)
+        acc += xc - xr[km];
+      else
+        g += ghost_lo2;
+      if (kp >= 0)
+        acc += xc - xr[kp];
+      else
+        g += ghost_hi2;
       acc += g * xc;
       yr[k] = T(alpha * xc + beta * acc);
     }
@@ -159,7 +164,7 @@ void MicPreconditioner<T>::build(const Laplace7& k) {
           const std::size_t m = n - stride[a];
           if (!(plus[m] & (1u << a))) continue;
           const double pm = inv_diag[m];
-          e -= pm * pm;  // (A_plus,a(m) precon(m))^2 with A_plus = -1
+          e -= pm * pm;       // (A_plus,a(m) precon(m))^2 with A_plus = -1
           double others = 0;  // sum of the other A_plus of m, each -1 when coupled
           for (int b = 0; b < 3; ++b)
             if (b != a && (plus[m] & (1u << b))) others -= 1.0;
@@ -181,8 +186,10 @@ void MicPreconditioner<T>::apply(const T* r, T* z) const {
     for (int j = 0; j < n1; ++j)
       for (int k = 0; k < n2; ++k, ++n) {
         double t = r[n];
-        if (i > 0 && (plus[n - stride[0]] & 1u)) t += double(inv_diag[n - stride[0]]) * z[n - stride[0]];
-        if (j > 0 && (plus[n - stride[1]] & 2u)) t += double(inv_diag[n - stride[1]]) * z[n - stride[1]];
+        if (i > 0 && (plus[n - stride[0]] & 1u))
+          t += double(inv_diag[n - stride[0]]) * z[n - stride[0]];
+        if (j > 0 && (plus[n - stride[1]] & 2u))
+          t += double(inv_diag[n - stride[1]]) * z[n - stride[1]];
         if (k > 0 && (plus[n - 1] & 4u)) t += double(inv_diag[n - 1]) * z[n - 1];
         z[n] = T(t * inv_diag[n]);
       }
@@ -248,7 +255,8 @@ CgResult solve_cg(const Laplace7& op, double alpha, double beta, const T* b, T* 
     }
     zero_fixed(op, out);
     if (singular) {
-      const double m = deterministic_sum(n, [&](std::size_t i) { return double(out[i]); }) / double(n);
+      const double m =
+          deterministic_sum(n, [&](std::size_t i) { return double(out[i]); }) / double(n);
       parallel_for_if(n > 16384, long(n), [&](Index i) { out[i] = T(out[i] - m); });
     }
   };
@@ -282,9 +290,9 @@ CgResult solve_cg(const Laplace7& op, double alpha, double beta, const T* b, T* 
   return res;
 }
 
-#define FLAGSIM_INSTANTIATE_POISSON(T)                                                        \
-  template void apply_laplace7<T>(const Laplace7&, double, double, const T*, T*);            \
-  template struct MicPreconditioner<T>;                                                      \
+#define FLAGSIM_INSTANTIATE_POISSON(T)                                                      \
+  template void apply_laplace7<T>(const Laplace7&, double, double, const T*, T*);           \
+  template struct MicPreconditioner<T>;                                                     \
   template CgResult solve_cg<T>(const Laplace7&, double, double, const T*, T*, double, int, \
                                 const MicPreconditioner<T>*, CgScratch<T>&);
 FLAGSIM_INSTANTIATE_POISSON(float)

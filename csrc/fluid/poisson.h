@@ -39,8 +39,8 @@ void apply_laplace7(const Laplace7& op, double alpha, double beta, const T* x, T
 template <class T>
 struct MicPreconditioner {
   Laplace7 op;
-  AlignedVector<T> inv_diag;     ///< 1 / sqrt(e) per node
-  AlignedVector<uint8_t> plus;   ///< bit d: node couples to its +d neighbour (no wrap)
+  AlignedVector<T> inv_diag;    ///< 1 / sqrt(e) per node
+  AlignedVector<uint8_t> plus;  ///< bit d: node couples to its +d neighbour (no wrap)
   void build(const Laplace7& k);
   /// z = M^-1 r (forward then backward substitution; sequential in index order).
   void apply(const T* r, T* z) const;

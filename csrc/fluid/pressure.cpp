@@ -1,6 +1,6 @@
+#include "fluid/pressure.h"
 #include "common/parallel.h"
 #include "common/simd.h"
-#include "fluid/pressure.h"
 
 #include <cmath>
 #include <mutex>
@@ -30,10 +30,12 @@ void divergence(const MacGrid<T>& u, T* div) {
     T* d = div + sc.index(i, j, 0);
     const int kend = per ? nz - 1 : nz;  // periodic: the last cell's top face is face 0
     for (int k = 0; k < kend; ++k)
-      d[k] = T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[k + 1]) - w0[k])) * inv_h);
+      d[k] = T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[k + 1]) - w0[k])) *
+               inv_h);
     if (per) {
       const int k = nz - 1;
-      d[k] = T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[0]) - w0[k])) * inv_h);
+      d[k] =
+          T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[0]) - w0[k])) * inv_h);
     }
   });
 }
@@ -80,7 +82,8 @@ void subtract_gradient(const T* phi, MacGrid<T>& u) {
       if (c < 2) {
         // Face f = ij[c] lies between cells f-1 (lo) and f (hi) of the same k-row.
         const int f = ij[c];
-        const bool held = !per && ((f == 0 && p.lo[c] == Side::kNeumann) || (f == nc && p.hi[c] == Side::kNeumann));
+        const bool held = !per && ((f == 0 && p.lo[c] == Side::kNeumann) ||
+                                   (f == nc && p.hi[c] == Side::kNeumann));
         if (held) return;
         int lo[2] = {i, j}, hi[2] = {i, j};
         lo[c] = per ? (f == 0 ? nc - 1 : f - 1) : f - 1;
@@ -121,7 +124,8 @@ void set_mean_flow(const Vec3& target, MacGrid<T>& u) {
   for (int c = 0; c < 3; ++c) {
     AlignedVector<T>& q = u.comp[c];
     const std::size_t n = q.size();
-    const double mean = deterministic_sum(n, [&](std::size_t i) { return double(q[i]); }) / double(n);
+    const double mean =
+        deterministic_sum(n, [&](std::size_t i) { return double(q[i]); }) / double(n);
     const double shift = target[c] - mean;
     if (shift == 0) continue;
     parallel_for_if(n > 16384, long(n), [&](Index i) { q[i] = T(q[i] + shift); });
@@ -205,9 +209,9 @@ struct FftProjector<T>::Impl {
   using F = Fftw<T>;
   using C = std::complex<T>;
   GridGeometry geo;
-  int nzc = 0;                        // nz/2 + 1 complex entries along z
+  int nzc = 0;  // nz/2 + 1 complex entries along z
   std::size_t n_real = 0, n_cplx = 0;
-  AlignedVector<T> div;               // nx*ny*nz
+  AlignedVector<T> div;                 // nx*ny*nz
   std::array<AlignedVector<C>, 3> hat;  // nx*ny*nzc each
   // Per-axis Fourier symbols: a_d(m) = (e^{i theta} - 1) / h (forward difference, i.e. MAC div
   // from faces to cells), lam_d(m) = (2 cos theta - 2) / h^2, theta = 2 pi m / n_d.
@@ -282,9 +286,9 @@ namespace {
 /// One (i, j) row of diffuse_and_project's spectral update: what it reads and writes.
 template <class T>
 struct SpectralRow {
-  T *p0, *p1, *p2;                  // the three transforms' row, interleaved (re, im)
-  const double *azr, *azi, *lamz;   // per k
-  double axr, axi, ayr, ayi, lxy;   // per row
+  T *p0, *p1, *p2;                 // the three transforms' row, interleaved (re, im)
+  const double *azr, *azi, *lamz;  // per k
+  double axr, axi, ayr, ayi, lxy;  // per row
   double scale, nu_dt;
 };
 
@@ -340,8 +344,10 @@ FLAGSIM_INLINE void spectral_modes(const SpectralRow<T>& w, int k) {
   // products check for NaN and call __muldc3, which keeps a loop scalar and branchy.
   const S pr = sp * (w.axr * xr - w.axi * xi + w.ayr * yr - w.ayi * yi + azr * zr - azi * zi);
   const S pi = sp * (w.axr * xi + w.axi * xr + w.ayr * yi + w.ayi * yr + azr * zi + azi * zr);
-  store_complex(w.p0 + 2 * k, S(s * xr + w.axr * pr + w.axi * pi), S(s * xi + w.axr * pi - w.axi * pr));
-  store_complex(w.p1 + 2 * k, S(s * yr + w.ayr * pr + w.ayi * pi), S(s * yi + w.ayr * pi - w.ayi * pr));
+  store_complex(w.p0 + 2 * k, S(s * xr + w.axr * pr + w.axi * pi),
+                S(s * xi + w.axr * pi - w.axi * pr));
+  store_complex(w.p1 + 2 * k, S(s * yr + w.ayr * pr + w.ayi * pi),
+                S(s * yi + w.ayr * pi - w.ayi * pr));
   store_complex(w.p2 + 2 * k, S(s * zr + azr * pr + azi * pi), S(s * zi + azr * pi - azi * pr));
 }
 
@@ -358,8 +364,8 @@ FLAGSIM_INLINE void spectral_row_body(const SpectralRow<T>& w, int nzc) {
 
 /// The n1 rows j of a plane i, w set for j = 0; the y symbols per j from (ayr, ayi, lamy).
 template <class L, class T>
-FLAGSIM_INLINE void spectral_plane_body(SpectralRow<T> w, const double* ayr, const double* ayi, const double* lamy,
-                                        double lamx, int n1, int nzc) {
+FLAGSIM_INLINE void spectral_plane_body(SpectralRow<T> w, const double* ayr, const double* ayi,
+                                        const double* lamy, double lamx, int n1, int nzc) {
   for (int j = 0; j < n1; ++j) {
     w.ayr = ayr[j];
     w.ayi = ayi[j];
@@ -372,15 +378,16 @@ FLAGSIM_INLINE void spectral_plane_body(SpectralRow<T> w, const double* ayr, con
 }
 
 template <class T>
-void spectral_plane_16(const SpectralRow<T>& w, const double* ayr, const double* ayi, const double* lamy,
-                       double lamx, int n1, int nzc) {
+void spectral_plane_16(const SpectralRow<T>& w, const double* ayr, const double* ayi,
+                       const double* lamy, double lamx, int n1, int nzc) {
   spectral_plane_body<NarrowLanes<double>>(w, ayr, ayi, lamy, lamx, n1, nzc);
 }
 
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
 template <class T>
-FLAGSIM_TARGET_AVX void spectral_plane_32(const SpectralRow<T>& w, const double* ayr, const double* ayi,
-                                          const double* lamy, double lamx, int n1, int nzc) {
+FLAGSIM_TARGET_AVX void spectral_plane_32(const SpectralRow<T>& w, const double* ayr,
+                                          const double* ayi, const double* lamy, double lamx,
+                                          int n1, int nzc) {
   spectral_plane_body<Lanes32<double>>(w, ayr, ayi, lamy, lamx, n1, nzc);
 }
 #endif
@@ -442,11 +449,11 @@ void FftProjector<T>::diffuse_and_project(MacGrid<T>&, double, const Vec3*) {}
 
 #endif
 
-#define FLAGSIM_INSTANTIATE_PRESSURE(T)                                  \
-  template void divergence<T>(const MacGrid<T>&, T*);                   \
-  template void subtract_gradient<T>(const T*, MacGrid<T>&);            \
-  template void apply_tunnel_boundary<T>(const Vec3&, MacGrid<T>&);     \
-  template void set_mean_flow<T>(const Vec3&, MacGrid<T>&);             \
+#define FLAGSIM_INSTANTIATE_PRESSURE(T)                             \
+  template void divergence<T>(const MacGrid<T>&, T*);               \
+  template void subtract_gradient<T>(const T*, MacGrid<T>&);        \
+  template void apply_tunnel_boundary<T>(const Vec3&, MacGrid<T>&); \
+  template void set_mean_flow<T>(const Vec3&, MacGrid<T>&);         \
   template class FftProjector<T>;
 FLAGSIM_INSTANTIATE_PRESSURE(float)
 FLAGSIM_INSTANTIATE_PRESSURE(double)

@@ -92,10 +92,8 @@ void Mesh2Options::validate() const {
 }
 
 std::string format_mesh2(const Eigen::Ref<const MatX3>& positions,
-                         const Eigen::Ref<const MatX3>& normals,
-                         const Eigen::Ref<const MatX2>& uv,
-                         const Eigen::Ref<const MatX3i>& triangles,
-                         const Mesh2Options& options) {
+                         const Eigen::Ref<const MatX3>& normals, const Eigen::Ref<const MatX2>& uv,
+                         const Eigen::Ref<const MatX3i>& triangles, const Mesh2Options& options) {
   options.validate();
   const Index n = positions.rows();
   const Index t = triangles.rows();

@@ -50,8 +50,7 @@ struct Mesh2Options {
 /// Requires N >= 3, T >= 1, matching row counts, finite values and indices in [0, N): otherwise
 /// InvalidArgument naming the array, the expectation and the offending value.
 std::string format_mesh2(const Eigen::Ref<const MatX3>& positions,
-                         const Eigen::Ref<const MatX3>& normals,
-                         const Eigen::Ref<const MatX2>& uv,
+                         const Eigen::Ref<const MatX3>& normals, const Eigen::Ref<const MatX2>& uv,
                          const Eigen::Ref<const MatX3i>& triangles,
                          const Mesh2Options& options = {});
 

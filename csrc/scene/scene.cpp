@@ -22,7 +22,8 @@ void Scene::validate() const {
   integrator.validate("integrator");
   // A strain beyond max_strain raises: at or below the strain limit's promise, so could a step
   // the limit keeps within it.
-  if (integrator.strain_limit > 0 && !(integrator.max_strain > integrator.strain_limit + kStrainLimitSlack))
+  if (integrator.strain_limit > 0 &&
+      !(integrator.max_strain > integrator.strain_limit + kStrainLimitSlack))
     fail_param("integrator.max_strain",
                "> integrator.strain_limit + " + detail::to_text(kStrainLimitSlack) + " = " +
                    detail::to_text(integrator.strain_limit + kStrainLimitSlack) +
@@ -105,7 +106,7 @@ Scene Scene::flapping_demo() {
   s.flag.cols = 24;
   s.air.model = "uniform";
   s.air.wind = WindSchedule(Vec3(2.0, 0.0, 0.0));
-  s.air.density = 0.0;  // no drag stage: the wind only sets u_p of eq. 5
+  s.air.density = 0.0;               // no drag stage: the wind only sets u_p of eq. 5
   s.gravity = Vec3(9.81, 0.0, 0.0);  // every mass pulled along +x
   s.flapping.mode = "displace";
   s.flapping.amplitude = 0.01;
@@ -118,10 +119,13 @@ Scene Scene::flapping_demo() {
 
 std::vector<std::pair<std::string, std::string>> builtin_scenes() {
   return {
-      {"paper", "Okamoto et al. §5: 8 x 11 flag on a pole, 16^3 air grid, about 2 m/s from a fan, dt = 0.01 s"},
+      {"paper",
+       "Okamoto et al. §5: 8 x 11 flag on a pole, 16^3 air grid, about 2 m/s from a fan, dt = 0.01 "
+       "s"},
       {"banner", "a banner hanging from its top edge in a steady 3 m/s horizontal wind"},
-      {"flapping_demo", "Okamoto et al. §4.3 (Fig. 6): eq. 5 flapping alone, no air solver, no "
-                        "gravity, every mass pulled along +x"},
+      {"flapping_demo",
+       "Okamoto et al. §4.3 (Fig. 6): eq. 5 flapping alone, no air solver, no "
+       "gravity, every mass pulled along +x"},
   };
 }
 

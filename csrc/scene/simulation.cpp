@@ -37,8 +37,8 @@ double EnergyLedger::unexplained_net() const {
 }
 
 double EnergyLedger::unexplained_since(const EnergyLedger& b) const {
-  const double projections = (strain_limit - b.strain_limit) + (pole - b.pole) +
-                             (self_collision - b.self_collision);
+  const double projections =
+      (strain_limit - b.strain_limit) + (pole - b.pole) + (self_collision - b.self_collision);
   return std::max(integrator - b.integrator, 0.0) + std::max(projections, 0.0);
 }
 
@@ -51,20 +51,18 @@ Scene validated(const Scene& s) {
   double cells = 0;
   if (s.air.model == "grid")
     cells = double(s.air.resolution[0]) * s.air.resolution[1] * s.air.resolution[2];
-  const double bytes = vertices * kBytesPerVertex +
-                       cells * kValuesPerCell * (s.air.precision == "float" ? 4 : 8);
-  check_memory("this scene (a " + std::to_string(s.flag.rows) + " x " + std::to_string(s.flag.cols) +
-                   " flag" + (cells > 0 ? ", " + detail::to_text(cells) + " air cells" : std::string()) +
-                   ")",
+  const double bytes =
+      vertices * kBytesPerVertex + cells * kValuesPerCell * (s.air.precision == "float" ? 4 : 8);
+  check_memory("this scene (a " + std::to_string(s.flag.rows) + " x " +
+                   std::to_string(s.flag.cols) + " flag" +
+                   (cells > 0 ? ", " + detail::to_text(cells) + " air cells" : std::string()) + ")",
                bytes, "use fewer flag.rows / flag.cols or a coarser air.resolution");
   return s;
 }
 }  // namespace
 
 Simulation::Simulation(const Scene& scene)
-    : scene_(validated(scene)),
-      topo_(build_flag_topology(scene_.flag)),
-      scratch_(topo_) {
+    : scene_(validated(scene)), topo_(build_flag_topology(scene_.flag)), scratch_(topo_) {
   const Index N = topo_.num_vertices();
   x_ = topo_.rest_positions;
   v_.setZero(N, 3);
@@ -75,8 +73,8 @@ Simulation::Simulation(const Scene& scene)
   // Build only what the scene needs: a stage left out is never called and costs nothing.
   const bool air = scene_.air.model != "none" && scene_.air.density > 0;
   forces_.gravity = scene_.gravity.squaredNorm() > 0;
-  forces_.drag = air && (scene_.drag.coefficient > 0 ||
-                         (scene_.drag.model == "triangle" && scene_.drag.tangential_coefficient > 0));
+  forces_.drag = air && (scene_.drag.coefficient > 0 || (scene_.drag.model == "triangle" &&
+                                                         scene_.drag.tangential_coefficient > 0));
   forces_.springs = topo_.stiffness.maxCoeff() > 0 || topo_.damping.maxCoeff() > 0;
   forces_.g = scene_.gravity;
   forces_.drag_params = scene_.drag;
@@ -100,8 +98,8 @@ Simulation::Simulation(const Scene& scene)
     // Strain limiting inside the collision sweeps: contacts alone would hold a stretch.
     // Its energy is booked with the self-collision response's (one evaluation around it).
     strain_projector_ = [this](MatX3& x, MatX3& v) {
-      limit_strain(topo_, scene_.integrator.strain_limit,
-                   scene_.integrator.strain_limit_iterations, x, v);
+      limit_strain(topo_, scene_.integrator.strain_limit, scene_.integrator.strain_limit_iterations,
+                   x, v);
     };
   }
   for (int s = 0; s < kNumStages; ++s)
@@ -121,7 +119,8 @@ void Simulation::check_explicit_step() const {
   if (ip.method != "explicit" || ip.adaptive) return;
   MatX3 u0;
   air_velocity(x_, u0);
-  const double stable = stable_step_estimate(topo_, scene_.drag, forces_.rho, forces_.drag, x_, v_, u0);
+  const double stable =
+      stable_step_estimate(topo_, scene_.drag, forces_.rho, forces_.drag, x_, v_, u0);
   const double h = scene_.dt / double(ip.substeps);
   if (!(h > stable)) return;
   std::ostringstream s;
@@ -160,7 +159,7 @@ void Simulation::setup_flapping() {
   // infinite, so A = amplitude, without pins).
   flap_L_.resize(N);
   for (Index i = 0; i < N; ++i)
-    flap_L_[i] = topo_.pinned(i)                ? 0.0
+    flap_L_[i] = topo_.pinned(i)               ? 0.0
                  : topo_.tether_anchor[i] >= 0 ? topo_.tether_length[i]
                                                : std::numeric_limits<double>::infinity();
   flap_applied_.setZero(N);
@@ -178,7 +177,8 @@ void Simulation::setup_flapping() {
   }
   // u_p is sampled along the flag's pole-side edge (column 0, beside the pole), at rest.
   edge_points_.resize(topo_.rows, 3);
-  for (int r = 0; r < topo_.rows; ++r) edge_points_.row(r) = topo_.rest_positions.row(r * topo_.cols);
+  for (int r = 0; r < topo_.rows; ++r)
+    edge_points_.row(r) = topo_.rest_positions.row(r * topo_.cols);
   edge_air_.resize(topo_.rows, 3);
   visual_ = built_[kFlapVisual];
   if (visual_) {
@@ -193,14 +193,17 @@ void Simulation::setup_flapping() {
 // The air grid (paper §2): one-way coupling, so it only needs the flag to start inside it.
 void Simulation::build_fluid() {
   const AirParams& a = scene_.air;
-  const Vec3 lo = a.origin, hi = a.origin + a.cell_size * Vec3(a.resolution[0], a.resolution[1], a.resolution[2]);
+  const Vec3 lo = a.origin,
+             hi = a.origin + a.cell_size * Vec3(a.resolution[0], a.resolution[1], a.resolution[2]);
   for (Index i = 0; i < x_.rows(); ++i) {
     const Vec3 p = x_.row(i).transpose();
     if ((p.array() < lo.array()).any() || (p.array() > hi.array()).any()) {
       std::ostringstream s;
-      s << "flag.origin should place the flag inside the air grid [" << lo.x() << ", " << hi.x() << "] x ["
-        << lo.y() << ", " << hi.y() << "] x [" << lo.z() << ", " << hi.z() << "] m (air.origin, air.resolution, "
-        << "air.cell_size), got vertex " << i << " at (" << p.x() << ", " << p.y() << ", " << p.z() << ")";
+      s << "flag.origin should place the flag inside the air grid [" << lo.x() << ", " << hi.x()
+        << "] x [" << lo.y() << ", " << hi.y() << "] x [" << lo.z() << ", " << hi.z()
+        << "] m (air.origin, air.resolution, "
+        << "air.cell_size), got vertex " << i << " at (" << p.x() << ", " << p.y() << ", " << p.z()
+        << ")";
       throw InvalidArgument(s.str());
     }
   }
@@ -266,7 +269,7 @@ Simulation::Implausible Simulation::step_piece() {
   x_piece_ = x_;
   const bool displace = built_[kFlap] && scene_.flapping.mode == "displace";
   stage_air();
-  if (displace) stage_flap_drift();                     // a drift of the positions, or
+  if (displace) stage_flap_drift();                    // a drift of the positions, or
   if (built_[kFlap] && !displace) stage_flap_force();  // a force, held over the piece
   stage_integrate();  // includes strain limiting after every substep, timed as its own stage
   stage_collide();
@@ -302,8 +305,9 @@ void Simulation::stage_flap_drift() {
   compute_vertex_normals(topo_, x_, n_);
   flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, t_piece_ + h_, scene_.flapping, flap_z_);
   for (Index i = 0; i < topo_.num_vertices(); ++i)
-    flap_drift_.row(i) = topo_.pinned(i) ? Vec3::Zero().transpose()
-                                         : (((flap_z_[i] - flap_applied_[i]) / h_) * n_.row(i)).eval();
+    flap_drift_.row(i) = topo_.pinned(i)
+                             ? Vec3::Zero().transpose()
+                             : (((flap_z_[i] - flap_applied_[i]) / h_) * n_.row(i)).eval();
 }
 
 // "force": F = m d2z/dt2 n, the force that would move a free mass along the wave (d2z/dt2 by the
@@ -320,7 +324,8 @@ void Simulation::stage_flap_force() {
   flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, t1 + h, fp, flap_after_);
   for (Index i = 0; i < topo_.num_vertices(); ++i) {
     const double a = (flap_after_[i] - 2 * flap_z_[i] + flap_before_[i]) / (h * h);
-    flap_force_.row(i) = topo_.pinned(i) ? Vec3::Zero().transpose() : ((topo_.mass[i] * a) * n_.row(i)).eval();
+    flap_force_.row(i) =
+        topo_.pinned(i) ? Vec3::Zero().transpose() : ((topo_.mass[i] * a) * n_.row(i)).eval();
   }
 }
 
@@ -436,11 +441,10 @@ void Simulation::stage_integrate() {
   ledger_.strain_limit += w.strain_limit;
   ledger_.integrator += w.remainder;
   energy_run_ = stats_.energy_after;
-  seconds_[kIntegrate] += total - (force_seconds_.gravity - before.gravity) -
-                          (force_seconds_.drag - before.drag) -
-                          (force_seconds_.springs - before.springs) -
-                          (force_seconds_.strain_limit - before.strain_limit) -
-                          (force_seconds_.energy - before.energy);
+  seconds_[kIntegrate] +=
+      total - (force_seconds_.gravity - before.gravity) - (force_seconds_.drag - before.drag) -
+      (force_seconds_.springs - before.springs) -
+      (force_seconds_.strain_limit - before.strain_limit) - (force_seconds_.energy - before.energy);
   if (status == IntegrateStatus::kTooManySubsteps) {
     std::ostringstream s;
     s << "the stable step estimate " << stats_.stable_step << " s needs more than "
@@ -490,7 +494,8 @@ Simulation::Implausible Simulation::stage_check() {
   }
   if (e > scene_.integrator.max_strain) {
     std::ostringstream s;
-    s << "spring strain " << e << " exceeds integrator.max_strain = " << scene_.integrator.max_strain;
+    s << "spring strain " << e
+      << " exceeds integrator.max_strain = " << scene_.integrator.max_strain;
     diverge("strain", vertex, s.str());
   }
   const double limit = scene_.integrator.strain_limit;

@@ -131,11 +131,18 @@ class Simulation {
 
  private:
   enum Stage {
-    kWind, kFluid,
-    kFlap,           // "displace" / "force": a drift or force the integrator carries
-    kGravity, kDrag, kSprings, kIntegrate, kStrainLimit,
-    kPole, kSelfCollision, kCheck,
-    kFlapVisual,     // "visual": after the step, on the exported geometry only
+    kWind,
+    kFluid,
+    kFlap,  // "displace" / "force": a drift or force the integrator carries
+    kGravity,
+    kDrag,
+    kSprings,
+    kIntegrate,
+    kStrainLimit,
+    kPole,
+    kSelfCollision,
+    kCheck,
+    kFlapVisual,  // "visual": after the step, on the exported geometry only
     kNumStages
   };
   static const char* stage_name(Stage s);
@@ -170,9 +177,9 @@ class Simulation {
   ForceSet forces_;
   IntegratorScratch scratch_;
   IntegratorStats stats_;
-  MatX3 x_, v_, n_, u_;    // (N x 3) positions, velocities, normals, air at masses
-  MatX3 x_start_, v_start_;  // (N x 3) state at the start of the step (rollback)
-  MatX3 x_piece_;            // (N x 3) positions at the start of the piece (swept collisions)
+  MatX3 x_, v_, n_, u_;         // (N x 3) positions, velocities, normals, air at masses
+  MatX3 x_start_, v_start_;     // (N x 3) state at the start of the step (rollback)
+  MatX3 x_piece_;               // (N x 3) positions at the start of the piece (swept collisions)
   double h_ = 0, t_piece_ = 0;  // s, length and start time of the piece being stepped
   double time_ = 0;
   long step_count_ = 0;
@@ -184,10 +191,10 @@ class Simulation {
 
   // Flapping (paper eq. 5), set up only when flapping.mode != "off".
   Perlin1D noise_{0};
-  MatX2 flap_xy_;              // (N x 2) eq. 5's normalised (x, y): the rest uv
-  VecX flap_L_;                // (N) m, rest distance to the nearest pinned vertex
-  VecX flap_z_;                // (N) m, z at the current time
-  VecX flap_applied_;          // (N) m, "displace": z already applied to the cloth
+  MatX2 flap_xy_;                  // (N x 2) eq. 5's normalised (x, y): the rest uv
+  VecX flap_L_;                    // (N) m, rest distance to the nearest pinned vertex
+  VecX flap_z_;                    // (N) m, z at the current time
+  VecX flap_applied_;              // (N) m, "displace": z already applied to the cloth
   VecX flap_before_, flap_after_;  // (N) m, "force": z at t - dt and t + dt
   MatX3 edge_points_, edge_air_;   // (P x 3) where u_p is sampled, and the air there
   double u_p_ = 0;
@@ -201,12 +208,12 @@ class Simulation {
   EnergyLedger ledger_, ledger_start_;
   double energy_end_start_ = 0;
   double energy_end_ = 0, energy_run_ = 0, gravity_potential_0_ = 0, energy_scale_ = 0;
-  MatX3 flap_drift_;           // (N x 3) m/s, "displace": dz n / h, the integrator's drift
-  MatX3 flap_force_;           // (N x 3) N, "force": held over the piece by the integrator
-  VecX flap_start_;            // (N) m, flap_applied_ at the start of the step (rollback)
+  MatX3 flap_drift_;  // (N x 3) m/s, "displace": dz n / h, the integrator's drift
+  MatX3 flap_force_;  // (N x 3) N, "force": held over the piece by the integrator
+  VecX flap_start_;   // (N) m, flap_applied_ at the start of the step (rollback)
 
   std::unique_ptr<SelfCollision> self_collision_;
-  std::atomic<bool> stepping_{false};  // a step() is running (one thread at a time)
+  std::atomic<bool> stepping_{false};          // a step() is running (one thread at a time)
   SelfCollision::Projector strain_projector_;  // built once: no allocation per step
   long air_outside_last_ = 0, air_outside_total_ = 0;
 };

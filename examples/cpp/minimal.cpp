@@ -13,7 +13,8 @@ int main() {
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const flagsim::MatX3& x = sim.positions();
   const flagsim::Vec3 lo = x.colwise().minCoeff(), hi = x.colwise().maxCoeff();
-  std::printf("simulated %.2f s in %ld steps: %.0f steps per second\n", sim.time(), steps, steps / secs);
+  std::printf("simulated %.2f s in %ld steps: %.0f steps per second\n", sim.time(), steps,
+              steps / secs);
   std::printf("flag extent: x [%.3f, %.3f] y [%.3f, %.3f] z [%.3f, %.3f] m\n", lo.x(), hi.x(),
               lo.y(), hi.y(), lo.z(), hi.z());
   return 0;

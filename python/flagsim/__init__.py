@@ -11,6 +11,8 @@ CLI, plotting and rendering helpers load when used.
     >>> round(sim.time, 6)
     1.0
 """
+
+from . import scene as _scene  # noqa: F401 (attaches Scene.load, Scene.named, ...)
 from ._core import (
     AirParams,
     DivergenceError,
@@ -34,7 +36,6 @@ from ._core import (
     perlin1d,
     set_num_threads,
 )
-from . import scene as _scene  # attaches Scene.load, Scene.builtins, Scene.named, ...
 
 __all__ = [
     "AirParams",

@@ -1,4 +1,5 @@
 """``python -m flagsim``: the flagsim command."""
+
 import sys
 
 from .cli import main

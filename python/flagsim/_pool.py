@@ -7,6 +7,7 @@ POV-Ray processes a worker starts ask the same of the worker, so the whole tree 
 head process. Where prctl does not exist (macOS, Windows) the workers fall back to the pool's
 own clean-up, which covers every exit but SIGKILL.
 """
+
 from __future__ import annotations
 
 import ctypes
@@ -45,9 +46,12 @@ def _worker_init(parent_pid: int) -> None:
 def worker_pool(max_workers: int | None = None) -> ProcessPoolExecutor:
     """A ProcessPoolExecutor (spawn start method: the parent may run OpenMP threads, and fork
     after threads is unsafe) whose workers die with this process."""
-    return ProcessPoolExecutor(max_workers=max_workers,
-                               mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_worker_init, initargs=(os.getpid(),))
+    return ProcessPoolExecutor(
+        max_workers=max_workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_worker_init,
+        initargs=(os.getpid(),),
+    )
 
 
 def child_dies_with_us() -> None:

@@ -10,6 +10,7 @@ and its docstring is the command's --help description. To add a command, add a m
 line to COMMANDS. User errors (bad input, missing programs, failed frames) print one line,
 ``flagsim: error: ...``, and exit non-zero without a traceback (FLAGSIM_TRACEBACK=1 shows it).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -19,19 +20,25 @@ import sys
 
 #: name -> (module, one-line summary), in the order --help lists them
 COMMANDS = {
-    "run": ("flagsim.commands.run",
-            "simulate a scene and export it for POV-Ray (--render: render it to a GIF/MP4)"),
+    "run": (
+        "flagsim.commands.run",
+        "simulate a scene and export it for POV-Ray (--render: render it to a GIF/MP4)",
+    ),
     "render": ("flagsim.commands.render", "render an existing export with POV-Ray"),
     "scenes": ("flagsim.commands.scenes", "list the built-in scenes"),
-    "study": ("flagsim.commands.study",
-              "accuracy (error against run time) or stability (stiff and extreme cases) study"),
-    "bench": ("flagsim.bench",
-              "benchmark: paper scene, cloth and air alone, threads; --peers: PyBullet, MuJoCo, pyPBD"),
+    "study": (
+        "flagsim.commands.study",
+        "accuracy (error against run time) or stability (stiff and extreme cases) study",
+    ),
+    "bench": (
+        "flagsim.bench",
+        "benchmark: paper scene, cloth and air alone, threads; --peers: PyBullet, MuJoCo, pyPBD",
+    ),
 }
 
 EXIT_OK = 0
-EXIT_FAILURE = 1      # the work failed: frames did not render, the simulation diverged, I/O
-EXIT_USAGE = 2        # the input is wrong: arguments, scene name or file, TOML keys, texture
+EXIT_FAILURE = 1  # the work failed: frames did not render, the simulation diverged, I/O
+EXIT_USAGE = 2  # the input is wrong: arguments, scene name or file, TOML keys, texture
 EXIT_INTERRUPTED = 130
 
 
@@ -44,8 +51,9 @@ def _top_parser():
         prog="flagsim",
         description="Simulate flags whipped by the wind and render them with POV-Ray.",
         epilog=f"commands:\n{listing}\n\n'flagsim COMMAND --help' describes a command.\n"
-               "example:  flagsim run paper --seconds 4 --fps 25 --out out/demo --render --gif",
-        formatter_class=argparse.RawDescriptionHelpFormatter)
+        "example:  flagsim run paper --seconds 4 --fps 25 --out out/demo --render --gif",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--version", action="version", version=f"flagsim {__version__}")
     p.add_argument("command", metavar="COMMAND", nargs="?", help="one of: " + ", ".join(COMMANDS))
     p.add_argument("args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
@@ -55,8 +63,11 @@ def _top_parser():
 def command_parser(name):
     """(module, parser) of a sub-command, importing its module."""
     module = importlib.import_module(COMMANDS[name][0])
-    parser = argparse.ArgumentParser(prog=f"flagsim {name}", description=module.__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog=f"flagsim {name}",
+        description=module.__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     module.configure(parser)
     return module, parser
 
@@ -76,8 +87,9 @@ def main(argv=None):
         return EXIT_USAGE
     if ns.command not in COMMANDS:
         top.print_usage(sys.stderr)
-        return error(f"unknown command '{ns.command}' (choose from {', '.join(COMMANDS)})",
-                     EXIT_USAGE)
+        return error(
+            f"unknown command '{ns.command}' (choose from {', '.join(COMMANDS)})", EXIT_USAGE
+        )
     module, parser = command_parser(ns.command)
     args = parser.parse_args(ns.args)
     if os.environ.get("FLAGSIM_TRACEBACK"):
@@ -92,6 +104,7 @@ class CommandError(Exception):
 def run_guarded(fn, args):
     """Run a command, turning the errors a user can act on into one line and an exit code."""
     import flagsim
+
     from .povray.render import FfmpegNotFound, PovrayNotFound, RenderError
 
     try:

@@ -18,6 +18,7 @@ A TOML scene mirrors the Scene's sections; every key is optional and unknown key
     [integrator]
     method = "implicit"
 """
+
 from __future__ import annotations
 
 import os
@@ -78,8 +79,7 @@ def apply_dict(obj: Any, data: dict[str, Any], section: str) -> None:
     for key, value in data.items():
         name = f"{section}.{key}" if section else key
         if key not in known:
-            raise ValueError(
-                f"unknown key '{key}' in {where}; known keys: {', '.join(known)}")
+            raise ValueError(f"unknown key '{key}' in {where}; known keys: {', '.join(known)}")
         current = getattr(obj, key)
         if _is_struct(current):
             if not isinstance(value, dict):
@@ -105,7 +105,7 @@ def apply_dict(obj: Any, data: dict[str, Any], section: str) -> None:
 def _renamed(message: str, cls: type, section: str) -> str:
     own = OWN_SECTION.get(cls)
     if own and own != section and message.startswith(own + "."):
-        return section + message[len(own):]
+        return section + message[len(own) :]
     return message
 
 
@@ -174,9 +174,17 @@ def _install() -> None:
     Scene.from_dict = staticmethod(from_dict)
     Scene.to_dict = to_dict
     Scene.__reduce__ = lambda self: (from_dict, (to_dict(self),))
-    for cls in (Scene, _core.FlagParams, _core.AirParams, _core.DragParams, _core.IntegratorParams,
-                _core.FanParams, _core.FlappingParams, _core.SelfCollisionParams,
-                _core.PoleParams):
+    for cls in (
+        Scene,
+        _core.FlagParams,
+        _core.AirParams,
+        _core.DragParams,
+        _core.IntegratorParams,
+        _core.FanParams,
+        _core.FlappingParams,
+        _core.SelfCollisionParams,
+        _core.PoleParams,
+    ):
         cls.__repr__ = _repr
 
 

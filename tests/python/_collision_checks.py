@@ -5,6 +5,7 @@ sampling the signed plane distance of each (vertex, non-incident triangle) pair,
 changes, and testing whether the vertex is inside the triangle at that time.
 min_distance(): smallest distance from a vertex to a triangle it does not belong to.
 """
+
 import numpy as np
 
 
@@ -82,8 +83,9 @@ def min_distance(x, tris, reach):
         return np.inf
     p, a, b, c = x[v], pts[t, 0], pts[t, 1], pts[t, 2]
     inside = _inside(p, a, b, c, tol=0.0)
-    edge = np.minimum.reduce([_segment_distance(p, a, b), _segment_distance(p, b, c),
-                              _segment_distance(p, c, a)])
+    edge = np.minimum.reduce(
+        [_segment_distance(p, a, b), _segment_distance(p, b, c), _segment_distance(p, c, a)]
+    )
     d = np.where(inside, np.abs(_plane_distance(p, a, b, c)), edge)
     return float(d.min())
 

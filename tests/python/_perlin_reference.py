@@ -1,5 +1,6 @@
 """The noise and eq. 5 written out from their definitions (csrc/flapping/perlin.h, flapping.h),
 independently of flagsim, for the tests to compare against."""
+
 import numpy as np
 
 MASK64 = (1 << 64) - 1

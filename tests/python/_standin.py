@@ -5,10 +5,10 @@ The flag is a rows x cols sheet hanging from a pole at x = 0 (r = 0 the top row,
 the pole side, as the real topology) with a travelling wave z = A (x / L) sin(k x - w t): a
 deterministic, flapping-looking motion with the same array interface as the Simulation.
 """
+
 from types import SimpleNamespace
 
 import numpy as np
-
 from flagsim.povray import vertex_normals
 
 
@@ -58,4 +58,3 @@ def standin_scene(dt=0.01):
     """What the exporter reads from a Scene: dt and the pole."""
     pole = SimpleNamespace(enabled=True, radius=0.055, height=2.6, base=(0.0, -2.5, 0.0))
     return SimpleNamespace(dt=dt, pole=pole)
-

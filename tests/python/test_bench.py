@@ -1,14 +1,14 @@
 """flagsim bench: the smoke run writes its CSV, table and plot; the protocol, the selection, the
 peers' cloth and the feature detection behave. No wall-clock figure is asserted anywhere."""
+
 import json
 import math
 import os
 from types import SimpleNamespace
 
+import flagsim
 import numpy as np
 import pytest
-
-import flagsim
 from flagsim import bench
 from flagsim.bench import engines, peers, report, worker, workloads
 from flagsim.bench.command import selection
@@ -31,8 +31,17 @@ def test_smoke_run_writes_csv_table_and_plot(tmp_path, capsys):
     with open(out / "results.csv", encoding="utf-8") as f:
         header = [line for line in f if line.startswith("#")]
     machine = dict(line[2:].rstrip("\n").split(": ", 1) for line in header)
-    for key in ("cpu", "logical_cpus", "compiler", "cxx_flags", "git_revision", "numpy", "fftw", "openmp",
-                "load_average_start"):
+    for key in (
+        "cpu",
+        "logical_cpus",
+        "compiler",
+        "cxx_flags",
+        "git_revision",
+        "numpy",
+        "fftw",
+        "openmp",
+        "load_average_start",
+    ):
         assert machine.get(key), key
     rows = report.read_csv(out / "results.csv")
     assert rows and list(rows[0]) == list(report.COLUMNS)
@@ -41,7 +50,10 @@ def test_smoke_run_writes_csv_table_and_plot(tmp_path, capsys):
     for r in rows:
         assert r["ok"] == "True", r
         _figures_ok(r)
-        assert int(r["steps_per_run"]) >= 1 and int(r["runs"]) == workloads.PROTOCOLS["quick"]["repeats"]
+        assert (
+            int(r["steps_per_run"]) >= 1
+            and int(r["runs"]) == workloads.PROTOCOLS["quick"]["repeats"]
+        )
         assert float(r["steps_per_s"]) == pytest.approx(1e3 / float(r["ms_median"]), rel=1e-4)
         assert float(r["ms_min"]) <= float(r["ms_median"])
     paper = [r for r in rows if r["group"] == "paper"][0]
@@ -62,8 +74,22 @@ def test_smoke_run_writes_csv_table_and_plot(tmp_path, capsys):
 
 def test_docs_report_is_written_with_its_plot(tmp_path):
     docs = tmp_path / "docs" / "performance.md"
-    assert bench.main(["--smoke", "--only", "cloth", "--integrators", "explicit", "--out", str(tmp_path / "o"),
-                       "--docs", str(docs)]) == 0
+    assert (
+        bench.main(
+            [
+                "--smoke",
+                "--only",
+                "cloth",
+                "--integrators",
+                "explicit",
+                "--out",
+                str(tmp_path / "o"),
+                "--docs",
+                str(docs),
+            ]
+        )
+        == 0
+    )
     text = docs.read_text(encoding="utf-8")
     assert text.startswith("# flagsim performance") and "Do not edit by hand" in text
     assert "![cost against size](performance.png)" in text
@@ -76,7 +102,7 @@ def test_peers_run_the_same_cloth_or_are_skipped_with_a_line(tmp_path, capsys):
     printed = capsys.readouterr().out
     rows = report.read_csv(out / "results.csv")
     comps = report.read_csv(out / "peers.csv") if (out / "peers.csv").exists() else []
-    for name, (module, display, _) in peers.PEERS.items():
+    for name, (_module, display, _) in peers.PEERS.items():
         ran = [r for r in rows if r["engine"] == name]
         if peers.peer_available(name)[0]:
             assert len(ran) == 1 and ran[0]["ok"] == "True", ran
@@ -84,7 +110,8 @@ def test_peers_run_the_same_cloth_or_are_skipped_with_a_line(tmp_path, capsys):
             c = [c for c in comps if c["peer"] == name]
             assert len(c) == 1 and float(c[0]["ratio"]) > 0
             assert float(c[0]["ratio"]) == pytest.approx(
-                float(c[0]["flagsim_steps_per_s"]) / float(c[0]["peer_steps_per_s"]), rel=1e-4)
+                float(c[0]["flagsim_steps_per_s"]) / float(c[0]["peer_steps_per_s"]), rel=1e-4
+            )
         else:
             assert not ran
             assert f"skip peer {name}: {display} is not installed" in printed
@@ -137,7 +164,9 @@ class SubstepPeer(TearingPeer):
 
 
 @pytest.mark.parametrize("needs, picked", [(1, 5), (5, 5), (11, 20), (80, 80)])
-def test_the_substep_search_picks_the_smallest_count_that_holds_and_restarts_from_rest(needs, picked):
+def test_the_substep_search_picks_the_smallest_count_that_holds_and_restarts_from_rest(
+    needs, picked
+):
     p = SubstepPeer(needs)
     assert p._smallest_stable((5, 10, 20, 40, 80), p.load) == picked
     tried = [n for n in (5, 10, 20, 40, 80) if n <= picked]
@@ -156,15 +185,21 @@ def test_a_peer_torn_after_the_timed_runs_fails_its_row(monkeypatch, holds, ok):
     # A short stability try can pass a peer that blows up later (PyBullet at 128 x 128 did, with
     # 16 substeps): its steps/s must not reach the table as a figure.
     monkeypatch.setattr(peers, "make", lambda name, rows, cols: TearingPeer(holds))
-    spec = {"name": "peers/fake/5x7/t1", "threads": 1, "protocol": {"min_time": 0.0, "repeats": 2, "warmup": 3},
-            "params": {"kind": "peer", "peer": "fake", "rows": 5, "cols": 7}}
+    spec = {
+        "name": "peers/fake/5x7/t1",
+        "threads": 1,
+        "protocol": {"min_time": 0.0, "repeats": 2, "warmup": 3},
+        "params": {"kind": "peer", "peer": "fake", "rows": 5, "cols": 7},
+    }
     result = worker.run(spec)
     assert result["ok"] is ok
     strain = result["info"]["max_strain"]
     assert (strain < 1e-12) if ok else (strain > peers.TORN_STRAIN)
     if not ok:
         assert result["error"] == "state not finite or torn apart after the runs"
-        w = SimpleNamespace(group="peers", engine="fake", variant="cloth", size="5x7", n=35, threads=1)
+        w = SimpleNamespace(
+            group="peers", engine="fake", variant="cloth", size="5x7", n=35, threads=1
+        )
         note = report.make_row(w, result)["note"]
         assert note.count(f"max strain {strain:.2g}") == 1 and note.endswith(result["error"]), note
 
@@ -174,9 +209,13 @@ def test_flag_mesh_matches_flagsim_topology():
     spec = peers.cloth_spec(6, 9)
     x, tris = peers.flag_mesh(spec)
     np.testing.assert_allclose(x, sim.rest_positions, atol=1e-12)
-    assert sorted(map(tuple, np.sort(tris, axis=1))) == sorted(map(tuple, np.sort(sim.triangles, axis=1)))
+    assert sorted(map(tuple, np.sort(tris, axis=1))) == sorted(
+        map(tuple, np.sort(sim.triangles, axis=1))
+    )
     np.testing.assert_array_equal(np.flatnonzero(sim.pinned), peers.pole_pins(spec))
-    assert spec["areal_density"] * spec["width"] * spec["height"] == pytest.approx(sim.node_mass.sum())
+    assert spec["areal_density"] * spec["width"] * spec["height"] == pytest.approx(
+        sim.node_mass.sum()
+    )
 
 
 class FakeClock:
@@ -212,12 +251,18 @@ def test_loglog_slope_and_stage_split():
     n = [100, 1000, 10000]
     assert report.loglog_slope(n, [2 * k**1.5 for k in n]) == pytest.approx(1.5)
     assert report.loglog_slope([64], [1.0]) is None
-    assert report.stage_split({"integrate": 3.0, "springs": 1.0, "check": 0.0}) == "integrate 75%, springs 25%"
+    assert (
+        report.stage_split({"integrate": 3.0, "springs": 1.0, "check": 0.0})
+        == "integrate 75%, springs 25%"
+    )
 
 
 def _features(**available):
     names = ("fluid", "self_collision", "flapping", "grid_air")
-    return {k: (available.get(k, False), "" if available.get(k, False) else f"no {k} here") for k in names}
+    return {
+        k: (available.get(k, False), "" if available.get(k, False) else f"no {k} here")
+        for k in names
+    }
 
 
 def test_workloads_needing_missing_parts_are_skipped_with_the_reason():
@@ -228,7 +273,10 @@ def test_workloads_needing_missing_parts_are_skipped_with_the_reason():
     why = dict(skipped)
     assert "no fluid here" in why["air alone (flagsim.Fluid)"]
     assert "no self_collision here" in why["cloth with self-collision"]
-    assert "no grid_air here" in why["paper scene, full pipeline (grid air + self-collision + flapping)"]
+    assert (
+        "no grid_air here"
+        in why["paper scene, full pipeline (grid air + self-collision + flapping)"]
+    )
 
     everything = _features(fluid=True, self_collision=True, flapping=True, grid_air=True)
     work, skipped = workloads.catalogue(sel, everything, baselines={"fftw": (True, "")})
@@ -265,19 +313,38 @@ def test_quick_selection_is_smaller_and_flags_narrow_it():
 
     full, quick = names([])[0], names(["--quick"])[0]
     assert 0 < len(quick) < len(full) / 2
-    work, proto = names(["--only", "cloth", "--sizes", "8x11,64", "--threads", "2", "--integrators",
-                         "explicit", "--no-self-collision", "--min-time", "0.3"])
+    work, proto = names(
+        [
+            "--only",
+            "cloth",
+            "--sizes",
+            "8x11,64",
+            "--threads",
+            "2",
+            "--integrators",
+            "explicit",
+            "--no-self-collision",
+            "--min-time",
+            "0.3",
+        ]
+    )
     assert work == ["cloth/flagsim/explicit/8x11/t2"]
     assert proto["min_time"] == 0.3
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["--sizes", "8by11"], "--sizes should list ROWSxCOLS"),
-    (["--threads", "0"], "--threads should be"),
-    (["--only", "cloth,wind"], "--only should be a comma-separated list among paper, cloth, air, peers"),
-    (["--pressure", "jacobi"], "--pressure should be"),
-    (["--repeats", "0"], "--repeats should be >= 1, got 0"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--sizes", "8by11"], "--sizes should list ROWSxCOLS"),
+        (["--threads", "0"], "--threads should be"),
+        (
+            ["--only", "cloth,wind"],
+            "--only should be a comma-separated list among paper, cloth, air, peers",
+        ),
+        (["--pressure", "jacobi"], "--pressure should be"),
+        (["--repeats", "0"], "--repeats should be >= 1, got 0"),
+    ],
+)
 def test_bad_selections_exit_2_with_a_message(argv, message, capsys, tmp_path):
     assert bench.main(argv + ["--out", str(tmp_path)]) == 2
     assert message in capsys.readouterr().err
@@ -315,9 +382,14 @@ def test_import_flagsim_bench_loads_no_plotting_or_peers():
     import subprocess
     import sys
 
-    code = ("import sys, flagsim.bench; bad = [m for m in ('matplotlib', 'pybullet', 'mujoco', 'pypbd') "
-            "if m in sys.modules]; print(bad)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    code = (
+        "import sys, flagsim.bench; "
+        "bad = [m for m in ('matplotlib', 'pybullet', 'mujoco', 'pypbd') if m in sys.modules]; "
+        "print(bad)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout
     assert out.strip() == "[]"
 
 
@@ -337,10 +409,13 @@ def test_cloth_workloads_keep_the_papers_thickness_to_spacing_ratio():
     ratio = paper.self_collision.thickness / engines._spacing(paper.flag)
     for rows, cols in [(8, 11), (32, 32), (64, 64), (128, 128)]:
         s = engines.cloth_scene(rows, cols, "implicit", self_collision=True)
-        assert s.self_collision.thickness / engines._spacing(s.flag) == pytest.approx(ratio, rel=1e-12)
+        assert s.self_collision.thickness / engines._spacing(s.flag) == pytest.approx(
+            ratio, rel=1e-12
+        )
         assert s.self_collision.thickness < 0.5 * engines._spacing(s.flag)
-    assert engines.cloth_scene(8, 11, self_collision=True).self_collision.thickness == pytest.approx(
-        paper.self_collision.thickness, rel=1e-12)
+    assert engines.cloth_scene(
+        8, 11, self_collision=True
+    ).self_collision.thickness == pytest.approx(paper.self_collision.thickness, rel=1e-12)
 
 
 @pytest.mark.parametrize("rows, cols", [(8, 11), (128, 128)])

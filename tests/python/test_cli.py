@@ -1,15 +1,16 @@
 """The flagsim command: help, scenes, run (with and without rendering), and its user errors."""
+
 import shutil
 import subprocess
 import sys
 
-import pytest
-
 import flagsim
+import pytest
 from flagsim import cli
 
-needs_povray = pytest.mark.skipif(shutil.which("povray") is None,
-                                  reason="POV-Ray is not installed (Debian package povray)")
+needs_povray = pytest.mark.skipif(
+    shutil.which("povray") is None, reason="POV-Ray is not installed (Debian package povray)"
+)
 
 
 def flagsim_cmd(capsys, *argv):
@@ -47,24 +48,31 @@ def test_scenes_lists_builtins_with_descriptions(capsys):
 def test_run_without_render_exports_frames(capsys, tmp_path):
     name = "paper"
     out = tmp_path / "out dir"
-    code, stdout, err = flagsim_cmd(capsys, "run", name, "--seconds", "0.2", "--fps", "10",
-                                    "--out", str(out), "--quiet")
+    code, stdout, err = flagsim_cmd(
+        capsys, "run", name, "--seconds", "0.2", "--fps", "10", "--out", str(out), "--quiet"
+    )
     assert code == 0, err
     assert stdout.strip() == str(out) and err == ""
     assert sorted(p.name for p in (out / "frames").iterdir()) == [
-        "flag_00000.inc", "flag_00001.inc", "flag_00002.inc"]
+        "flag_00000.inc",
+        "flag_00001.inc",
+        "flag_00002.inc",
+    ]
     assert (out / "flag.pov").is_file() and (out / "flag.ini").is_file()
     # the same command again resumes: every frame is kept
-    code, _, err = flagsim_cmd(capsys, "run", name, "--seconds", "0.2", "--fps", "10",
-                               "--out", str(out))
+    code, _, err = flagsim_cmd(
+        capsys, "run", name, "--seconds", "0.2", "--fps", "10", "--out", str(out)
+    )
     assert code == 0 and "3 frames" in err and "0 written, 3 kept" in err
 
 
 def test_unknown_scene_lists_the_known_ones(capsys, tmp_path):
     code, out, err = flagsim_cmd(capsys, "run", "no_such_scene", "--out", str(tmp_path / "o"))
     assert code == 2 and out == ""
-    assert err.startswith("flagsim: error: unknown scene 'no_such_scene': the built-in scenes "
-                          "are " + ", ".join(sorted(flagsim.Scene.builtins())))
+    assert err.startswith(
+        "flagsim: error: unknown scene 'no_such_scene': the built-in scenes "
+        "are " + ", ".join(sorted(flagsim.Scene.builtins()))
+    )
     assert "Traceback" not in err and not (tmp_path / "o").exists()
 
 
@@ -77,8 +85,9 @@ def test_bad_toml_key_is_reported_as_scene_load_reports_it(capsys, tmp_path):
     code, _, err = flagsim_cmd(capsys, "run", str(toml), "--out", str(tmp_path / "o"))
     assert code == 2
     assert err == f"flagsim: error: {direct.value}\n"
-    code, _, err = flagsim_cmd(capsys, "run", str(tmp_path / "missing.toml"), "--out",
-                               str(tmp_path / "o"))
+    code, _, err = flagsim_cmd(
+        capsys, "run", str(tmp_path / "missing.toml"), "--out", str(tmp_path / "o")
+    )
     assert code == 2 and "scene file" in err and "missing.toml' not found" in err
 
 
@@ -86,28 +95,34 @@ def test_bad_values_and_folders_are_user_errors(capsys, tmp_path):
     name = "paper"
     code, _, err = flagsim_cmd(capsys, "run", name, "--out", str(tmp_path), "--fps", "0")
     assert code == 2 and "fps should be finite and > 0, got 0.0" in err
-    code, _, err = flagsim_cmd(capsys, "run", name, "--out", str(tmp_path), "--texture",
-                               str(tmp_path / "flag.bmp"))
+    code, _, err = flagsim_cmd(
+        capsys, "run", name, "--out", str(tmp_path), "--texture", str(tmp_path / "flag.bmp")
+    )
     assert code == 2 and "texture should be an image file" in err
     code, _, err = flagsim_cmd(capsys, "render", str(tmp_path / "nothing"))
     assert code == 2 and "is not a flagsim export" in err and "Traceback" not in err
 
 
-@pytest.mark.parametrize("name, content", [
-    ("flag.png", b"not a picture, just text\n"),     # text named .png
-    ("flag.jpg", b"\x89PNG\r\n\x1a\n" + bytes(40)),    # a PNG named .jpg
-    ("flag.gif", b""),                                 # empty
-])
-def test_a_texture_povray_cannot_read_is_rejected_before_any_work(capsys, tmp_path, monkeypatch,
-                                                                   name, content):
+@pytest.mark.parametrize(
+    "name, content",
+    [
+        ("flag.png", b"not a picture, just text\n"),  # text named .png
+        ("flag.jpg", b"\x89PNG\r\n\x1a\n" + bytes(40)),  # a PNG named .jpg
+        ("flag.gif", b""),  # empty
+    ],
+)
+def test_a_texture_povray_cannot_read_is_rejected_before_any_work(
+    capsys, tmp_path, monkeypatch, name, content
+):
     import flagsim
 
     (tmp_path / name).write_bytes(content)
     built = []
     monkeypatch.setattr(flagsim, "Simulation", lambda *a, **k: built.append(a))
     out = tmp_path / "o"
-    code, _, err = flagsim_cmd(capsys, "run", "paper", "--out", str(out), "--texture",
-                               str(tmp_path / name), "--render")
+    code, _, err = flagsim_cmd(
+        capsys, "run", "paper", "--out", str(out), "--texture", str(tmp_path / name), "--render"
+    )
     assert code == 2 and "does not start like one" in err and "Traceback" not in err
     assert built == [] and not out.exists()  # no simulation built, no folder made
 
@@ -127,20 +142,40 @@ def test_run_render_gif_prints_the_animation_path(capsys, tmp_path):
 
     name = "paper"
     out = tmp_path / "anim"
-    code, stdout, err = flagsim_cmd(capsys, "run", name, "--seconds", "0.1", "--fps", "20",
-                                    "--out", str(out), "--render", "--gif", "--width", "64",
-                                    "--height", "48", "--quiet", "--jobs", "3")
+    code, stdout, err = flagsim_cmd(
+        capsys,
+        "run",
+        name,
+        "--seconds",
+        "0.1",
+        "--fps",
+        "20",
+        "--out",
+        str(out),
+        "--render",
+        "--gif",
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--quiet",
+        "--jobs",
+        "3",
+    )
     assert code == 0, err
     assert stdout.strip() == str(out / "flag.gif") and err == ""
     assert iio.imread(out / "flag.gif", index=None).shape[:3] == (3, 48, 64)
 
 
 def test_python_dash_m_flagsim_and_lazy_imports():
-    proc = subprocess.run([sys.executable, "-m", "flagsim", "--help"], capture_output=True,
-                          text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "flagsim", "--help"], capture_output=True, text=True
+    )
     assert proc.returncode == 0 and "usage: flagsim" in proc.stdout
-    code = ("import sys, flagsim; a = 'flagsim.povray' in sys.modules; flagsim.povray.export; "
-            "print(a, sorted(m for m in ('tqdm', 'imageio', 'matplotlib', 'flagsim.cli') "
-            "if m in sys.modules))")
+    code = (
+        "import sys, flagsim; a = 'flagsim.povray' in sys.modules; flagsim.povray.export; "
+        "print(a, sorted(m for m in ('tqdm', 'imageio', 'matplotlib', 'flagsim.cli') "
+        "if m in sys.modules))"
+    )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert proc.stdout.strip() == "False []", proc.stderr

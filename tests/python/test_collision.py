@@ -1,25 +1,28 @@
 """Self-collision and pole parameters from Python."""
-import pytest
 
 import flagsim
+import pytest
 
 
 def test_self_collision_params_validation():
     p = flagsim.SelfCollisionParams()
     assert not p.enabled and p.thickness == 0.005 and p.friction == 0.0
-    with pytest.raises(ValueError,
-                       match=r"self_collision\.thickness should be finite and > 0, got -0\.001"):
+    with pytest.raises(
+        ValueError, match=r"self_collision\.thickness should be finite and > 0, got -0\.001"
+    ):
         p.thickness = -0.001
-    with pytest.raises(ValueError,
-                       match=r"self_collision\.friction should be finite and >= 0, got -0\.5"):
+    with pytest.raises(
+        ValueError, match=r"self_collision\.friction should be finite and >= 0, got -0\.5"
+    ):
         p.friction = -0.5
     with pytest.raises(ValueError, match=r"self_collision\.iterations should be in \[1, 1000\]"):
         p.iterations = 0
     assert p.thickness == 0.005 and p.friction == 0.0 and p.iterations == 32
     p.enabled = True
     p.thickness = 0.002
-    assert repr(p) == ("SelfCollisionParams(enabled=True, thickness=0.002, friction=0.0, "
-                       "iterations=32)")
+    assert repr(p) == (
+        "SelfCollisionParams(enabled=True, thickness=0.002, friction=0.0, " "iterations=32)"
+    )
 
 
 def test_pole_params_validation():

@@ -1,12 +1,12 @@
 """Self-collision and the pole inside the Simulation, checked after every step by independent
 geometry (_collision_checks.py): no vertex passes through a triangle, no vertex ends closer than
 half the thickness to a triangle it does not belong to, no vertex inside the pole."""
-import numpy as np
-import pytest
 
 import flagsim
-from flagsim.testing.shapes import folded_onto_itself
+import numpy as np
+import pytest
 from _collision_checks import crossings, inside_cylinder, min_distance
+from flagsim.testing.shapes import folded_onto_itself
 
 
 def run_checked(sim, steps, scene, pole=None):
@@ -14,8 +14,9 @@ def run_checked(sim, steps, scene, pole=None):
     non-incident triangle distance and the vertices inside the pole. Returns totals and extremes."""
     tris = np.asarray(sim.triangles)
     h = scene.self_collision.thickness
-    out = dict(crossings=0, min_distance=np.inf, inside_pole=0, max_strain=0.0, contacts=0,
-               frozen=0)
+    out = dict(
+        crossings=0, min_distance=np.inf, inside_pole=0, max_strain=0.0, contacts=0, frozen=0
+    )
     for _ in range(steps):
         x0 = sim.positions.copy()
         sim.step()
@@ -48,7 +49,7 @@ def test_folded_flag_dropped_onto_itself():
     s.flag.bend_stiffness, s.flag.areal_density = 0.2, 0.5  # a limp, heavy cloth: the fold closes
     sim = flagsim.Simulation(s)
     sim.positions = folded_onto_itself(sim, cols, rows, s.flag.width)
-    top = np.arange(rows * cols).reshape(rows, cols)[:, cols // 2 + 1:].ravel()
+    top = np.arange(rows * cols).reshape(rows, cols)[:, cols // 2 + 1 :].ravel()
     start = sim.positions[top, 1].mean()
     out = run_checked(sim, 150, s)
     assert out["crossings"] == 0
@@ -96,8 +97,14 @@ def reversal_scene(self_collision=True, speed=8.0):
     s.self_collision.enabled = self_collision
     s.flapping.mode = "off"  # collisions under test; eq. 5 would add 0.03 m per m/s of its own
     w = speed
-    s.air.wind = [(0.0, (w, 0, 0)), (0.6, (w, 0, 0)), (0.9, (-w, 0, 0.3 * w)),
-                  (1.6, (-w, 0, 0.3 * w)), (1.9, (w, 0, -0.3 * w)), (2.5, (w, 0, -0.3 * w))]
+    s.air.wind = [
+        (0.0, (w, 0, 0)),
+        (0.6, (w, 0, 0)),
+        (0.9, (-w, 0, 0.3 * w)),
+        (1.6, (-w, 0, 0.3 * w)),
+        (1.9, (w, 0, -0.3 * w)),
+        (2.5, (w, 0, -0.3 * w)),
+    ]
     return s
 
 
@@ -125,8 +132,9 @@ def test_pole_alone_keeps_every_vertex_out():
         sim.step()
         x = sim.positions
         assert not inside_cylinder(x, s.pole.radius, s.pole.base, s.pole.height).any()
-        closest = min(closest, np.hypot(x[free, 0] - s.pole.base[0],
-                                        x[free, 2] - s.pole.base[2]).min())
+        closest = min(
+            closest, np.hypot(x[free, 0] - s.pole.base[0], x[free, 2] - s.pole.base[2]).min()
+        )
     assert closest == pytest.approx(s.pole.radius, rel=1e-6)  # blown onto it, not through it
     assert sim.max_strain() < 0.15
 
@@ -148,8 +156,9 @@ def test_same_scene_same_bytes_with_collisions():
 
 def test_invalid_collision_parameters_raise():
     s = flagsim.Scene.paper()
-    with pytest.raises(ValueError, match=r"self_collision\.thickness should be finite and > 0, "
-                                         r"got -0\.001"):
+    with pytest.raises(
+        ValueError, match=r"self_collision\.thickness should be finite and > 0, " r"got -0\.001"
+    ):
         s.self_collision.thickness = -0.001
     with pytest.raises(ValueError, match=r"pole\.radius should be in \(0, 1e\+06\] m, got 0"):
         s.pole.radius = 0.0

@@ -1,6 +1,5 @@
-import pytest
-
 import flagsim
+import pytest
 
 
 def test_divergence_error_is_a_runtime_error():

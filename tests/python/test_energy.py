@@ -1,17 +1,27 @@
 """The energy ledger from Python, the plausibility check, and a property test: a run of any scene
 in the documented parameter ranges ends plausible or reported, never implausible."""
+
 import math
 
+import flagsim
 import numpy as np
 import pytest
+from flagsim.study import stability
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import flagsim
-from flagsim.study import stability
-
-ENTRIES = ("gravity", "drag", "damping", "flap", "strain_limit", "pole", "self_collision", "pins",
-           "edits", "integrator")
+ENTRIES = (
+    "gravity",
+    "drag",
+    "damping",
+    "flap",
+    "strain_limit",
+    "pole",
+    "self_collision",
+    "pins",
+    "edits",
+    "integrator",
+)
 
 
 def total(sim):
@@ -31,9 +41,11 @@ def test_ledger_balances_every_stage_of_the_paper_scene():
         e = sim.energy()
         # E(t) - E(0) = every entry but gravity; kinetic + spring: every entry
         assert total(sim) - sum(e0.values()) == pytest.approx(
-            sum(ledger.values()) - ledger["gravity"], abs=1e-12)
+            sum(ledger.values()) - ledger["gravity"], abs=1e-12
+        )
         assert (e["kinetic"] + e["spring"]) - (e0["kinetic"] + e0["spring"]) == pytest.approx(
-            sum(ledger.values()), abs=1e-12)
+            sum(ledger.values()), abs=1e-12
+        )
         assert ledger["gravity"] == pytest.approx(-(e["gravity"] - e0["gravity"]), abs=1e-15)
     assert ledger["damping"] < 0 and ledger["integrator"] < 0 and ledger["flap"] != 0
 
@@ -123,15 +135,21 @@ def scene_cases(draw):
     density = 10 ** draw(st.floats(-3, 1))
     k_max = min(7.0, math.log10(1e6 * density)) if integrator == "explicit_adaptive" else 7.0
     return dict(
-        id="hypothesis", kind="matrix", integrator=integrator,
+        id="hypothesis",
+        kind="matrix",
+        integrator=integrator,
         flapping=draw(st.sampled_from(stability.FLAPPING)),
-        k_s=10 ** draw(st.floats(1, max(1.0, k_max))), wind=draw(st.floats(0, 60)),
-        dt=10 ** draw(st.floats(math.log10(5e-3), math.log10(5e-2))), density=density,
-        duration=0.0)
+        k_s=10 ** draw(st.floats(1, max(1.0, k_max))),
+        wind=draw(st.floats(0, 60)),
+        dt=10 ** draw(st.floats(math.log10(5e-3), math.log10(5e-2))),
+        density=density,
+        duration=0.0,
+    )
 
 
-@settings(max_examples=25, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.too_slow])
+@settings(
+    max_examples=25, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
+)
 @given(scene_cases())
 def test_every_run_in_the_documented_ranges_ends_plausible_or_reported(case):
     case["duration"] = 150 * case["dt"]  # a few hundred steps at most
@@ -144,8 +162,10 @@ def test_every_run_in_the_documented_ranges_ends_plausible_or_reported(case):
 def test_parameters_that_rule_out_a_plausible_run_are_rejected_before_any_step():
     s = flagsim.Scene.paper()
     s.integrator.max_strain = 0.1  # below what the strain limit promises: any step could raise
-    with pytest.raises(ValueError, match=r"^integrator\.max_strain should be > "
-                                         r"integrator\.strain_limit \+ 0\.02 = 0\.12"):
+    with pytest.raises(
+        ValueError,
+        match=r"^integrator\.max_strain should be > " r"integrator\.strain_limit \+ 0\.02 = 0\.12",
+    ):
         flagsim.Simulation(s)
     s.integrator.strain_limit = 0.0  # no promise, no conflict
     flagsim.Simulation(s)

@@ -1,17 +1,18 @@
 """perlin1d and eq. 5 from Python, checked against the definitions written out in
 _perlin_reference.py."""
-import numpy as np
-import pytest
 
 import flagsim
+import numpy as np
+import pytest
 from _perlin_reference import reference_eq5, reference_noise
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2024, 2**32 - 1])
 def test_perlin1d_matches_the_definition(seed):
     x = np.linspace(-40.0, 40.0, 1601) + 0.013
-    np.testing.assert_allclose(flagsim.perlin1d(x, seed=seed), reference_noise(x, seed),
-                               rtol=0, atol=1e-14)
+    np.testing.assert_allclose(
+        flagsim.perlin1d(x, seed=seed), reference_noise(x, seed), rtol=0, atol=1e-14
+    )
 
 
 def test_perlin1d_zero_on_the_lattice_bounded_and_smooth():
@@ -38,8 +39,9 @@ def test_perlin1d_is_vectorised_and_seeded():
     # Only 8 gradient values: two seeds share a cell now and then (1 in 64), most cells differ.
     assert np.count_nonzero(a != flagsim.perlin1d(x, seed=6)) >= 18
     assert isinstance(flagsim.perlin1d(0.5), float)
-    np.testing.assert_array_equal(flagsim.perlin1d([0.25, 0.75]),
-                                  flagsim.perlin1d(np.array([0.25, 0.75])))
+    np.testing.assert_array_equal(
+        flagsim.perlin1d([0.25, 0.75]), flagsim.perlin1d(np.array([0.25, 0.75]))
+    )
 
 
 def test_perlin1d_rejects_bad_input():
@@ -71,8 +73,9 @@ def test_displacement_is_equation_5_per_vertex():
     L = xy[:, 0] * length
     for t in (0.0, 0.8, 3.1):
         z = flagsim.flapping_displacement(xy, L, 2.0, t, p)
-        np.testing.assert_allclose(z, reference_eq5(xy[:, 0], xy[:, 1], L, 2.0, t, p),
-                                   rtol=0, atol=1e-15)
+        np.testing.assert_allclose(
+            z, reference_eq5(xy[:, 0], xy[:, 1], L, 2.0, t, p), rtol=0, atol=1e-15
+        )
 
 
 def test_ramp_constant_beyond_l_max():
@@ -89,8 +92,11 @@ def test_flapping_params_validation():
         p.l_max = 0.0
     with pytest.raises(ValueError, match=r"flapping\.l_max should be finite and > 0, got -1"):
         p.l_max = -1.0
-    with pytest.raises(ValueError, match=r"flapping\.mode should be one of 'displace', 'force', "
-                                         r"'visual', 'off', got 'flap'"):
+    with pytest.raises(
+        ValueError,
+        match=r"flapping\.mode should be one of 'displace', 'force', "
+        r"'visual', 'off', got 'flap'",
+    ):
         p.mode = "flap"
     with pytest.raises(ValueError, match=r"flapping\.frequency should be finite and > 0, got inf"):
         p.frequency = float("inf")

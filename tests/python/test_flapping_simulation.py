@@ -1,9 +1,9 @@
 """Flapping (paper eq. 5) inside the Simulation: the displacement it applies, its modes, u_p, the
 flapping demo of paper §4.3 and the scene/TOML plumbing."""
-import numpy as np
-import pytest
 
 import flagsim
+import numpy as np
+import pytest
 from _perlin_reference import reference_eq5
 
 
@@ -19,7 +19,14 @@ def quiet_scene(mode="displace", wind=2.0, ramp=0.0):
     s.integrator.strain_limit = 0.0
     f = s.flapping
     f.mode, f.amplitude, f.l_max, f.speed, f.parabola, f.frequency, f.seed = (
-        mode, 0.02, 0.25, 0.8, 1.3, 3.5, 11)
+        mode,
+        0.02,
+        0.25,
+        0.8,
+        1.3,
+        3.5,
+        11,
+    )
     f.ramp = ramp
     return s
 
@@ -86,13 +93,15 @@ def test_visual_mode_changes_only_the_exported_geometry():
         vis.step(10)
         np.testing.assert_array_equal(vis.positions, off.positions)  # physics untouched
         np.testing.assert_array_equal(off.render_positions, off.positions)
-        speed = np.mean(np.linalg.norm(vis.air_velocity(vis.rest_positions[::s_vis.flag.cols]),
-                                       axis=1))
+        speed = np.mean(
+            np.linalg.norm(vis.air_velocity(vis.rest_positions[:: s_vis.flag.cols]), axis=1)
+        )
         assert vis.pole_air_speed == pytest.approx(speed, rel=1e-12)
         z = reference_eq5(x, y, L, speed, vis.time, s_vis.flapping)
         np.testing.assert_allclose(vis.flap_displacement, z, rtol=0, atol=1e-15)
-        np.testing.assert_allclose(vis.render_positions,
-                                   vis.positions + z[:, None] * vis.normals, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(
+            vis.render_positions, vis.positions + z[:, None] * vis.normals, rtol=0, atol=1e-14
+        )
     assert not vis.render_positions.flags.writeable
     # the rendered normals belong to the rendered surface, not to the physics one
     assert np.abs(vis.render_normals - vis.normals).max() > 1e-3
@@ -114,7 +123,7 @@ def test_air_speed_at_the_pole_follows_the_computed_air():
     s.air.model = "grid"
     s.flapping.mode = "visual"
     sim = flagsim.Simulation(s)
-    edge = np.asarray(sim.rest_positions)[::s.flag.cols]
+    edge = np.asarray(sim.rest_positions)[:: s.flag.cols]
     speeds = []
     for _ in range(4):
         sim.step(5)
@@ -134,7 +143,7 @@ def wave_lags(sim, rows, cols, intervals=16, every=10, max_lag=6):
         b = sim.positions[:, 2].reshape(rows, cols).copy()
         err = {}
         for lag in range(-max_lag, max_lag + 1):
-            d = b[:, lag:] - a[:, :cols - lag] if lag >= 0 else b[:, :cols + lag] - a[:, -lag:]
+            d = b[:, lag:] - a[:, : cols - lag] if lag >= 0 else b[:, : cols + lag] - a[:, -lag:]
             err[lag] = np.mean(d**2)
         lags.append(min(err, key=err.get))
     return np.array(lags)
@@ -170,19 +179,24 @@ def test_builtin_flapping_demo_is_registered():
 
 def test_flapping_sections_load_from_toml(tmp_path):
     f = tmp_path / "flap.toml"
-    f.write_text('base = "paper"\n'
-                 '[flapping]\nmode = "visual"\namplitude = 0.03\nl_max = 0.1\nspeed = 0.5\n'
-                 'parabola = 2.0\nfrequency = 4.0\nseed = 7\n'
-                 '[self_collision]\nenabled = true\nthickness = 0.004\nfriction = 0.3\n'
-                 'iterations = 12\n'
-                 '[pole]\nradius = 0.03\nheight = 3.0\nbase = [0.0, -2.9, 0.0]\n')
+    f.write_text(
+        'base = "paper"\n'
+        '[flapping]\nmode = "visual"\namplitude = 0.03\nl_max = 0.1\nspeed = 0.5\n'
+        "parabola = 2.0\nfrequency = 4.0\nseed = 7\n"
+        "[self_collision]\nenabled = true\nthickness = 0.004\nfriction = 0.3\n"
+        "iterations = 12\n"
+        "[pole]\nradius = 0.03\nheight = 3.0\nbase = [0.0, -2.9, 0.0]\n"
+    )
     s = flagsim.Scene.load(f)
     assert (s.flapping.mode, s.flapping.amplitude, s.flapping.seed) == ("visual", 0.03, 7)
     assert (s.self_collision.enabled, s.self_collision.thickness, s.self_collision.iterations) == (
-        True, 0.004, 12)
+        True,
+        0.004,
+        12,
+    )
     assert s.pole.radius == 0.03 and tuple(s.pole.base) == (0.0, -2.9, 0.0)
     assert flagsim.Scene.from_dict(s.to_dict()).to_dict() == s.to_dict()
-    f.write_text('[flapping]\nwobble = 1\n')
+    f.write_text("[flapping]\nwobble = 1\n")
     with pytest.raises(ValueError, match=r"unknown key 'wobble' in section \[flapping\]"):
         flagsim.Scene.load(f)
     f.write_text('[flapping]\nmode = "wobble"\n')

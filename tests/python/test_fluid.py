@@ -1,14 +1,16 @@
 """flagsim.Fluid: invariants, exact cases, convergence, boundaries, bindings (issue 4)."""
+
 import math
 
+import flagsim
 import numpy as np
 import pytest
-
-import flagsim
 from flagsim.testing.stable_fluids_numpy import StableFluidsNumpy
 
 BACKENDS = [
-    pytest.param("fft", marks=pytest.mark.skipif(not flagsim.has_fftw(), reason="built without FFTW")),
+    pytest.param(
+        "fft", marks=pytest.mark.skipif(not flagsim.has_fftw(), reason="built without FFTW")
+    ),
     "pcg",
 ]
 SCHEMES = ["semi_lagrangian", "maccormack"]
@@ -26,12 +28,20 @@ def max_abs_diff(a, b):
 
 # ---- projection ----------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("scheme", SCHEMES)
 @pytest.mark.parametrize("pressure", BACKENDS)
 def test_divergence_after_projection(pressure, scheme):
     tol = 1e-8
-    fluid = flagsim.Fluid(resolution=(12, 10, 8), cell_size=0.1, origin=(0, 0, 0), pressure=pressure,
-                          advection=scheme, viscosity=1e-3, pcg_tolerance=tol)
+    fluid = flagsim.Fluid(
+        resolution=(12, 10, 8),
+        cell_size=0.1,
+        origin=(0, 0, 0),
+        pressure=pressure,
+        advection=scheme,
+        viscosity=1e-3,
+        pcg_tolerance=tol,
+    )
     random_field(fluid, 1)
     before = np.abs(fluid.divergence()).max()
     assert before > 10
@@ -49,8 +59,9 @@ def test_fft_and_pcg_agree_on_a_periodic_field():
         pytest.skip("built without FFTW")
     tol = 1e-10
     a = flagsim.Fluid(resolution=(8, 8, 8), cell_size=0.125, pressure="fft", viscosity=1e-3)
-    b = flagsim.Fluid(resolution=(8, 8, 8), cell_size=0.125, pressure="pcg", viscosity=1e-3,
-                      pcg_tolerance=tol)
+    b = flagsim.Fluid(
+        resolution=(8, 8, 8), cell_size=0.125, pressure="pcg", viscosity=1e-3, pcg_tolerance=tol
+    )
     random_field(a, 2)
     random_field(b, 2)
     a.step(0.01)
@@ -78,15 +89,30 @@ def test_fft_agrees_with_the_numpy_oracle_after_one_step():
 
 # ---- exact cases ---------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("scheme", SCHEMES)
-@pytest.mark.parametrize("boundary,pressure",  # fft solves periodic domains only
-                         [pytest.param("periodic", p.values[0], marks=p.marks) if hasattr(p, "values")
-                          else ("periodic", p) for p in BACKENDS] + [("tunnel", "pcg")])
+@pytest.mark.parametrize(
+    "boundary,pressure",  # fft solves periodic domains only
+    [
+        pytest.param("periodic", p.values[0], marks=p.marks)
+        if hasattr(p, "values")
+        else ("periodic", p)
+        for p in BACKENDS
+    ]
+    + [("tunnel", "pcg")],
+)
 def test_uniform_field_is_preserved_exactly(boundary, pressure, scheme):
     wind = (1.25, -0.5, 0.75) if boundary == "periodic" else (1.25, 0.0, 0.0)
     kw = dict(wind=wind) if boundary == "tunnel" else {}
-    fluid = flagsim.Fluid(resolution=(8, 6, 5), cell_size=0.2, boundary=boundary, pressure=pressure,
-                          advection=scheme, viscosity=0.0, **kw)
+    fluid = flagsim.Fluid(
+        resolution=(8, 6, 5),
+        cell_size=0.2,
+        boundary=boundary,
+        pressure=pressure,
+        advection=scheme,
+        viscosity=0.0,
+        **kw,
+    )
     fluid.set_velocity(lambda p: np.tile(wind, (len(p), 1)))
     if boundary == "tunnel":
         fluid.v[:, [0, -1], :] = 0.0
@@ -112,14 +138,27 @@ def test_uniform_field_with_viscosity_stays_uniform_to_round_off():
 @pytest.mark.parametrize("pressure", BACKENDS)
 def test_constant_shift_is_advected_exactly(pressure, scheme):
     # u = U everywhere, v = f(x): divergence-free, pressure-free; v is carried along x by U.
-    # U dt = one cell per step, so departure points are grid nodes and no interpolation error occurs.
+    # U dt = one cell per step, so departure points are grid nodes: no interpolation error.
     n, h, U = 16, 0.125, 1.25
     dt = h / U
-    fluid = flagsim.Fluid(resolution=(n, 4, 3), cell_size=h, origin=(0, 0, 0), pressure=pressure,
-                          advection=scheme, viscosity=0.0)
-    fluid.set_velocity(lambda p: np.stack(
-        [np.full(len(p), U), np.sin(2 * np.pi * p[:, 0] / (n * h)) + 0.3 * np.cos(6 * np.pi * p[:, 0] / (n * h)),
-         np.zeros(len(p))], axis=1))
+    fluid = flagsim.Fluid(
+        resolution=(n, 4, 3),
+        cell_size=h,
+        origin=(0, 0, 0),
+        pressure=pressure,
+        advection=scheme,
+        viscosity=0.0,
+    )
+    fluid.set_velocity(
+        lambda p: np.stack(
+            [
+                np.full(len(p), U),
+                np.sin(2 * np.pi * p[:, 0] / (n * h)) + 0.3 * np.cos(6 * np.pi * p[:, 0] / (n * h)),
+                np.zeros(len(p)),
+            ],
+            axis=1,
+        )
+    )
     v0 = fluid.v.copy()
     fluid.step(dt, 5)
     np.testing.assert_array_equal(fluid.v, np.roll(v0, 5, axis=0))
@@ -128,6 +167,7 @@ def test_constant_shift_is_advected_exactly(pressure, scheme):
 
 # ---- Taylor-Green --------------------------------------------------------------------------------
 
+
 def taylor_green_error(n, scheme, steps, nu=0.01, t_end=0.5):
     """Max error of the 2-D Taylor-Green vortex (extruded in z, an exact Navier-Stokes solution)."""
     k = 2 * np.pi  # unit periodic box
@@ -135,12 +175,24 @@ def taylor_green_error(n, scheme, steps, nu=0.01, t_end=0.5):
     def exact(p, t):
         d = math.exp(-2 * nu * k * k * t)
         x, y = p[:, 0], p[:, 1]
-        return np.stack([np.sin(k * x) * np.cos(k * y) * d, -np.cos(k * x) * np.sin(k * y) * d,
-                         np.zeros(len(p))], axis=1)
+        return np.stack(
+            [
+                np.sin(k * x) * np.cos(k * y) * d,
+                -np.cos(k * x) * np.sin(k * y) * d,
+                np.zeros(len(p)),
+            ],
+            axis=1,
+        )
 
-    fluid = flagsim.Fluid(resolution=(n, n, 2), cell_size=1.0 / n, origin=(0, 0, 0), viscosity=nu,
-                          advection=scheme, pressure="fft" if flagsim.has_fftw() else "pcg",
-                          pcg_tolerance=1e-12)
+    fluid = flagsim.Fluid(
+        resolution=(n, n, 2),
+        cell_size=1.0 / n,
+        origin=(0, 0, 0),
+        viscosity=nu,
+        advection=scheme,
+        pressure="fft" if flagsim.has_fftw() else "pcg",
+        pcg_tolerance=1e-12,
+    )
     fluid.set_velocity(lambda p: exact(p, 0.0))
     fluid.step(t_end / steps, steps)
     err = 0.0
@@ -157,11 +209,15 @@ def test_taylor_green_converges_first_order_for_semi_lagrangian_better_for_macco
     # MacCormack second order.
     sizes = (8, 16, 32)
     errors = {s: [taylor_green_error(n, s, steps=n * n // 8) for n in sizes] for s in SCHEMES}
-    orders = {s: [math.log2(e[i] / e[i + 1]) for i in range(len(sizes) - 1)] for s, e in errors.items()}
+    orders = {
+        s: [math.log2(e[i] / e[i + 1]) for i in range(len(sizes) - 1)] for s, e in errors.items()
+    }
     with capsys.disabled():
         for s in SCHEMES:
-            print(f"\nTaylor-Green {s}: errors {['%.3g' % e for e in errors[s]]} "
-                  f"orders {['%.2f' % o for o in orders[s]]}")
+            print(
+                f"\nTaylor-Green {s}: errors {['%.3g' % e for e in errors[s]]} "
+                f"orders {['%.2f' % o for o in orders[s]]}"
+            )
     for s in SCHEMES:
         assert errors[s][0] > errors[s][1] > errors[s][2]
     assert 0.6 < orders["semi_lagrangian"][-1] < 1.3
@@ -180,11 +236,25 @@ def test_taylor_green_at_fixed_cfl_both_schemes_converge():
 
 # ---- tunnel --------------------------------------------------------------------------------------
 
+
 def tunnel(**kw):
-    args = dict(resolution=(16, 8, 8), cell_size=0.125, origin=(0, 0, 0), boundary="tunnel",
-                pressure="pcg", wind=[(0.0, (2.0, 0.0, 0.0)), (0.2, (3.0, 0.0, 0.0))],
-                fans=[flagsim.FanParams(shape="sphere", center=(0.8, 0.5, 0.5), radius=0.3,
-                                        direction=(1.0, 0.5, 0.0), force_density=60.0)])
+    args = dict(
+        resolution=(16, 8, 8),
+        cell_size=0.125,
+        origin=(0, 0, 0),
+        boundary="tunnel",
+        pressure="pcg",
+        wind=[(0.0, (2.0, 0.0, 0.0)), (0.2, (3.0, 0.0, 0.0))],
+        fans=[
+            flagsim.FanParams(
+                shape="sphere",
+                center=(0.8, 0.5, 0.5),
+                radius=0.3,
+                direction=(1.0, 0.5, 0.0),
+                force_density=60.0,
+            )
+        ],
+    )
     args.update(kw)
     return flagsim.Fluid(**args)
 
@@ -193,8 +263,10 @@ def test_tunnel_flux_out_equals_flux_in():
     tol = 1e-10
     fluid = tunnel(pcg_tolerance=tol)
     fluid.step(0.01, 30)
-    assert fluid.u.shape == (17, 8, 8) and fluid.v.shape == (16, 9, 8) and fluid.w.shape == (16, 8, 9)
-    h2 = fluid.cell_size ** 2
+    assert (
+        fluid.u.shape == (17, 8, 8) and fluid.v.shape == (16, 9, 8) and fluid.w.shape == (16, 8, 9)
+    )
+    h2 = fluid.cell_size**2
     flux_in = fluid.u[0].sum() * h2
     flux_out = fluid.u[-1].sum() * h2
     assert flux_in == pytest.approx(3.0 * 64 * h2, rel=1e-14)  # wind at t = 0.3: after the ramp
@@ -208,8 +280,8 @@ def test_sampling_outside_the_domain_is_the_nearest_boundary_value_and_counted()
     fluid.step(0.01, 5)
     inside = np.array([[1.0, 0.5, 0.5], [0.3, 0.2, 0.9]])
     outside = inside.copy()
-    outside[0, 0] = 50.0   # beyond the outflow face -> x = 2.0
-    outside[1, 2] = -3.0   # below the z = 0 wall -> z = 0
+    outside[0, 0] = 50.0  # beyond the outflow face -> x = 2.0
+    outside[1, 2] = -3.0  # below the z = 0 wall -> z = 0
     clamped = inside.copy()
     clamped[0, 0] = 2.0
     clamped[1, 2] = 0.0
@@ -221,8 +293,13 @@ def test_sampling_outside_the_domain_is_the_nearest_boundary_value_and_counted()
 
 
 def test_sampling_reproduces_node_values_and_linear_fields():
-    fluid = flagsim.Fluid(resolution=(6, 5, 4), cell_size=0.2, origin=(-0.5, 0.1, 0.0),
-                          boundary="tunnel", pressure="pcg")
+    fluid = flagsim.Fluid(
+        resolution=(6, 5, 4),
+        cell_size=0.2,
+        origin=(-0.5, 0.1, 0.0),
+        boundary="tunnel",
+        pressure="pcg",
+    )
     a = np.array([[0.3, -1.0, 0.5], [2.0, 0.25, -0.75], [-0.5, 1.5, 1.0]])
     fluid.set_velocity(lambda p: p @ a.T + np.array([0.1, 0.2, 0.3]))
     # interior points, away from the half cell next to a wall where values are held constant
@@ -237,6 +314,7 @@ def test_sampling_reproduces_node_values_and_linear_fields():
 
 # ---- symmetry ------------------------------------------------------------------------------------
 
+
 def mirror_z_error(fluid):
     """Largest departure from symmetry about the domain's mid z-plane (u, v even; w odd)."""
     u, v, w = fluid.u, fluid.v, fluid.w
@@ -249,35 +327,63 @@ def mirror_z_error(fluid):
 
 
 @pytest.mark.parametrize("scheme", SCHEMES)
-@pytest.mark.parametrize("boundary,pressure", [
-    pytest.param("periodic", "fft", marks=pytest.mark.skipif(not flagsim.has_fftw(), reason="no FFTW")),
-    ("tunnel", "pcg")])
+@pytest.mark.parametrize(
+    "boundary,pressure",
+    [
+        pytest.param(
+            "periodic", "fft", marks=pytest.mark.skipif(not flagsim.has_fftw(), reason="no FFTW")
+        ),
+        ("tunnel", "pcg"),
+    ],
+)
 def test_mirror_symmetric_set_up_stays_symmetric(boundary, pressure, scheme):
-    fan = flagsim.FanParams(shape="sphere", center=(0.7, 0.45, 0.5), radius=0.3, direction=(1.0, 1.0, 0.0),
-                            force_density=80.0)
-    fluid = flagsim.Fluid(resolution=(16, 8, 8), cell_size=0.125, origin=(0, 0, 0), boundary=boundary,
-                          pressure=pressure, advection=scheme, wind=(2.0, 0.0, 0.0), fans=[fan],
-                          pcg_tolerance=1e-13)
+    fan = flagsim.FanParams(
+        shape="sphere",
+        center=(0.7, 0.45, 0.5),
+        radius=0.3,
+        direction=(1.0, 1.0, 0.0),
+        force_density=80.0,
+    )
+    fluid = flagsim.Fluid(
+        resolution=(16, 8, 8),
+        cell_size=0.125,
+        origin=(0, 0, 0),
+        boundary=boundary,
+        pressure=pressure,
+        advection=scheme,
+        wind=(2.0, 0.0, 0.0),
+        fans=[fan],
+        pcg_tolerance=1e-13,
+    )
     fluid.step(0.01, 20)
     assert np.abs(fluid.w).max() > 1e-2  # the flow is truly three-dimensional
     assert mirror_z_error(fluid) < 1e-12 * max(np.abs(fluid.u).max(), 1.0)
 
 
-# ---- mean flow, fans, determinism, precision -------------------------------------------------------
+# ---- mean flow, fans, determinism, precision -----------------------------------------------------
+
 
 def test_periodic_mean_flow_follows_the_wind_schedule():
     wind = [(0.0, (2.0, 0.0, 0.0)), (0.1, (1.0, 0.5, 0.0))]
     fan = flagsim.FanParams(center=(0.5, 0.5, 0.5), half_size=(0.2, 0.2, 0.2), force_density=50.0)
-    fluid = flagsim.Fluid(resolution=(8, 8, 8), cell_size=0.125, origin=(0, 0, 0), wind=wind, fans=[fan])
-    np.testing.assert_allclose([fluid.u.mean(), fluid.v.mean(), fluid.w.mean()], [2.0, 0.0, 0.0], atol=1e-15)
+    fluid = flagsim.Fluid(
+        resolution=(8, 8, 8), cell_size=0.125, origin=(0, 0, 0), wind=wind, fans=[fan]
+    )
+    np.testing.assert_allclose(
+        [fluid.u.mean(), fluid.v.mean(), fluid.w.mean()], [2.0, 0.0, 0.0], atol=1e-15
+    )
     fluid.step(0.01, 5)
     np.testing.assert_allclose([fluid.u.mean(), fluid.v.mean()], [1.5, 0.25], atol=1e-13)
     assert np.abs(fluid.u - 1.5).max() > 1e-3  # the fan stirred it
 
 
 def test_fan_strength_schedule_switches_the_fan():
-    fan = flagsim.FanParams(center=(0.5, 0.5, 0.5), half_size=(0.2, 0.2, 0.2), force_density=50.0,
-                            strength=[(0.0, 0.0), (0.45, 0.0), (0.55, 1.0)])
+    fan = flagsim.FanParams(
+        center=(0.5, 0.5, 0.5),
+        half_size=(0.2, 0.2, 0.2),
+        force_density=50.0,
+        strength=[(0.0, 0.0), (0.45, 0.0), (0.55, 1.0)],
+    )
     fluid = flagsim.Fluid(resolution=(8, 8, 8), cell_size=0.125, origin=(0, 0, 0), fans=[fan])
     fluid.step(0.1, 5)  # the fan is applied at each step's start time, t <= 0.4
     assert np.abs(fluid.u).max() == 0.0
@@ -290,14 +396,20 @@ def test_same_set_up_gives_identical_bytes_whatever_the_thread_count():
         old = flagsim.num_threads()
         flagsim.set_num_threads(threads)
         try:
-            f = flagsim.Fluid(resolution=(32, 32, 24), cell_size=0.0625, advection="maccormack",
-                              wind=(2.0, 0.0, 0.0), fans=[flagsim.FanParams(center=(-0.2, 0.0, -0.3))])
+            f = flagsim.Fluid(
+                resolution=(32, 32, 24),
+                cell_size=0.0625,
+                advection="maccormack",
+                wind=(2.0, 0.0, 0.0),
+                fans=[flagsim.FanParams(center=(-0.2, 0.0, -0.3))],
+            )
             f.step(0.01, 3)
             g = tunnel(resolution=(32, 24, 24), cell_size=0.05)
             g.step(0.01, 2)
             return [a.copy() for a in (f.u, f.v, f.w, g.u, g.v, g.w)]
         finally:
             flagsim.set_num_threads(old)
+
     a, b, c = run(1), run(2), run(1)
     for x, y, z in zip(a, b, c):
         assert x.tobytes() == y.tobytes() == z.tobytes()
@@ -310,14 +422,23 @@ def test_float_precision_runs_close_to_double():
     assert f.u.dtype == np.float32 and d.u.dtype == np.float64
     k = 2 * np.pi
     for fl in (d, f):
-        fl.set_velocity(lambda p: np.stack([np.sin(k * p[:, 0]) * np.cos(k * p[:, 1]),
-                                            -np.cos(k * p[:, 0]) * np.sin(k * p[:, 1]), 0 * p[:, 0]], axis=1))
+        fl.set_velocity(
+            lambda p: np.stack(
+                [
+                    np.sin(k * p[:, 0]) * np.cos(k * p[:, 1]),
+                    -np.cos(k * p[:, 0]) * np.sin(k * p[:, 1]),
+                    0 * p[:, 0],
+                ],
+                axis=1,
+            )
+        )
         fl.step(0.02, 20)
     assert max_abs_diff(d, f) < 1e-5
     assert np.abs(f.divergence()).max() < 1e-4
 
 
 # ---- bindings and validation ---------------------------------------------------------------------
+
 
 def test_component_views_share_memory_and_outlive_the_fluid():
     fluid = flagsim.Fluid(resolution=(4, 4, 4), cell_size=0.25)
@@ -334,35 +455,50 @@ def test_component_views_share_memory_and_outlive_the_fluid():
 def test_set_velocity_evaluates_at_the_face_positions():
     fluid = flagsim.Fluid(resolution=(4, 3, 2), cell_size=0.5, origin=(1.0, 2.0, 3.0))
     fluid.set_velocity(lambda p: p.copy())
-    assert fluid.u[1, 0, 0] == 1.0 + 0.5          # x of face i = 1
+    assert fluid.u[1, 0, 0] == 1.0 + 0.5  # x of face i = 1
     assert fluid.u[1, 2, 1] == pytest.approx(1.5)
-    assert fluid.v[0, 2, 0] == 2.0 + 2 * 0.5       # y of face j = 2
-    assert fluid.w[3, 1, 1] == 3.0 + 1 * 0.5       # z of face k = 1
+    assert fluid.v[0, 2, 0] == 2.0 + 2 * 0.5  # y of face j = 2
+    assert fluid.w[3, 1, 1] == 3.0 + 1 * 0.5  # z of face k = 1
     with pytest.raises(ValueError, match=r"fn\(points\) should be an \(M, 3\) array"):
         fluid.set_velocity(lambda p: p[:, :2])
 
 
-@pytest.mark.parametrize("kwargs,match", [
-    (dict(resolution=(0, 16, 16)), r"resolution should be 3 cell counts in \[1, 4096\], got 0 x 16 x 16"),
-    (dict(resolution=(16, -2, 16)), r"resolution should be"),
-    (dict(resolution=(16, 16)), r"resolution should be a sequence of 3 values, got \(16, 16\)"),
-    (dict(cell_size=0.0), r"cell_size should be in \[1e-06, 10000\], got 0"),
-    (dict(cell_size=-1.0), r"cell_size should be in \[1e-06, 10000\], got -1"),
-    (dict(cell_size=float("nan")), r"cell_size should be in \[1e-06, 10000\], got nan"),
-    (dict(cell_size=1e-155), r"cell_size should be in \[1e-06, 10000\], got 1e-155"),
-    (dict(advection="upwind"), r'advection should be one of "semi_lagrangian", "maccormack", got "upwind"'),
-    (dict(pressure="jacobi"), r'pressure should be one of "fft", "pcg", got "jacobi"'),
-    (dict(boundary="box"), r'boundary should be one of "periodic", "tunnel", got "box"'),
-    (dict(boundary="tunnel", pressure="fft"), r'pressure should be "pcg" with boundary "tunnel"'),
-    (dict(precision="half"), r'precision should be one of "double", "float"'),
-    (dict(viscosity=-1e-5), r"viscosity should be finite and >= 0"),
-    (dict(density=0.0), r"density should be finite and > 0"),
-    (dict(pcg_tolerance=0.0), r"pcg_tolerance should be in \(0, 1\)"),
-    (dict(pcg_max_iterations=0), r"pcg_max_iterations should be >= 1"),
-    (dict(origin=(0.0, float("inf"), 0.0)), r"origin should be finite"),
-    (dict(wind=[(1.0, (1, 0, 0)), (0.5, (2, 0, 0))]), r"wind\[1\].time should be > the previous key's time"),
-    (dict(wind="east"), r"wind should be None, a 3-vector"),
-])
+@pytest.mark.parametrize(
+    "kwargs,match",
+    [
+        (
+            dict(resolution=(0, 16, 16)),
+            r"resolution should be 3 cell counts in \[1, 4096\], got 0 x 16 x 16",
+        ),
+        (dict(resolution=(16, -2, 16)), r"resolution should be"),
+        (dict(resolution=(16, 16)), r"resolution should be a sequence of 3 values, got \(16, 16\)"),
+        (dict(cell_size=0.0), r"cell_size should be in \[1e-06, 10000\], got 0"),
+        (dict(cell_size=-1.0), r"cell_size should be in \[1e-06, 10000\], got -1"),
+        (dict(cell_size=float("nan")), r"cell_size should be in \[1e-06, 10000\], got nan"),
+        (dict(cell_size=1e-155), r"cell_size should be in \[1e-06, 10000\], got 1e-155"),
+        (
+            dict(advection="upwind"),
+            r'advection should be one of "semi_lagrangian", "maccormack", got "upwind"',
+        ),
+        (dict(pressure="jacobi"), r'pressure should be one of "fft", "pcg", got "jacobi"'),
+        (dict(boundary="box"), r'boundary should be one of "periodic", "tunnel", got "box"'),
+        (
+            dict(boundary="tunnel", pressure="fft"),
+            r'pressure should be "pcg" with boundary "tunnel"',
+        ),
+        (dict(precision="half"), r'precision should be one of "double", "float"'),
+        (dict(viscosity=-1e-5), r"viscosity should be finite and >= 0"),
+        (dict(density=0.0), r"density should be finite and > 0"),
+        (dict(pcg_tolerance=0.0), r"pcg_tolerance should be in \(0, 1\)"),
+        (dict(pcg_max_iterations=0), r"pcg_max_iterations should be >= 1"),
+        (dict(origin=(0.0, float("inf"), 0.0)), r"origin should be finite"),
+        (
+            dict(wind=[(1.0, (1, 0, 0)), (0.5, (2, 0, 0))]),
+            r"wind\[1\].time should be > the previous key's time",
+        ),
+        (dict(wind="east"), r"wind should be None, a 3-vector"),
+    ],
+)
 def test_invalid_parameters_raise_value_error_naming_the_parameter(kwargs, match):
     with pytest.raises(ValueError, match=match):
         flagsim.Fluid(**kwargs)
@@ -389,5 +525,7 @@ def test_invalid_fan_and_step_arguments():
 
 @pytest.mark.skipif(flagsim.has_fftw(), reason="this build has FFTW")
 def test_fft_without_fftw_is_a_clear_value_error():
-    with pytest.raises(ValueError, match=r"pressure should be \"pcg\": this flagsim was built without FFTW"):
+    with pytest.raises(
+        ValueError, match=r"pressure should be \"pcg\": this flagsim was built without FFTW"
+    ):
         flagsim.Fluid(pressure="fft")

@@ -1,11 +1,13 @@
 """The air grid as the Simulation's air stage (issue 4, coupling and scenes)."""
+
+import flagsim
 import numpy as np
 import pytest
 
-import flagsim
-
 PRESSURES = [
-    pytest.param("fft", marks=pytest.mark.skipif(not flagsim.has_fftw(), reason="built without FFTW")),
+    pytest.param(
+        "fft", marks=pytest.mark.skipif(not flagsim.has_fftw(), reason="built without FFTW")
+    ),
     "pcg",
 ]
 
@@ -35,7 +37,9 @@ def test_uniform_wind_through_the_grid_gives_the_analytic_flag(pressure):
     assert grid.timings["fluid"] > 0 and "fluid" not in analytic.timings
     # the field stayed uniform: the grid is the analytic wind, sampled anywhere
     pts = np.array([[0.2, -0.3, 0.1], [1.2, 0.5, -0.7]])
-    np.testing.assert_allclose(grid.air_velocity(pts), analytic.air_velocity(pts), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        grid.air_velocity(pts), analytic.air_velocity(pts), rtol=0, atol=1e-12
+    )
 
 
 def test_paper_scene_is_the_papers_set_up_with_a_non_uniform_grid_air():
@@ -45,8 +49,8 @@ def test_paper_scene_is_the_papers_set_up_with_a_non_uniform_grid_air():
     sim = flagsim.Simulation(s)
     sim.step(150)
     u = sim.fluid.sample(sim.positions)[:, 0]
-    assert 1.6 < u.mean() < 2.6        # about 2 m/s along +x at the flag
-    assert u.max() - u.min() > 0.3     # made non-uniform by the fan
+    assert 1.6 < u.mean() < 2.6  # about 2 m/s along +x at the flag
+    assert u.max() - u.min() > 0.3  # made non-uniform by the fan
     assert sim.last_step_stats["air_samples_outside"] == 0
     assert np.all(sim.positions[:, 0] > sim.rest_positions[:, 0].min() - 1e-9)  # blown downstream
 
@@ -71,16 +75,19 @@ def test_air_none_and_uniform_have_no_fluid():
 def test_flag_outside_the_grid_at_build_time_is_a_value_error():
     s = flagsim.Scene.paper()
     s.air.origin = (0.3, -1.0, -1.0)  # the pole-side edge at x = 0.055 is left out
-    with pytest.raises(ValueError, match=r"flag.origin should place the flag inside the air grid "
-                                         r"\[0.3, 2.3\] x \[-1, 1\] x \[-1, 1\] m .* got vertex 0"):
+    with pytest.raises(
+        ValueError,
+        match=r"flag.origin should place the flag inside the air grid "
+        r"\[0.3, 2.3\] x \[-1, 1\] x \[-1, 1\] m .* got vertex 0",
+    ):
         flagsim.Simulation(s)
 
 
 def test_masses_outside_the_grid_mid_run_sample_the_boundary_and_are_counted():
     sim = flagsim.Simulation(flagsim.Scene.paper())
     x = sim.positions.copy()
-    x[-1] = (1.4, -0.5, 3.0)   # beyond the z = 1 face: counted, samples the face's value
-    x[-2] = (1.4, -0.5, 1.0)   # on the face: inside
+    x[-1] = (1.4, -0.5, 3.0)  # beyond the z = 1 face: counted, samples the face's value
+    x[-2] = (1.4, -0.5, 1.0)  # on the face: inside
     sim.positions = x
     sim.step()
     assert sim.last_step_stats["air_samples_outside"] == 1
@@ -105,7 +112,7 @@ def test_boundary_and_pressure_can_be_set_in_either_order():
 
 def test_toml_expresses_the_grid_air_and_fans(tmp_path):
     f = tmp_path / "fan.toml"
-    f.write_text('''
+    f.write_text("""
 base = "paper"
 
 [air]
@@ -132,13 +139,27 @@ shape = "sphere"
 center = [0.5, 0.2, 0.0]
 radius = 0.2
 direction = [0.0, -1.0, 0.0]
-''')
+""")
     s = flagsim.Scene.load(f)
     a = s.air
-    assert (a.model, a.resolution, a.cell_size, a.origin) == ("grid", (12, 12, 10), 0.2, (-0.6, -1.2, -1.0))
-    assert (a.advection, a.pressure, a.boundary, a.viscosity) == ("maccormack", "pcg", "tunnel", 0.0)
+    assert (a.model, a.resolution, a.cell_size, a.origin) == (
+        "grid",
+        (12, 12, 10),
+        0.2,
+        (-0.6, -1.2, -1.0),
+    )
+    assert (a.advection, a.pressure, a.boundary, a.viscosity) == (
+        "maccormack",
+        "pcg",
+        "tunnel",
+        0.0,
+    )
     assert len(a.fans) == 2 and a.fans[0].max_speed == 3.0 and a.fans[1].shape == "sphere"
-    assert a.fans[0].strength == [(0.0, 0.0), (0.5, 1.0)] and a.fans[1].direction == (0.0, -1.0, 0.0)
+    assert a.fans[0].strength == [(0.0, 0.0), (0.5, 1.0)] and a.fans[1].direction == (
+        0.0,
+        -1.0,
+        0.0,
+    )
     sim = flagsim.Simulation(s)
     sim.step(20)
     assert sim.fluid.u.shape == (13, 12, 10) and sim.fluid.boundary == "tunnel"
@@ -148,12 +169,24 @@ direction = [0.0, -1.0, 0.0]
     assert again.air.fans[1].radius == 0.2 and again.air.resolution == (12, 12, 10)
 
 
-@pytest.mark.parametrize("text,match", [
-    ('[air]\nmodel = "grid"\nresolution = [16, 0, 16]\n', r"air.resolution should be 3 cell counts in \[1, 4096\]"),
-    ('[air]\nmodel = "grid"\nadvection = "upwind"\n', r'air.advection should be one of "semi_lagrangian"'),
-    ('[[air.fans]]\nradius = -1.0\n', r"air\.fans\[0\]\.radius should be in \(0, 1e\+06\] m, got -1"),
-    ('[[air.fans]]\nspeed = 2.0\n', r"unknown key 'speed' in section \[air.fans\[0\]\]"),
-])
+@pytest.mark.parametrize(
+    "text,match",
+    [
+        (
+            '[air]\nmodel = "grid"\nresolution = [16, 0, 16]\n',
+            r"air.resolution should be 3 cell counts in \[1, 4096\]",
+        ),
+        (
+            '[air]\nmodel = "grid"\nadvection = "upwind"\n',
+            r'air.advection should be one of "semi_lagrangian"',
+        ),
+        (
+            "[[air.fans]]\nradius = -1.0\n",
+            r"air\.fans\[0\]\.radius should be in \(0, 1e\+06\] m, got -1",
+        ),
+        ("[[air.fans]]\nspeed = 2.0\n", r"unknown key 'speed' in section \[air.fans\[0\]\]"),
+    ],
+)
 def test_toml_air_errors_name_the_key(tmp_path, text, match):
     f = tmp_path / "bad.toml"
     f.write_text('base = "paper"\n' + text)

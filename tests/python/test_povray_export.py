@@ -1,13 +1,13 @@
 """Exporter: frame times independent of dt, whole files after a failure mid-write, resume."""
+
 import json
 import os
 import resource
 import signal
 
+import flagsim.povray as pov
 import numpy as np
 import pytest
-
-import flagsim.povray as pov
 from _standin import StandInSim, standin_scene
 from test_povray_mesh import parse_mesh2
 
@@ -65,8 +65,9 @@ def test_interrupted_export_leaves_whole_files_and_resumes(tmp_path):
     old_handler = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
     try:
         with pytest.raises(OSError) as e:  # frame 6 is t = 0.6 s = step 60
-            pov.export(FailingDisk(at_step=60), out, seconds=1.0, fps=10, scene=scene,
-                       progress=False)
+            pov.export(
+                FailingDisk(at_step=60), out, seconds=1.0, fps=10, scene=scene, progress=False
+            )
     finally:
         resource.setrlimit(resource.RLIMIT_FSIZE, limits)
         signal.signal(signal.SIGXFSZ, old_handler)
@@ -92,13 +93,23 @@ def test_interrupted_export_leaves_whole_files_and_resumes(tmp_path):
 
 
 def test_other_settings_in_the_same_folder_conflict_unless_overwritten(tmp_path):
-    pov.export(StandInSim(), tmp_path, seconds=0.5, fps=10, dt=0.01, key={"scene": "a"},
-               progress=False)
+    pov.export(
+        StandInSim(), tmp_path, seconds=0.5, fps=10, dt=0.01, key={"scene": "a"}, progress=False
+    )
     with pytest.raises(pov.ExportConflict, match=r"holds an export of another scene"):
-        pov.export(StandInSim(), tmp_path, seconds=0.5, fps=10, dt=0.01, key={"scene": "b"},
-                   progress=False)
-    res = pov.export(StandInSim(), tmp_path, seconds=0.2, fps=10, dt=0.01, key={"scene": "b"},
-                     overwrite=True, progress=False)
+        pov.export(
+            StandInSim(), tmp_path, seconds=0.5, fps=10, dt=0.01, key={"scene": "b"}, progress=False
+        )
+    res = pov.export(
+        StandInSim(),
+        tmp_path,
+        seconds=0.2,
+        fps=10,
+        dt=0.01,
+        key={"scene": "b"},
+        overwrite=True,
+        progress=False,
+    )
     assert res.frames == 3 and frame_files(tmp_path) == [f"flag_{k:05d}.inc" for k in range(3)]
 
 
@@ -108,14 +119,15 @@ def test_master_scene_takes_the_pole_from_the_scene_in_povray_frame(tmp_path):
     pov.export(StandInSim(), tmp_path, seconds=0.1, fps=10, scene=scene, progress=False)
     text = (tmp_path / "flag.pov").read_text()
     assert "$" not in text  # every template field filled
-    assert "cylinder { <0.000000, -2.000000, -0.250000>, <0.000000, 0.600000, -0.250000>, " \
-           "0.070000 }" in text
+    assert (
+        "cylinder { <0.000000, -2.000000, -0.250000>, <0.000000, 0.600000, -0.250000>, "
+        "0.070000 }" in text
+    )
     assert '#include concat("frames/flag_", str(FRAME, -5, 0), ".inc")' in text
     ini = (tmp_path / "flag.ini").read_text()
     assert "Final_Frame=1" in ini and "Input_File_Name=flag.pov" in ini
     scene.pole.enabled = False
-    pov.export(StandInSim(), tmp_path / "nopole", seconds=0.1, fps=10, scene=scene,
-               progress=False)
+    pov.export(StandInSim(), tmp_path / "nopole", seconds=0.1, fps=10, scene=scene, progress=False)
     assert "cylinder" not in (tmp_path / "nopole" / "flag.pov").read_text()
 
 
@@ -129,8 +141,7 @@ def test_paper_flag_hoist_touches_the_drawn_pole(tmp_path):
     pov.export(sim, tmp_path, seconds=0.0, fps=10, progress=False)  # scene: sim.scene
     pole = scenefiles.scene_pole(sim.scene)  # scene.pole, or the default for a pole-pinned flag
     text = (tmp_path / "flag.pov").read_text()
-    base, top, radius = re.search(r"cylinder \{ <([^>]*)>, <([^>]*)>, ([0-9.]+) \}",
-                                  text).groups()
+    base, top, radius = re.search(r"cylinder \{ <([^>]*)>, <([^>]*)>, ([0-9.]+) \}", text).groups()
     base = np.array([float(c) for c in base.split(",")]) * [1, 1, -1]
     assert np.allclose(base, pole.base) and float(radius) == pytest.approx(pole.radius)
     hoist = sim.positions[sim.uv[:, 0] == 0.0]
@@ -149,8 +160,9 @@ def test_camera_faces_the_flag_from_its_plus_z_side_within_elevation_limits():
     for facing in ([0, 0, 1], [0, 0, -3], None, [0, 0, 0]):
         assert np.allclose(angles(view_direction(facing)), (17.0, -5.0))
     # a flag turned by the wind to face +x: the camera turns with it
-    assert np.allclose(angles(view_direction([1, 0, 0.001])), (90.0 + 17.0 - 0.057, -5.0),
-                       atol=1e-2)
+    assert np.allclose(
+        angles(view_direction([1, 0, 0.001])), (90.0 + 17.0 - 0.057, -5.0), atol=1e-2
+    )
     # a banner blown flat faces up: seen from at most 40 degrees above
     assert np.isclose(angles(view_direction([0, 1, 0.2]))[1], 40.0)
     assert np.isclose(np.linalg.norm(view_direction([0.3, 0.4, 0.5])), 1.0)
@@ -178,12 +190,21 @@ def test_a_folder_that_is_not_an_export_is_never_written(tmp_path, monkeypatch):
         if flags & os.O_CREAT:
             created.append(str(path))
         return real_open(path, flags, *a, **kw)
+
     monkeypatch.setattr(os, "open", spy)
     for overwrite in (False, True):
-        with pytest.raises(pov.ExportConflict, match=r"is not empty \(.*\) and holds no flagsim "
-                                                     r"export"):
-            pov.export(StandInSim(), tmp_path, seconds=0.2, fps=10, dt=0.01, progress=False,
-                       overwrite=overwrite)
+        with pytest.raises(
+            pov.ExportConflict, match=r"is not empty \(.*\) and holds no flagsim " r"export"
+        ):
+            pov.export(
+                StandInSim(),
+                tmp_path,
+                seconds=0.2,
+                fps=10,
+                dt=0.01,
+                progress=False,
+                overwrite=overwrite,
+            )
         assert snapshot(tmp_path) == before  # nothing written, nothing deleted
         assert created == []  # refused before even a lock file was made
 
@@ -205,8 +226,7 @@ def test_an_output_path_that_is_a_file_is_an_error(tmp_path):
 
 
 @pytest.mark.parametrize("manifest", ["[]", "{}", '"x"', "{not json", '{"key": 1, "frames": 1e9}'])
-def test_overwrite_recovers_from_a_corrupt_manifest_and_keeps_the_users_files(tmp_path,
-                                                                                 manifest):
+def test_overwrite_recovers_from_a_corrupt_manifest_and_keeps_the_users_files(tmp_path, manifest):
     key = {"scene": "a"}
     pov.export(StandInSim(), tmp_path, seconds=0.3, fps=10, dt=0.01, key=key, progress=False)
     (tmp_path / "notes.txt").write_text("keep me\n")
@@ -218,16 +238,26 @@ def test_overwrite_recovers_from_a_corrupt_manifest_and_keeps_the_users_files(tm
         match = r"export\.json is not a flagsim export manifest"
     with pytest.raises(pov.ExportConflict, match=match):
         pov.export(StandInSim(), tmp_path, seconds=0.3, fps=10, dt=0.01, key=key, progress=False)
-    res = pov.export(StandInSim(), tmp_path, seconds=0.3, fps=10, dt=0.01, key=key,
-                     overwrite=True, progress=False)
+    res = pov.export(
+        StandInSim(),
+        tmp_path,
+        seconds=0.3,
+        fps=10,
+        dt=0.01,
+        key=key,
+        overwrite=True,
+        progress=False,
+    )
     assert res.frames == 4 and pov.load_export(tmp_path)["complete"] is True
     assert (tmp_path / "notes.txt").read_text() == "keep me\n"
     assert (tmp_path / "render" / "poster.png").read_bytes() == b"poster"
     assert not (tmp_path / ".flagsim.lock").exists()
 
 
-@pytest.mark.parametrize("field, value", [("frames", 1_000_000_000), ("frames", "12"),
-                                          ("fps", -1), ("width", 1.5), ("height", None)])
+@pytest.mark.parametrize(
+    "field, value",
+    [("frames", 1_000_000_000), ("frames", "12"), ("fps", -1), ("width", 1.5), ("height", None)],
+)
 def test_render_names_a_damaged_manifest_field_without_reading_on(tmp_path, field, value):
     pov.export(StandInSim(), tmp_path, seconds=0.2, fps=10, dt=0.01, progress=False)
     m = json.loads((tmp_path / "export.json").read_text())

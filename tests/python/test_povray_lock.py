@@ -1,15 +1,15 @@
 """One writer per export folder (flagsim.povray.lock): a second writer is refused naming the
 holder, a dead process's lock is taken over, and two real processes racing into one folder leave
 one whole export."""
+
 import json
 import os
 import socket
 import subprocess
 import sys
 
-import pytest
-
 import flagsim.povray as pov
+import pytest
 from _standin import StandInSim
 
 
@@ -19,8 +19,11 @@ def export(out, **kw):
 
 def test_a_second_writer_is_refused_naming_the_holder(tmp_path):
     with pov.ExportLock(tmp_path):
-        with pytest.raises(pov.ExportBusy, match=rf"is being written by pid {os.getpid()} on "
-                                                 rf"{socket.gethostname()} since .*; wait"):
+        with pytest.raises(
+            pov.ExportBusy,
+            match=rf"is being written by pid {os.getpid()} on "
+            rf"{socket.gethostname()} since .*; wait",
+        ):
             export(tmp_path)
         with pytest.raises(pov.ExportBusy):
             pov.render(tmp_path)
@@ -31,8 +34,11 @@ def test_a_second_writer_is_refused_naming_the_holder(tmp_path):
 def test_the_lock_of_a_process_that_died_is_taken_over(tmp_path):
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
-    (tmp_path / ".flagsim.lock").write_text(json.dumps(
-        {"pid": dead.pid, "host": socket.gethostname(), "started": "earlier", "command": "x"}))
+    (tmp_path / ".flagsim.lock").write_text(
+        json.dumps(
+            {"pid": dead.pid, "host": socket.gethostname(), "started": "earlier", "command": "x"}
+        )
+    )
     assert export(tmp_path).frames == 3
     assert not (tmp_path / ".flagsim.lock").exists()
 
@@ -48,9 +54,15 @@ def test_a_lock_from_another_host_or_unreadable_is_never_taken_over(tmp_path, ho
 
 def _race(out, scenes):
     cmd = [sys.executable, "-m", "flagsim", "run"]
-    procs = [subprocess.Popen(cmd + [s, "--out", str(out), "--seconds", "0.3", "--quiet"],
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-             for s in scenes]
+    procs = [
+        subprocess.Popen(
+            cmd + [s, "--out", str(out), "--seconds", "0.3", "--quiet"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for s in scenes
+    ]
     results = []
     for p in procs:
         _, err = p.communicate(timeout=120)  # waits, and closes the pipes
@@ -59,8 +71,9 @@ def _race(out, scenes):
 
 
 @pytest.mark.parametrize("attempt", range(2))
-def test_two_processes_exporting_other_scenes_into_one_folder_leave_one_whole_export(tmp_path,
-                                                                                      attempt):
+def test_two_processes_exporting_other_scenes_into_one_folder_leave_one_whole_export(
+    tmp_path, attempt
+):
     out = tmp_path / "shared"
     results = _race(out, ["paper", "flapping_demo"])
     codes = sorted(code for code, _ in results)

@@ -1,12 +1,12 @@
 """mesh2 export: parse-back in POV-Ray's frame, winding vs normals, validation, atomic writes."""
+
 import os
 import re
 
-import numpy as np
-import pytest
-
 import flagsim
 import flagsim.povray as pov
+import numpy as np
+import pytest
 from _standin import StandInSim
 
 
@@ -30,8 +30,9 @@ def moved_sim(request):
     if request.param == "paper":
         from flagsim.scene import from_dict
 
-        sim = flagsim.Simulation(from_dict({"base": "paper",
-                                            "air": {"wind": [[0.0, [2.0, 0.0, 1.0]]]}}))
+        sim = flagsim.Simulation(
+            from_dict({"base": "paper", "air": {"wind": [[0.0, [2.0, 0.0, 1.0]]]}})
+        )
         sim.step(50)
         return sim
     sim = StandInSim(rows=11, cols=17, amplitude=0.4)
@@ -63,7 +64,8 @@ def test_winding_in_file_agrees_with_file_normals(tmp_path, moved_sim):
     face = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
     corner = n[f].sum(axis=1)
     cos = np.einsum("ij,ij->i", face, corner) / (
-        np.linalg.norm(face, axis=1) * np.linalg.norm(corner, axis=1))
+        np.linalg.norm(face, axis=1) * np.linalg.norm(corner, axis=1)
+    )
     assert cos.min() > 0.5  # every face, not just on average
 
 

@@ -1,5 +1,6 @@
 """Rendering with the real POV-Ray: no warnings, the flag where the camera says, the driver's
 retry and failure reporting, GIF assembly, clear errors for missing programs."""
+
 import os
 import re
 import shutil
@@ -7,16 +8,16 @@ import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
 
-import numpy as np
-import pytest
-
 import flagsim
 import flagsim.povray as pov
+import numpy as np
+import pytest
 from _standin import StandInSim, standin_scene
 from test_povray_mesh import parse_mesh2
 
-needs_povray = pytest.mark.skipif(shutil.which("povray") is None,
-                                  reason="POV-Ray is not installed (Debian package povray)")
+needs_povray = pytest.mark.skipif(
+    shutil.which("povray") is None, reason="POV-Ray is not installed (Debian package povray)"
+)
 
 
 def red_mask(img):
@@ -28,9 +29,12 @@ def red_mask(img):
 
 def project(points, text, width, height):
     """Pixel coordinates of POV-Ray-frame points through flag.pov's perspective camera."""
+
     def vec(name):
-        return np.array([float(c) for c in re.search(name + r" <([^>]*)>", text).group(1)
-                         .split(",")])
+        return np.array(
+            [float(c) for c in re.search(name + r" <([^>]*)>", text).group(1).split(",")]
+        )
+
     loc, look = vec("location"), vec("look_at")
     angle = float(re.search(r"angle ([0-9.]+)", text).group(1))
     d = (look - loc) / np.linalg.norm(look - loc)
@@ -54,8 +58,9 @@ def rendered(tmp_path_factory):
     from flagsim.scene import from_dict
 
     out = tmp_path_factory.mktemp("render") / 'my out; #declare "x'
-    sim = flagsim.Simulation(from_dict({"base": "paper",
-                                        "air": {"wind": [[0.0, [2.0, 0.0, 1.0]]]}}))
+    sim = flagsim.Simulation(
+        from_dict({"base": "paper", "air": {"wind": [[0.0, [2.0, 0.0, 1.0]]]}})
+    )
     pov.export(sim, out, seconds=0.3, fps=10, width=80, height=60, progress=False)
     result = pov.render(out, progress=False)
     return out, result
@@ -83,8 +88,12 @@ def test_render_is_clean_and_the_flag_covers_its_projected_area(rendered):
     # Red pixels lie where the camera projects the flag (with a pixel of slack) ...
     rows, cols = np.nonzero(red)
     lo, hi = xy.min(axis=0) - 1.5, xy.max(axis=0) + 1.5
-    inside = (cols + 0.5 >= lo[0]) & (cols + 0.5 <= hi[0]) & (rows + 0.5 >= lo[1]) & (
-        rows + 0.5 <= hi[1])
+    inside = (
+        (cols + 0.5 >= lo[0])
+        & (cols + 0.5 <= hi[0])
+        & (rows + 0.5 >= lo[1])
+        & (rows + 0.5 <= hi[1])
+    )
     assert inside.mean() > 0.98
     # ... and not mirrored: the hoist (u = 0) projects to the left of the fly (u = 1).
     u = m["uv_vectors"][:, 0]
@@ -94,8 +103,14 @@ def test_render_is_clean_and_the_flag_covers_its_projected_area(rendered):
 @needs_povray
 def test_povray_stderr_has_no_warnings_and_the_check_would_see_them(rendered, tmp_path):
     out, _ = rendered
-    job = pov.FrameJob(frame=1, out_dir=str(out), image="render/check.png",
-                       povray=pov.find_povray(), width=80, height=60)
+    job = pov.FrameJob(
+        frame=1,
+        out_dir=str(out),
+        image="render/check.png",
+        povray=pov.find_povray(),
+        width=80,
+        height=60,
+    )
     from flagsim.povray.render import povray_command, povray_env
 
     cmd = povray_command(job)
@@ -107,13 +122,18 @@ def test_povray_stderr_has_no_warnings_and_the_check_would_see_them(rendered, tm
     # Without the export's private configuration, POV-Ray complains, and the check sees it.
     env = dict(povray_env(out), HOME=str(tmp_path))
     proc = subprocess.run(cmd, cwd=out, env=env, capture_output=True, text=True)
-    assert any("user configuration file" in line
-               for line in pov.povray_diagnostics(proc.stderr))
+    assert any("user configuration file" in line for line in pov.povray_diagnostics(proc.stderr))
     # A scene without assumed_gamma draws a parse warning, and the check sees that too.
-    (out / "nogamma.pov").write_text("#version 3.7;\ncamera { location -5*z look_at 0 }\n"
-                                     "sphere { 0, 1 pigment { rgb 1 } }\n")
-    proc = subprocess.run([cmd[0], "+Inogamma.pov", "+Orender/ng.png", *cmd[3:]], cwd=out,
-                          env=povray_env(out), capture_output=True, text=True)
+    (out / "nogamma.pov").write_text(
+        "#version 3.7;\ncamera { location -5*z look_at 0 }\n" "sphere { 0, 1 pigment { rgb 1 } }\n"
+    )
+    proc = subprocess.run(
+        [cmd[0], "+Inogamma.pov", "+Orender/ng.png", *cmd[3:]],
+        cwd=out,
+        env=povray_env(out),
+        capture_output=True,
+        text=True,
+    )
     assert any("assumed_gamma" in line for line in pov.povray_diagnostics(proc.stderr))
 
 
@@ -142,23 +162,36 @@ def fake_worker(job):
     open(marker, "a").close()
     if job.frame == 2 or (job.frame == 1 and first_try):
         return pov.FrameResult(job.frame, False, "povray exited with 1: Parse Error: boom")
-    iio.imwrite(os.path.join(job.out_dir, job.image),
-                np.zeros((job.height, job.width, 3), np.uint8))
+    iio.imwrite(
+        os.path.join(job.out_dir, job.image), np.zeros((job.height, job.width, 3), np.uint8)
+    )
     return pov.FrameResult(job.frame, True)
 
 
 def test_failed_frame_is_retried_once_then_reported_by_number(tmp_path):
-    pov.export(StandInSim(), tmp_path, seconds=0.3, fps=10, dt=0.01, width=32, height=24,
-               progress=False)
+    pov.export(
+        StandInSim(), tmp_path, seconds=0.3, fps=10, dt=0.01, width=32, height=24, progress=False
+    )
     with ThreadPoolExecutor(2) as ex:
-        with pytest.raises(pov.RenderError, match=r"1 of 4 frames failed to render after 2 "
-                                                  r"tries: frames 2 \(frame 2: povray exited "
-                                                  r"with 1: Parse Error: boom\)") as e:
-            pov.render(tmp_path, executor=ex, worker=fake_worker, progress=False,
-                       povray_binary=sys.executable)
+        with pytest.raises(
+            pov.RenderError,
+            match=r"1 of 4 frames failed to render after 2 "
+            r"tries: frames 2 \(frame 2: povray exited "
+            r"with 1: Parse Error: boom\)",
+        ) as e:
+            pov.render(
+                tmp_path,
+                executor=ex,
+                worker=fake_worker,
+                progress=False,
+                povray_binary=sys.executable,
+            )
     assert e.value.frames == [2]
     assert sorted(p.name for p in (tmp_path / "render").iterdir()) == [
-        "frame_0.png", "frame_1.png", "frame_3.png"]
+        "frame_0.png",
+        "frame_1.png",
+        "frame_3.png",
+    ]
 
 
 def test_missing_povray_and_ffmpeg_name_the_debian_package(tmp_path, monkeypatch):
@@ -180,12 +213,21 @@ def test_texture_image_is_mapped_upright_with_the_hoist_at_the_pole(tmp_path):
     import imageio.v3 as iio
 
     image = np.zeros((40, 60, 3), np.uint8)
-    image[...] = (20, 40, 220)            # blue ...
-    image[:20, :30] = (220, 20, 20)       # ... but the top hoist-side quarter is red
+    image[...] = (20, 40, 220)  # blue ...
+    image[:20, :30] = (220, 20, 20)  # ... but the top hoist-side quarter is red
     iio.imwrite(tmp_path / "my flag.png", image)
     out = tmp_path / "out"
-    pov.export(StandInSim(amplitude=0.05), out, seconds=0.0, fps=10, scene=standin_scene(),
-               width=80, height=60, texture=tmp_path / "my flag.png", progress=False)
+    pov.export(
+        StandInSim(amplitude=0.05),
+        out,
+        seconds=0.0,
+        fps=10,
+        scene=standin_scene(),
+        width=80,
+        height=60,
+        texture=tmp_path / "my flag.png",
+        progress=False,
+    )
     assert (out / "texture.png").read_bytes() == (tmp_path / "my flag.png").read_bytes()
     assert 'image_map { png "texture.png" interpolate 2 }' in (out / "flag.pov").read_text()
     result = pov.render(out, progress=False, executor=ThreadPoolExecutor(1))

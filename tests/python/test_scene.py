@@ -1,11 +1,11 @@
 """Scenes: validation on assignment, TOML loading, built-ins, pickling, lazy imports."""
+
 import pickle
 import subprocess
 import sys
 
-import pytest
-
 import flagsim
+import pytest
 
 BAD_VALUES = [
     ("flag", "rows", 1, r"flag.rows should be >= 2, got 1"),
@@ -15,19 +15,49 @@ BAD_VALUES = [
     ("flag", "areal_density", 0.0, r"flag.areal_density should be finite and > 0, got 0"),
     ("flag", "stretch_stiffness", -5.0, r"flag.stretch_stiffness should be finite and >= 0"),
     ("flag", "damping", float("inf"), r"flag.damping should be finite and >= 0, got inf"),
-    ("flag", "pin", "left", r"flag.pin should be one of 'pole', 'grommets', 'top', 'none', got 'left'"),
-    ("flag", "pinned_vertices", [0, 88], r"flag.pinned_vertices\[1\] should be a vertex index in \[0, 87\], got 88"),
+    (
+        "flag",
+        "pin",
+        "left",
+        r"flag.pin should be one of 'pole', 'grommets', 'top', 'none', got 'left'",
+    ),
+    (
+        "flag",
+        "pinned_vertices",
+        [0, 88],
+        r"flag.pinned_vertices\[1\] should be a vertex index in \[0, 87\], got 88",
+    ),
     ("flag", "origin", (0, float("nan"), 0), r"flag.origin should be finite"),
-    ("drag", "model", "magic", r"drag.model should be one of 'paper', 'relative', 'triangle', got 'magic'"),
+    (
+        "drag",
+        "model",
+        "magic",
+        r"drag.model should be one of 'paper', 'relative', 'triangle', got 'magic'",
+    ),
     ("drag", "coefficient", -1.0, r"drag.coefficient should be finite and >= 0, got -1"),
-    ("integrator", "method", "rk4", r"integrator.method should be one of 'explicit', 'implicit', got 'rk4'"),
+    (
+        "integrator",
+        "method",
+        "rk4",
+        r"integrator.method should be one of 'explicit', 'implicit', got 'rk4'",
+    ),
     ("integrator", "safety", 1.5, r"integrator.safety should be in \(0, 1\], got 1.5"),
     ("integrator", "cg_tolerance", 0.0, r"integrator.cg_tolerance should be in \(0, 1\), got 0"),
-    ("integrator", "preconditioner", "ilu", r"integrator.preconditioner should be one of 'auto', 'jacobi', 'multigrid', got 'ilu'"),
+    (
+        "integrator",
+        "preconditioner",
+        "ilu",
+        r"integrator.preconditioner should be one of 'auto', 'jacobi', 'multigrid', got 'ilu'",
+    ),
     ("integrator", "max_strain", -1.0, r"integrator.max_strain should be finite and > 0"),
     ("air", "model", "wind", r"air.model should be one of 'none', 'uniform', 'grid', got 'wind'"),
     ("air", "density", -1.2, r"air.density should be finite and >= 0, got -1.2"),
-    ("air", "wind", [(1.0, (1, 0, 0)), (0.5, (2, 0, 0))], r"air.wind\[1\].time should be > the previous key's time 1"),
+    (
+        "air",
+        "wind",
+        [(1.0, (1, 0, 0)), (0.5, (2, 0, 0))],
+        r"air.wind\[1\].time should be > the previous key's time 1",
+    ),
     ("air", "wind", (1, 2), r"air.wind\[0\] should be a pair \(time, \(vx, vy, vz\)\)"),
     ("air", "wind", (float("inf"), 0, 0), r"air.wind\[0\].velocity should be finite"),
 ]
@@ -43,12 +73,15 @@ def test_bad_values_raise_naming_the_parameter_and_change_nothing(section, key, 
     assert getattr(part, key) == before
 
 
-@pytest.mark.parametrize("key,value,message", [
-    ("dt", 0.0, r"dt should be finite and > 0, got 0"),
-    ("dt", -0.01, r"dt should be finite and > 0, got -0.01"),
-    ("gravity", (0, float("nan"), 0), r"gravity should be finite"),
-    ("gravity", (0, 1), r"gravity should be a sequence of 3 numbers"),
-])
+@pytest.mark.parametrize(
+    "key,value,message",
+    [
+        ("dt", 0.0, r"dt should be finite and > 0, got 0"),
+        ("dt", -0.01, r"dt should be finite and > 0, got -0.01"),
+        ("gravity", (0, float("nan"), 0), r"gravity should be finite"),
+        ("gravity", (0, 1), r"gravity should be a sequence of 3 numbers"),
+    ],
+)
 def test_bad_top_level_values(key, value, message):
     scene = flagsim.Scene.paper()
     with pytest.raises(ValueError, match=message):
@@ -96,15 +129,18 @@ method = "explicit"
     assert sim.pinned.sum() == 2
 
 
-@pytest.mark.parametrize("text,message", [
-    ("[flag]\nrowz = 3\n", r"unknown key 'rowz' in section \[flag\]; known keys: rows, cols"),
-    ("colour = 'red'\n", r"unknown key 'colour' in the top level"),
-    ("[flagg]\nrows = 3\n", r"unknown key 'flagg' in the top level"),
-    ("[flag]\nrows = 1\n", r"flag.rows should be >= 2, got 1"),
-    ("[flag]\nrows = 'eight'\n", r"flag.rows should be an integer, got 'eight'"),
-    ("base = 'nope'\n", r"unknown scene 'nope'; built-in scenes are: paper"),
-    ("[flag\n", r"not valid TOML"),
-])
+@pytest.mark.parametrize(
+    "text,message",
+    [
+        ("[flag]\nrowz = 3\n", r"unknown key 'rowz' in section \[flag\]; known keys: rows, cols"),
+        ("colour = 'red'\n", r"unknown key 'colour' in the top level"),
+        ("[flagg]\nrows = 3\n", r"unknown key 'flagg' in the top level"),
+        ("[flag]\nrows = 1\n", r"flag.rows should be >= 2, got 1"),
+        ("[flag]\nrows = 'eight'\n", r"flag.rows should be an integer, got 'eight'"),
+        ("base = 'nope'\n", r"unknown scene 'nope'; built-in scenes are: paper"),
+        ("[flag\n", r"not valid TOML"),
+    ],
+)
 def test_load_toml_errors_name_key_and_section(tmp_path, text, message):
     f = tmp_path / "bad.toml"
     f.write_text(text)
@@ -135,14 +171,17 @@ def test_round_trip_through_dict_and_pickle():
 
 
 def test_import_loads_no_cli_plotting_or_rendering_library():
-    code = ("import sys, flagsim; bad = [m for m in ('matplotlib', 'tqdm', 'imageio', 'flagsim.cli') "
-            "if m in sys.modules]; print(','.join(bad))")
+    code = (
+        "import sys, flagsim; bad = [m for m in ('matplotlib', 'tqdm', 'imageio', 'flagsim.cli') "
+        "if m in sys.modules]; print(','.join(bad))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == ""
 
 
 def test_example_scene_files_load():
     import pathlib
+
     root = pathlib.Path(__file__).resolve().parents[2] / "examples" / "scenes"
     files = sorted(root.glob("*.toml"))
     assert files

@@ -1,12 +1,12 @@
 """The Simulation from Python: physics, views, divergence handling, determinism."""
+
 import gc
 import math
 import weakref
 
+import flagsim
 import numpy as np
 import pytest
-
-import flagsim
 from conftest import spring_pair
 
 
@@ -37,7 +37,9 @@ def test_banner_settles_at_analytic_angle():
     sim = flagsim.Simulation(s)
     sim.step(1500)
     u = np.linalg.norm(s.air.wind[0][1])
-    want = math.atan(0.5 * s.drag.coefficient * s.air.density * u * u / (s.flag.areal_density * 9.81))
+    want = math.atan(
+        0.5 * s.drag.coefficient * s.air.density * u * u / (s.flag.areal_density * 9.81)
+    )
     x = sim.positions.reshape(s.flag.rows, s.flag.cols, 3)
     d = x[1:] - x[:1]
     assert np.abs(np.arctan2(d[..., 2], -d[..., 1]) - want).max() < 1e-6
@@ -135,7 +137,9 @@ def test_read_only_arrays_and_sizes(paper):
     with pytest.raises(ValueError):
         sim.normals[0, 0] = 1
     assert sim.pinned.sum() == paper.flag.rows
-    assert math.isclose(sim.node_mass.sum(), paper.flag.areal_density * paper.flag.width * paper.flag.height)
+    assert math.isclose(
+        sim.node_mass.sum(), paper.flag.areal_density * paper.flag.width * paper.flag.height
+    )
     assert np.allclose(sim.node_mass, paper.flag.areal_density * sim.node_area)
 
 

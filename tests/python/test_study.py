@@ -1,12 +1,11 @@
 """Studies: the reduced stability matrix, convergence orders, reports, resumable executor runs."""
+
 import concurrent.futures as cf
 import csv
 import math
 
-import numpy as np
-import pytest
-
 import flagsim
+import pytest
 from flagsim import study
 from flagsim.study import accuracy, runner, stability
 
@@ -20,7 +19,9 @@ def stability_rows(tmp_path_factory):
 def test_reduced_stability_matrix_has_no_implausible_or_nonfinite_case(stability_rows):
     rows, _ = stability_rows
     assert len(rows) == len(stability.cases(reduced=True))
-    assert [(r["id"], r["cause"]) for r in rows if r["outcome"] in ("implausible", "nonfinite")] == []
+    assert [
+        (r["id"], r["cause"]) for r in rows if r["outcome"] in ("implausible", "nonfinite")
+    ] == []
     assert {r["outcome"] for r in rows} <= {"plausible", "diverged"}
     # every plausible run's ledger balanced to round-off, and made no more than the tolerance
     for r in rows:
@@ -41,10 +42,15 @@ def test_reduced_matrix_covers_flapping_stiff_heavy_and_pole_contact():
 
 
 @pytest.mark.parametrize("integrator", ["implicit", "explicit_adaptive"])
-def test_implicit_and_adaptive_explicit_are_plausible_in_every_reduced_case(stability_rows, integrator):
+def test_implicit_and_adaptive_explicit_are_plausible_in_every_reduced_case(
+    stability_rows, integrator
+):
     rows, _ = stability_rows
-    bad = [(r["id"], r["outcome"], r["cause"]) for r in rows
-           if r["integrator"] == integrator and r["outcome"] != "plausible"]
+    bad = [
+        (r["id"], r["outcome"], r["cause"])
+        for r in rows
+        if r["integrator"] == integrator and r["outcome"] != "plausible"
+    ]
     assert bad == []
     for r in rows:
         if r["integrator"] == integrator:
@@ -57,15 +63,23 @@ def test_plain_explicit_reports_its_divergence(stability_rows):
     causes = {r["cause"] for r in diverged}
     # most above their stable step at rest: named before any step
     assert "rejected: integrator.substeps" in causes
-    assert causes <= {"rejected: integrator.substeps", "unstable_step", "strain", "non-finite",
-                      "energy"}, causes
+    assert causes <= {
+        "rejected: integrator.substeps",
+        "unstable_step",
+        "strain",
+        "non-finite",
+        "energy",
+    }, causes
 
 
 def test_stability_report_counts_every_case(stability_rows):
     rows, out = stability_rows
     text = (out / "stability.md").read_text()
     for (integ,), c in stability.summarize(rows).items():
-        assert f"| {integ} | {c['plausible']} | {c['diverged']} | {c['implausible']} | {c['nonfinite']} |" in text
+        assert (
+            f"| {integ} | {c['plausible']} | {c['diverged']} | {c['implausible']} | "
+            f"{c['nonfinite']} |" in text
+        )
     assert stability.headline(rows) in text
 
 
@@ -82,8 +96,17 @@ def test_the_issues_heavy_stiff_flag_is_plausible_only_with_the_check(monkeypatc
     # shear and bend springs, dt = 0.05, implicit): with the check off (energy_tolerance = 0)
     # strain limiting and the solve fight, finite throughout, and the study must call it
     # implausible, not stable; with the check on, step halvings make it plausible.
-    case = dict(id="heavy", kind="matrix", integrator="implicit", flapping="off", k_s=1e7,
-                wind=2.0, dt=0.05, density=10.0, duration=1.0)
+    case = dict(
+        id="heavy",
+        kind="matrix",
+        integrator="implicit",
+        flapping="off",
+        k_s=1e7,
+        wind=2.0,
+        dt=0.05,
+        density=10.0,
+        duration=1.0,
+    )
     original = stability.build_scene
 
     def scene(c):
@@ -92,6 +115,7 @@ def test_the_issues_heavy_stiff_flag_is_plausible_only_with_the_check(monkeypatc
         if not checked:
             s.integrator.energy_tolerance = 0.0
         return s, prepare
+
     monkeypatch.setattr(stability, "build_scene", scene)
     r = stability.run_case(case)
     if checked:
@@ -169,10 +193,18 @@ def test_runner_resumes_after_an_interruption(tmp_path):
 
 def test_results_do_not_depend_on_executor_or_order(tmp_path):
     cases = [{"id": f"c{i}", "x": i} for i in range(8)]
-    serial = runner.run_cases(cases, _square, str(tmp_path / "a.csv"), ["id", "x", "value"], progress=False)
+    serial = runner.run_cases(
+        cases, _square, str(tmp_path / "a.csv"), ["id", "x", "value"], progress=False
+    )
     with cf.ThreadPoolExecutor(max_workers=3) as ex:
-        pooled = runner.run_cases(cases, _square, str(tmp_path / "b.csv"), ["id", "x", "value"],
-                                  executor=ex, progress=False)
+        pooled = runner.run_cases(
+            cases,
+            _square,
+            str(tmp_path / "b.csv"),
+            ["id", "x", "value"],
+            executor=ex,
+            progress=False,
+        )
     assert serial == pooled
 
 
@@ -187,11 +219,32 @@ def test_stability_case_is_a_pure_function_of_its_settings():
 def test_air_orders_semi_lagrangian_about_one_maccormack_clearly_higher_in_space(accuracy_rows):
     rows, _ = accuracy_rows
     p = "fft" if flagsim.has_fftw() else "pcg"
-    sl = -accuracy.observed_order(rows, "air", "semi_lagrangian", key="resolution", pressure=p,
-                                  tolerance=repr(1e-8), refinement="cfl")
+    sl = -accuracy.observed_order(
+        rows,
+        "air",
+        "semi_lagrangian",
+        key="resolution",
+        pressure=p,
+        tolerance=repr(1e-8),
+        refinement="cfl",
+    )
     assert 0.6 < sl < 1.3, sl
-    sl_h2 = -accuracy.observed_order(rows, "air", "semi_lagrangian", key="resolution", pressure=p,
-                                     tolerance=repr(1e-8), refinement="dt~h^2")
-    mc_h2 = -accuracy.observed_order(rows, "air", "maccormack", key="resolution", pressure=p,
-                                     tolerance=repr(1e-8), refinement="dt~h^2")
+    sl_h2 = -accuracy.observed_order(
+        rows,
+        "air",
+        "semi_lagrangian",
+        key="resolution",
+        pressure=p,
+        tolerance=repr(1e-8),
+        refinement="dt~h^2",
+    )
+    mc_h2 = -accuracy.observed_order(
+        rows,
+        "air",
+        "maccormack",
+        key="resolution",
+        pressure=p,
+        tolerance=repr(1e-8),
+        refinement="dt~h^2",
+    )
     assert mc_h2 > 1.3 and mc_h2 > sl_h2 + 0.6, (sl_h2, mc_h2)

@@ -13,6 +13,7 @@ runs, stage split from Simulation.timings. Writes results.csv (the machine descr
 '#' header lines), results.md, scaling.png (log-log cost against size, slopes printed),
 peers.csv and results.json to --out; --docs PATH writes the report for the docs.
 """
+
 from .command import configure, main, run
 
 __all__ = ["configure", "main", "run"]

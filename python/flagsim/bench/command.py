@@ -1,4 +1,5 @@
 """Command line of the benchmark (``flagsim bench`` / ``python -m flagsim.bench``)."""
+
 from __future__ import annotations
 
 import argparse
@@ -26,35 +27,72 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.epilog = EXAMPLES
     mode = parser.add_mutually_exclusive_group()
-    mode.add_argument("--quick", action="store_true",
-                      help="fewer sizes and thread counts, runs of >= 0.1 s (about a minute)")
-    mode.add_argument("--smoke", action="store_true",
-                      help="the smallest of each group, runs of >= 0.01 s (seconds; for CI)")
-    parser.add_argument("--out", default="out/bench", metavar="DIR",
-                        help="directory for results.csv, results.md, scaling.png, peers.csv, results.json "
-                             "(default: %(default)s)")
-    parser.add_argument("--only", metavar="GROUPS",
-                        help=f"comma-separated groups among {', '.join(wl.GROUPS)} (default: paper,cloth,air)")
-    parser.add_argument("--peers", action="store_true",
-                        help="also run PyBullet, MuJoCo and pyPBD on the same cloth and the numpy Stable "
-                             "Fluids baseline on the same air (pip install .[bench]); missing ones are skipped")
-    parser.add_argument("--sizes", metavar="LIST",
-                        help="comma-separated sizes: ROWSxCOLS for cloth (8x11), N or N^3 for air (64)")
-    parser.add_argument("--threads", metavar="LIST", help="comma-separated thread counts (default: 1,2)")
+    mode.add_argument(
+        "--quick",
+        action="store_true",
+        help="fewer sizes and thread counts, runs of >= 0.1 s (about a minute)",
+    )
+    mode.add_argument(
+        "--smoke",
+        action="store_true",
+        help="the smallest of each group, runs of >= 0.01 s (seconds; for CI)",
+    )
+    parser.add_argument(
+        "--out",
+        default="out/bench",
+        metavar="DIR",
+        help="directory for results.csv, results.md, scaling.png, peers.csv, results.json "
+        "(default: %(default)s)",
+    )
+    parser.add_argument(
+        "--only",
+        metavar="GROUPS",
+        help=f"comma-separated groups among {', '.join(wl.GROUPS)} (default: paper,cloth,air)",
+    )
+    parser.add_argument(
+        "--peers",
+        action="store_true",
+        help="also run PyBullet, MuJoCo and pyPBD on the same cloth and the numpy Stable "
+        "Fluids baseline on the same air (pip install .[bench]); missing ones are skipped",
+    )
+    parser.add_argument(
+        "--sizes",
+        metavar="LIST",
+        help="comma-separated sizes: ROWSxCOLS for cloth (8x11), N or N^3 for air (64)",
+    )
+    parser.add_argument(
+        "--threads", metavar="LIST", help="comma-separated thread counts (default: 1,2)"
+    )
     parser.add_argument("--integrators", metavar="LIST", help=f"among {', '.join(wl.INTEGRATORS)}")
     parser.add_argument("--advection", metavar="LIST", help=f"among {', '.join(wl.ADVECTION)}")
     parser.add_argument("--pressure", metavar="LIST", help=f"among {', '.join(wl.PRESSURE)}")
-    parser.add_argument("--no-self-collision", action="store_true", help="cloth without self-collision only")
+    parser.add_argument(
+        "--no-self-collision", action="store_true", help="cloth without self-collision only"
+    )
     parser.add_argument("--no-float", action="store_true", help="skip the float32 grid variants")
-    parser.add_argument("--min-time", type=float, metavar="S", help="a run lasts at least S seconds")
-    parser.add_argument("--repeats", type=int, metavar="N", help="runs per workload (min and median)")
+    parser.add_argument(
+        "--min-time", type=float, metavar="S", help="a run lasts at least S seconds"
+    )
+    parser.add_argument(
+        "--repeats", type=int, metavar="N", help="runs per workload (min and median)"
+    )
     parser.add_argument("--warmup", type=int, metavar="N", help="steps dropped before timing")
-    parser.add_argument("--timeout", type=float, default=1800.0, metavar="S",
-                        help="give up on one workload after S seconds (default: %(default)g)")
-    parser.add_argument("--docs", metavar="PATH",
-                        help="also write the report as PATH (e.g. docs/performance.md) with its plot beside")
+    parser.add_argument(
+        "--timeout",
+        type=float,
+        default=1800.0,
+        metavar="S",
+        help="give up on one workload after S seconds (default: %(default)g)",
+    )
+    parser.add_argument(
+        "--docs",
+        metavar="PATH",
+        help="also write the report as PATH (e.g. docs/performance.md) with its plot beside",
+    )
     parser.add_argument("--no-plot", action="store_true", help="no PNG (matplotlib not needed)")
-    parser.add_argument("--list", action="store_true", help="list the workloads and skips, run nothing")
+    parser.add_argument(
+        "--list", action="store_true", help="list the workloads and skips, run nothing"
+    )
 
 
 def _split(text: str | None) -> list[str]:
@@ -67,7 +105,9 @@ def _choices(name: str, text: str | None, allowed) -> tuple[str, ...] | None:
     items = _split(text)
     bad = [i for i in items if i not in allowed]
     if bad or not items:
-        raise ValueError(f"--{name} should be a comma-separated list among {', '.join(allowed)}, got {text!r}")
+        raise ValueError(
+            f"--{name} should be a comma-separated list among {', '.join(allowed)}, got {text!r}"
+        )
     return tuple(items)
 
 
@@ -90,7 +130,9 @@ def parse_sizes(text: str | None):
                     raise ValueError
                 air.append(n)
         except ValueError:
-            raise ValueError(f"--sizes should list ROWSxCOLS (>= 2) or N (>= 2) items, got {tok!r}") from None
+            raise ValueError(
+                f"--sizes should list ROWSxCOLS (>= 2) or N (>= 2) items, got {tok!r}"
+            ) from None
     if not cloth and not air:
         raise ValueError(f"--sizes should list at least one size, got {text!r}")
     return (tuple(cloth) or None), (tuple(air) or None)
@@ -109,41 +151,64 @@ def selection(args) -> tuple[wl.Selection, dict[str, Any]]:
         except ValueError:
             threads = ()
         if not threads or min(threads) < 1:
-            raise ValueError(f"--threads should be a comma-separated list of counts >= 1, got {args.threads!r}")
+            raise ValueError(
+                f"--threads should be a comma-separated list of counts >= 1, got {args.threads!r}"
+            )
     sel = wl.Selection(
-        mode=mode, groups=groups, cloth_sizes=cloth_sizes, air_sizes=air_sizes, threads=threads,
+        mode=mode,
+        groups=groups,
+        cloth_sizes=cloth_sizes,
+        air_sizes=air_sizes,
+        threads=threads,
         integrators=_choices("integrators", args.integrators, wl.INTEGRATORS) or wl.INTEGRATORS,
         advection=_choices("advection", args.advection, wl.ADVECTION) or wl.ADVECTION,
         pressure=_choices("pressure", args.pressure, wl.PRESSURE) or wl.PRESSURE,
         self_collision=(False,) if args.no_self_collision else (False, True),
-        float_grid=not args.no_float)
+        float_grid=not args.no_float,
+    )
     protocol = dict(wl.PROTOCOLS[mode])
     for key in ("min_time", "repeats", "warmup"):
         v = getattr(args, key)
         if v is not None:
-            if (key == "min_time" and not v > 0) or (key != "min_time" and v < (1 if key == "repeats" else 0)):
-                raise ValueError(f"--{key.replace('_', '-')} should be {'> 0' if key == 'min_time' else '>= 1' if key == 'repeats' else '>= 0'}, got {v}")
+            if (key == "min_time" and not v > 0) or (
+                key != "min_time" and v < (1 if key == "repeats" else 0)
+            ):
+                bound = "> 0" if key == "min_time" else ">= 1" if key == "repeats" else ">= 0"
+                raise ValueError(f"--{key.replace('_', '-')} should be {bound}, got {v}")
             protocol[key] = v
     return sel, protocol
 
 
 def run_workload(w: wl.Workload, protocol: dict[str, Any], timeout: float) -> dict[str, Any]:
-    """Measure one workload in a fresh process; failures come back as {'ok': False, 'error': ...}."""
+    """Measure one workload in a fresh process; a failure comes back as {'ok': False, 'error'}."""
     spec = json.dumps(w.spec(protocol))
     import flagsim
 
     # The worker runs in a temporary directory: make sure it imports this same flagsim.
     package_root = os.path.dirname(os.path.dirname(os.path.abspath(flagsim.__file__)))
-    paths = [package_root] + [os.path.abspath(p) for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
-    env = dict(os.environ, OMP_NUM_THREADS=str(w.threads), OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
-               PYTHONPATH=os.pathsep.join(paths))
+    paths = [package_root] + [
+        os.path.abspath(p) for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p
+    ]
+    env = dict(
+        os.environ,
+        OMP_NUM_THREADS=str(w.threads),
+        OPENBLAS_NUM_THREADS="1",
+        MKL_NUM_THREADS="1",
+        PYTHONPATH=os.pathsep.join(paths),
+    )
     with tempfile.TemporaryDirectory(prefix="flagsim-bench-") as tmp:
         path = os.path.join(tmp, "result.json")
         try:
             # cwd: engines that write logs to the working directory (MuJoCo) write them there
-            proc = subprocess.run([sys.executable, "-m", "flagsim.bench.worker", spec, path], env=env,
-                                  stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                                  timeout=timeout, cwd=tmp)
+            proc = subprocess.run(
+                [sys.executable, "-m", "flagsim.bench.worker", spec, path],
+                env=env,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.PIPE,
+                text=True,
+                timeout=timeout,
+                cwd=tmp,
+            )
         except subprocess.TimeoutExpired:
             return {"ok": False, "error": f"timed out after {timeout:g} s"}
         if os.path.exists(path):
@@ -157,12 +222,19 @@ def _progress(i: int, total: int, w: wl.Workload, row: dict[str, Any]) -> str:
     head = f"[{i}/{total}] {w.name}: "
     if not row["ok"]:
         return head + "FAILED: " + row["note"]
-    return (head + f"{row['steps_per_s']:,.1f} steps/s (median {row['ms_median']:.4g} ms, min "
-            f"{row['ms_min']:.4g} ms, cpu {row['cpu_ms_median']:.4g} ms), +{row['workload_mb']:.1f} MiB")
+    return (
+        head + f"{row['steps_per_s']:,.1f} steps/s (median {row['ms_median']:.4g} ms, min "
+        f"{row['ms_min']:.4g} ms, cpu {row['cpu_ms_median']:.4g} ms), +{row['workload_mb']:.1f} MiB"
+    )
 
 
 def taylor_green(sel: wl.Selection, features) -> dict[str, Any] | None:
-    if "air" not in sel.groups or not sel.float_grid or sel.mode == "smoke" or not features["fluid"][0]:
+    if (
+        "air" not in sel.groups
+        or not sel.float_grid
+        or sel.mode == "smoke"
+        or not features["fluid"][0]
+    ):
         return None
     from .engines import taylor_green_errors
 
@@ -199,10 +271,17 @@ def run(args) -> int:
     os.makedirs(args.out, exist_ok=True)
     desc = machine.describe()
     argv = getattr(args, "_argv", None)
-    command = ("python -m flagsim.bench " + " ".join(argv)) if argv is not None else \
-        "flagsim " + " ".join(sys.argv[1:])
-    print(f"{len(work)} workloads on {desc['cpu']} ({desc['usable_cpus']} cpus, load {desc['load_average_start']}),"
-          f" flagsim {desc['git_revision']}; results in {args.out}", flush=True)
+    command = (
+        ("python -m flagsim.bench " + " ".join(argv))
+        if argv is not None
+        else "flagsim " + " ".join(sys.argv[1:])
+    )
+    print(
+        f"{len(work)} workloads on {desc['cpu']} ({desc['usable_cpus']} cpus, "
+        f"load {desc['load_average_start']}),"
+        f" flagsim {desc['git_revision']}; results in {args.out}",
+        flush=True,
+    )
     rows: list[dict[str, Any]] = []
     t_start = time.perf_counter()
     interrupted = False
@@ -221,21 +300,40 @@ def run(args) -> int:
     slope_list = report.slopes(rows)
     if not args.no_plot:
         plot_name = "scaling.png"
-        slope_list = report.plot(os.path.join(args.out, plot_name), rows,
-                                 title=f"{desc['cpu']}, flagsim {desc['git_revision']}, {desc['date']}")
+        slope_list = report.plot(
+            os.path.join(args.out, plot_name),
+            rows,
+            title=f"{desc['cpu']}, flagsim {desc['git_revision']}, {desc['date']}",
+        )
     target_list = report.targets(rows, comps, accuracy)
     report.write_csv(os.path.join(args.out, "results.csv"), rows, desc)
     if comps:
         report.write_peers_csv(os.path.join(args.out, "peers.csv"), comps)
     md_args = dict(command=command, protocol=protocol, load_end=load_end)
     with open(os.path.join(args.out, "results.md"), "w", encoding="utf-8") as f:
-        f.write(report.markdown(rows, desc, skipped, comps, slope_list, target_list, plot_name=plot_name,
-                                **md_args))
+        f.write(
+            report.markdown(
+                rows, desc, skipped, comps, slope_list, target_list, plot_name=plot_name, **md_args
+            )
+        )
     with open(os.path.join(args.out, "results.json"), "w", encoding="utf-8") as f:
-        json.dump({"machine": desc, "protocol": protocol, "command": command, "load_average_end": load_end,
-                   "rows": [{k: v for k, v in r.items()} for r in rows], "skipped": skipped,
-                   "comparisons": comps, "slopes": slope_list, "targets": target_list,
-                   "taylor_green": accuracy}, f, indent=1, default=str)
+        json.dump(
+            {
+                "machine": desc,
+                "protocol": protocol,
+                "command": command,
+                "load_average_end": load_end,
+                "rows": [{k: v for k, v in r.items()} for r in rows],
+                "skipped": skipped,
+                "comparisons": comps,
+                "slopes": slope_list,
+                "targets": target_list,
+                "taylor_green": accuracy,
+            },
+            f,
+            indent=1,
+            default=str,
+        )
     if args.docs:
         docs_dir = os.path.dirname(os.path.abspath(args.docs))
         os.makedirs(docs_dir, exist_ok=True)
@@ -244,12 +342,26 @@ def run(args) -> int:
             docs_plot = os.path.splitext(os.path.basename(args.docs))[0] + ".png"
             shutil.copyfile(os.path.join(args.out, plot_name), os.path.join(docs_dir, docs_plot))
         with open(args.docs, "w", encoding="utf-8") as f:
-            f.write(report.markdown(rows, desc, skipped, comps, slope_list, target_list, plot_name=docs_plot,
-                                    docs=True, **md_args))
+            f.write(
+                report.markdown(
+                    rows,
+                    desc,
+                    skipped,
+                    comps,
+                    slope_list,
+                    target_list,
+                    plot_name=docs_plot,
+                    docs=True,
+                    **md_args,
+                )
+            )
     for name, measured, verdict in target_list:
         print(f"target: {name}: {measured} [{verdict}]")
-    print(f"done in {time.perf_counter() - t_start:.0f} s: {sum(r['ok'] for r in rows)} measured, "
-          f"{sum(not r['ok'] for r in rows)} failed, {len(skipped)} skipped; see {args.out}/results.md")
+    print(
+        f"done in {time.perf_counter() - t_start:.0f} s: {sum(r['ok'] for r in rows)} measured, "
+        f"{sum(not r['ok'] for r in rows)} failed, {len(skipped)} skipped; "
+        f"see {args.out}/results.md"
+    )
     return 130 if interrupted else 0
 
 

@@ -5,6 +5,7 @@ A stepper is built outside the timing and offers ``step(n)``; optionally ``timin
 per stage, cumulative), ``info()`` (a small dict for the report) and ``ok()`` (state finite).
 Features that other issues add are detected, never assumed: ``features()`` says which exist.
 """
+
 from __future__ import annotations
 
 import ctypes
@@ -22,6 +23,7 @@ AIR_VISCOSITY = 1.5e-5  # m^2/s, air
 
 
 # ---- feature detection ------------------------------------------------------------------------
+
 
 def plain_paper_scene():
     """Scene.paper() with only what the foundation has: analytic (uniform) wind, and
@@ -61,8 +63,11 @@ def features() -> dict[str, tuple[bool, str]]:
     import flagsim
 
     out: dict[str, tuple[bool, str]] = {}
-    out["fluid"] = (True, "") if hasattr(flagsim, "Fluid") else (
-        False, "flagsim.Fluid does not exist yet (the air solver, issue 4)")
+    out["fluid"] = (
+        (True, "")
+        if hasattr(flagsim, "Fluid")
+        else (False, "flagsim.Fluid does not exist yet (the air solver, issue 4)")
+    )
 
     def self_collision(s):
         s.self_collision.enabled = True
@@ -86,6 +91,7 @@ def features() -> dict[str, tuple[bool, str]]:
 
 
 # ---- flagsim -----------------------------------------------------------------------------------
+
 
 def cloth_scene(rows: int, cols: int, integrator: str = "implicit", self_collision: bool = False):
     """The paper scene's flag (same size, mass, pins, dt) meshed with rows x cols masses, alone:
@@ -139,8 +145,12 @@ class SimulationStepper:
         return dict(self.sim.timings)
 
     def info(self) -> dict[str, Any]:
-        return {"vertices": int(self.sim.positions.shape[0]), "stages": list(self.sim.stages),
-                "last_step": dict(self.sim.last_step_stats), "max_strain": float(self.sim.max_strain())}
+        return {
+            "vertices": int(self.sim.positions.shape[0]),
+            "stages": list(self.sim.stages),
+            "last_step": dict(self.sim.last_step_stats),
+            "max_strain": float(self.sim.max_strain()),
+        }
 
     def ok(self) -> bool:
         return bool(np.isfinite(self.sim.positions).all())
@@ -171,9 +181,16 @@ class FluidStepper:
     def __init__(self, n: int, advection: str, pressure: str, precision: str = "double"):
         import flagsim
 
-        self.fluid = flagsim.Fluid(resolution=(n, n, n), cell_size=AIR_BOX / n, origin=(0.0, 0.0, 0.0),
-                                   boundary="periodic", advection=advection, pressure=pressure,
-                                   precision=precision, viscosity=AIR_VISCOSITY)
+        self.fluid = flagsim.Fluid(
+            resolution=(n, n, n),
+            cell_size=AIR_BOX / n,
+            origin=(0.0, 0.0, 0.0),
+            boundary="periodic",
+            advection=advection,
+            pressure=pressure,
+            precision=precision,
+            viscosity=AIR_VISCOSITY,
+        )
         self.fluid.set_velocity(smooth_periodic_field)
 
     def step(self, n: int) -> None:
@@ -184,7 +201,9 @@ class FluidStepper:
         stats = getattr(self.fluid, "stats", None)
         if not isinstance(stats, dict):
             return {}
-        return {k[len("seconds_"):]: float(v) for k, v in stats.items() if k.startswith("seconds_")}
+        return {
+            k[len("seconds_") :]: float(v) for k, v in stats.items() if k.startswith("seconds_")
+        }
 
     def info(self) -> dict[str, Any]:
         stats = getattr(self.fluid, "stats", None)
@@ -204,8 +223,12 @@ class NumpyFluidStepper:
     def __init__(self, n: int):
         from flagsim.testing.stable_fluids_numpy import StableFluidsNumpy
 
-        self.fluid = StableFluidsNumpy(resolution=(n, n, n), cell_size=AIR_BOX / n,
-                                       origin=(0.0, 0.0, 0.0), viscosity=AIR_VISCOSITY)
+        self.fluid = StableFluidsNumpy(
+            resolution=(n, n, n),
+            cell_size=AIR_BOX / n,
+            origin=(0.0, 0.0, 0.0),
+            viscosity=AIR_VISCOSITY,
+        )
         self.fluid.set_velocity(smooth_periodic_field)
 
     def step(self, n: int) -> None:
@@ -260,8 +283,11 @@ class FftwFloorStepper:
             raise RuntimeError("libfftw3 not found")
         self.lib = lib
         lib.fftw_plan_dft_r2c_3d.restype = ctypes.c_void_p
-        lib.fftw_plan_dft_r2c_3d.argtypes = [ctypes.c_int] * 3 + [ctypes.c_void_p, ctypes.c_void_p,
-                                                                  ctypes.c_uint]
+        lib.fftw_plan_dft_r2c_3d.argtypes = [ctypes.c_int] * 3 + [
+            ctypes.c_void_p,
+            ctypes.c_void_p,
+            ctypes.c_uint,
+        ]
         lib.fftw_plan_dft_c2r_3d.restype = ctypes.c_void_p
         lib.fftw_plan_dft_c2r_3d.argtypes = lib.fftw_plan_dft_r2c_3d.argtypes
         lib.fftw_execute.argtypes = [ctypes.c_void_p]
@@ -271,10 +297,12 @@ class FftwFloorStepper:
         self.plans = []
         for r, c in zip(self.real, self.spec):
             keep = r.copy()  # planning may overwrite (not with ESTIMATE, but be safe)
-            self.plans.append(lib.fftw_plan_dft_r2c_3d(n, n, n, r.ctypes.data, c.ctypes.data,
-                                                       _FFTW_ESTIMATE))
-            self.plans.append(lib.fftw_plan_dft_c2r_3d(n, n, n, c.ctypes.data, r.ctypes.data,
-                                                       _FFTW_ESTIMATE))
+            self.plans.append(
+                lib.fftw_plan_dft_r2c_3d(n, n, n, r.ctypes.data, c.ctypes.data, _FFTW_ESTIMATE)
+            )
+            self.plans.append(
+                lib.fftw_plan_dft_c2r_3d(n, n, n, c.ctypes.data, r.ctypes.data, _FFTW_ESTIMATE)
+            )
             r[...] = keep
         if not all(self.plans):
             raise RuntimeError("FFTW planning failed")
@@ -300,6 +328,7 @@ class FftwFloorStepper:
 
 # ---- Taylor-Green: float32 grid accuracy against double -----------------------------------------
 
+
 def taylor_green_errors(n: int = 32, steps: int = 50, viscosity: float = 0.05) -> dict[str, float]:
     """Relative max error of a decaying Taylor-Green vortex after `steps` steps of DT, for the
     double and the float grid, and their difference relative to the double result.
@@ -321,9 +350,16 @@ def taylor_green_errors(n: int = 32, steps: int = 50, viscosity: float = 0.05) -
     out: dict[str, float] = {}
     fields = {}
     for precision in ("double", "float"):
-        f = flagsim.Fluid(resolution=(n, n, n), cell_size=AIR_BOX / n, origin=(0.0, 0.0, 0.0),
-                          boundary="periodic", advection="semi_lagrangian", pressure="fft",
-                          precision=precision, viscosity=viscosity)
+        f = flagsim.Fluid(
+            resolution=(n, n, n),
+            cell_size=AIR_BOX / n,
+            origin=(0.0, 0.0, 0.0),
+            boundary="periodic",
+            advection="semi_lagrangian",
+            pressure="fft",
+            precision=precision,
+            viscosity=viscosity,
+        )
         f.set_velocity(tg)
         f.step(DT, steps)
         decay = math.exp(-2 * viscosity * k * k * DT * steps)
@@ -331,8 +367,9 @@ def taylor_green_errors(n: int = 32, steps: int = 50, viscosity: float = 0.05) -
         u = np.asarray(f.u, dtype=float).reshape(-1)
         fields[precision] = u
         out[f"error_{precision}"] = float(np.abs(u - exact).max() / decay)
-    out["float_vs_double"] = float(np.abs(fields["float"] - fields["double"]).max()
-                                   / np.abs(fields["double"]).max())
+    out["float_vs_double"] = float(
+        np.abs(fields["float"] - fields["double"]).max() / np.abs(fields["double"]).max()
+    )
     out["n"] = n
     out["steps"] = steps
     return out

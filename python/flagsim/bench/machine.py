@@ -1,4 +1,5 @@
 """The machine a benchmark ran on: CPU, cores, load, compiler and flags, library versions, git."""
+
 from __future__ import annotations
 
 import datetime
@@ -34,7 +35,9 @@ def physical_cores() -> int | None:
     cores = set()
     for block in text.split("\n\n"):
         fields = dict(
-            (k.strip(), v.strip()) for k, _, v in (line.partition(":") for line in block.splitlines()))
+            (k.strip(), v.strip())
+            for k, _, v in (line.partition(":") for line in block.splitlines())
+        )
         if "core id" in fields:
             cores.add((fields.get("physical id", "0"), fields["core id"]))
     return len(cores) or None
@@ -64,12 +67,22 @@ def git_revision() -> str:
 
     here = os.path.dirname(os.path.abspath(flagsim.__file__))
     try:
-        rev = subprocess.run(["git", "rev-parse", "--short=12", "HEAD"], cwd=here, capture_output=True,
-                             text=True, timeout=10)
+        rev = subprocess.run(
+            ["git", "rev-parse", "--short=12", "HEAD"],
+            cwd=here,
+            capture_output=True,
+            text=True,
+            timeout=10,
+        )
         if rev.returncode != 0:
             return "unknown (not a git checkout)"
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
-                               capture_output=True, text=True, timeout=10)
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=here,
+            capture_output=True,
+            text=True,
+            timeout=10,
+        )
         return rev.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
     except (OSError, subprocess.SubprocessError):
         return "unknown (git not available)"
@@ -103,7 +116,9 @@ def describe() -> dict[str, Any]:
         "cpu": cpu_model(),
         "logical_cpus": os.cpu_count(),
         "physical_cores": physical_cores(),
-        "usable_cpus": len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(),
+        "usable_cpus": len(os.sched_getaffinity(0))
+        if hasattr(os, "sched_getaffinity")
+        else os.cpu_count(),
         "memory_gib": memory_total_gib(),
         "load_average_start": load_average(),
         "os": f"{platform.system()} {platform.release()}",
@@ -112,12 +127,17 @@ def describe() -> dict[str, Any]:
         "git_revision": git_revision(),
         "compiler": info.get("compiler", "unknown"),
         "build_type": info.get("build_type", "unknown"),
-        "cxx_flags": " ".join(x for x in (info.get("cxx_flags", ""), info.get("openmp_flags", "")) if x)
+        "cxx_flags": " ".join(
+            x for x in (info.get("cxx_flags", ""), info.get("openmp_flags", "")) if x
+        )
         or "unknown",
         "eigen": f"{info.get('eigen', '?')} ({info.get('eigen_simd', '?')})",
         "openmp": (f"yes ({info.get('openmp_version')})" if info.get("openmp") else "no")
-        if info else str(flagsim.has_openmp()),
-        "fftw": (info.get("fftw_version") or "yes") if info.get("fftw", flagsim.has_fftw()) else "no",
+        if info
+        else str(flagsim.has_openmp()),
+        "fftw": (info.get("fftw_version") or "yes")
+        if info.get("fftw", flagsim.has_fftw())
+        else "no",
         "fftw_threads": "yes (OpenMP, grids >= 32^3)" if info.get("fftw_threads") else "no",
         "default_threads": flagsim.num_threads(),
     }

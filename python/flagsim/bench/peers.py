@@ -24,6 +24,7 @@ rows x cols vertices, with the closest stiffness its model offers:
 Peer modules are imported only inside these functions; one that is not installed is reported,
 never an error.
 """
+
 from __future__ import annotations
 
 import importlib.util
@@ -60,11 +61,20 @@ def cloth_spec(rows: int, cols: int) -> dict[str, Any]:
     s = plain_paper_scene()
     wind = s.air.wind[0][1] if s.air.model != "none" else (0.0, 0.0, 0.0)
     return {
-        "rows": rows, "cols": cols, "width": s.flag.width, "height": s.flag.height,
-        "origin": tuple(s.flag.origin), "areal_density": s.flag.areal_density,
-        "k_stretch": s.flag.stretch_stiffness, "k_shear": s.flag.shear_stiffness,
-        "k_bend": s.flag.bend_stiffness, "damping": s.flag.damping, "dt": s.dt,
-        "gravity": tuple(s.gravity), "wind": tuple(wind), "air_density": s.air.density,
+        "rows": rows,
+        "cols": cols,
+        "width": s.flag.width,
+        "height": s.flag.height,
+        "origin": tuple(s.flag.origin),
+        "areal_density": s.flag.areal_density,
+        "k_stretch": s.flag.stretch_stiffness,
+        "k_shear": s.flag.shear_stiffness,
+        "k_bend": s.flag.bend_stiffness,
+        "damping": s.flag.damping,
+        "dt": s.dt,
+        "gravity": tuple(s.gravity),
+        "wind": tuple(wind),
+        "air_density": s.air.density,
     }
 
 
@@ -74,8 +84,14 @@ def flag_mesh(spec: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     R, C = spec["rows"], spec["cols"]
     ox, oy, oz = spec["origin"]
     c, r = np.meshgrid(np.arange(C), np.arange(R))
-    x = np.stack([ox + c.ravel() * spec["width"] / (C - 1), oy - r.ravel() * spec["height"] / (R - 1),
-                  np.full(R * C, oz)], axis=1)
+    x = np.stack(
+        [
+            ox + c.ravel() * spec["width"] / (C - 1),
+            oy - r.ravel() * spec["height"] / (R - 1),
+            np.full(R * C, oz),
+        ],
+        axis=1,
+    )
     tris = []
     for i in range(R - 1):
         for j in range(C - 1):
@@ -148,7 +164,10 @@ class PeerStepper:
 
     def info(self) -> dict[str, Any]:
         strain = structural_strain(self.spec, self.positions())
-        return {"notes": f"{self.notes}; max strain {strain:.2g} after the runs", "max_strain": strain}
+        return {
+            "notes": f"{self.notes}; max strain {strain:.2g} after the runs",
+            "max_strain": strain,
+        }
 
     def close(self) -> None:
         """Release what the engine holds (the worker process simply exits instead)."""
@@ -187,11 +206,22 @@ class PyBulletCloth(PeerStepper):
         p.setPhysicsEngineParameter(numSubSteps=substeps, physicsClientId=self.client)
         mass = s["areal_density"] * s["width"] * s["height"]
         self.body = p.loadSoftBody(
-            self.obj, basePosition=[0, 0, 0], scale=1, mass=mass, useNeoHookean=0, useMassSpring=1,
-            useBendingSprings=1, springElasticStiffness=s["k_stretch"],
-            springDampingStiffness=s["damping"], springBendingStiffness=s["k_bend"],
-            useSelfCollision=0, useFaceContact=0, frictionCoeff=0.0, collisionMargin=0.001,
-            physicsClientId=self.client)
+            self.obj,
+            basePosition=[0, 0, 0],
+            scale=1,
+            mass=mass,
+            useNeoHookean=0,
+            useMassSpring=1,
+            useBendingSprings=1,
+            springElasticStiffness=s["k_stretch"],
+            springDampingStiffness=s["damping"],
+            springBendingStiffness=s["k_bend"],
+            useSelfCollision=0,
+            useFaceContact=0,
+            frictionCoeff=0.0,
+            collisionMargin=0.001,
+            physicsClientId=self.client,
+        )
         for i in pole_pins(s):
             p.createSoftBodyAnchor(self.body, i, -1, -1, physicsClientId=self.client)
 
@@ -201,8 +231,9 @@ class PyBulletCloth(PeerStepper):
             step(physicsClientId=self.client)
 
     def positions(self) -> np.ndarray:
-        _, verts = self.p.getMeshData(self.body, -1, flags=self.p.MESH_DATA_SIMULATION_MESH,
-                                      physicsClientId=self.client)
+        _, verts = self.p.getMeshData(
+            self.body, -1, flags=self.p.MESH_DATA_SIMULATION_MESH, physicsClientId=self.client
+        )
         return np.asarray(verts, dtype=float)
 
     def close(self) -> None:
@@ -228,10 +259,12 @@ class MujocoCloth(PeerStepper):
           wind="{wind}" density="{spec['air_density']:g}" integrator="discrete"/>
   <worldbody>
     <flexcomp name="flag" type="grid" dim="2" count="{C} {R} 1"
-              spacing="{W / (C - 1):.9g} {H / (R - 1):.9g} 1" pos="{ox + W / 2:.9g} {oy - H / 2:.9g} {oz:.9g}"
+              spacing="{W / (C - 1):.9g} {H / (R - 1):.9g} 1"
+              pos="{ox + W / 2:.9g} {oy - H / 2:.9g} {oz:.9g}"
               mass="{spec['areal_density'] * W * H:.9g}" radius="0.001">
       <contact contype="0" conaffinity="0" selfcollide="none"/>
-      <elasticity young="{spec['k_stretch'] / thickness:.9g}" poisson="0.2" thickness="{thickness:g}"
+      <elasticity young="{spec['k_stretch'] / thickness:.9g}" poisson="0.2"
+                  thickness="{thickness:g}"
                   elastic2d="both" damping="1e-4"/>
       <pin id="{pins}"/>
     </flexcomp>
@@ -243,17 +276,25 @@ class MujocoCloth(PeerStepper):
         # flex order (ix * R + iy, iy from the bottom) -> flagsim order (r * C + c, r from the top)
         c, r = np.meshgrid(np.arange(C), np.arange(R))
         self.order = (c * R + (R - 1 - r)).ravel()
-        self.notes = "flex shell (elastic2d), discrete integrator, wind from the MJCF option wind and density"
+        self.notes = (
+            "flex shell (elastic2d), discrete integrator, wind from the MJCF option "
+            "wind and density"
+        )
 
     def step(self, n: int) -> None:
         self.mj.mj_step(self.model, self.data, nstep=n)
 
     def info(self) -> dict[str, Any]:
         out = super().info()
-        warned = {self.mj.mjtWarning(i).name.replace("mjWARN_", "").lower(): int(w.number)
-                  for i, w in enumerate(self.data.warning) if w.number > 0}
+        warned = {
+            self.mj.mjtWarning(i).name.replace("mjWARN_", "").lower(): int(w.number)
+            for i, w in enumerate(self.data.warning)
+            if w.number > 0
+        }
         if warned:
-            out["notes"] += "; MuJoCo warnings: " + ", ".join(f"{k} x{v}" for k, v in warned.items())
+            out["notes"] += "; MuJoCo warnings: " + ", ".join(
+                f"{k} x{v}" for k, v in warned.items()
+            )
         return out
 
     def positions(self) -> np.ndarray:
@@ -282,8 +323,9 @@ class PbdCloth(PeerStepper):
         self.model = sim.getModel()
         # addRegularTriangleModel lays vertex r * C + c at (c dx, r dy, 0): flip y (and z) so row
         # 0 is the top, as in flagsim.
-        tri = self.model.addRegularTriangleModel(C, R, list(spec["origin"]), np.diag([1.0, -1.0, -1.0]),
-                                                 [spec["width"], spec["height"]])
+        tri = self.model.addRegularTriangleModel(
+            C, R, list(spec["origin"]), np.diag([1.0, -1.0, -1.0]), [spec["width"], spec["height"]]
+        )
         pd = self.model.getParticles()
         self.pd = pd
         m = spec["areal_density"] * spec["width"] * spec["height"] / pd.size()
@@ -318,4 +360,3 @@ def make(name: str, rows: int, cols: int) -> PeerStepper:
     if name == "pypbd":
         return PbdCloth(spec)
     raise ValueError(f"peer should be one of {', '.join(PEERS)}, got {name!r}")
-

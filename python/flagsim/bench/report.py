@@ -1,46 +1,90 @@
 """Benchmark output: CSV with the machine described, a markdown report, a log-log PNG of cost
 against size with fitted slopes, the peers side by side, and the issue's targets."""
+
 from __future__ import annotations
 
 import csv
 import math
-import os
 import re
 from typing import Any, Iterable
 
 import numpy as np
 
 #: CSV columns, in order. Figures are per step; *_mb are MiB; stage_split is text.
-COLUMNS = ("group", "engine", "variant", "size", "n", "threads", "steps_per_run", "runs", "ms_min",
-           "ms_median", "steps_per_s", "cpu_ms_median", "build_s", "peak_rss_mb", "workload_mb",
-           "stage_split", "ok", "note")
+COLUMNS = (
+    "group",
+    "engine",
+    "variant",
+    "size",
+    "n",
+    "threads",
+    "steps_per_run",
+    "runs",
+    "ms_min",
+    "ms_median",
+    "steps_per_s",
+    "cpu_ms_median",
+    "build_s",
+    "peak_rss_mb",
+    "workload_mb",
+    "stage_split",
+    "ok",
+    "note",
+)
 #: Columns that hold measured figures (positive and finite in every ok row, workload_mb >= 0).
 FIGURES = ("ms_min", "ms_median", "steps_per_s", "cpu_ms_median", "build_s", "peak_rss_mb")
-PEER_COLUMNS = ("workload", "size", "flagsim_variant", "flagsim_steps_per_s", "peer", "peer_notes",
-                "peer_steps_per_s", "ratio")
-PEER_NAMES = {"pybullet": "PyBullet", "pypbd": "pyPBD", "mujoco": "MuJoCo", "numpy": "numpy Stable Fluids"}
+PEER_COLUMNS = (
+    "workload",
+    "size",
+    "flagsim_variant",
+    "flagsim_steps_per_s",
+    "peer",
+    "peer_notes",
+    "peer_steps_per_s",
+    "ratio",
+)
+PEER_NAMES = {
+    "pybullet": "PyBullet",
+    "pypbd": "pyPBD",
+    "mujoco": "MuJoCo",
+    "numpy": "numpy Stable Fluids",
+}
 
 
-# ---- rows ------------------------------------------------------------------------------------------
+# ---- rows ----------------------------------------------------------------------------------------
+
 
 def make_row(w, result: dict[str, Any]) -> dict[str, Any]:
     """One CSV row from a workload and its worker result."""
-    row: dict[str, Any] = {"group": w.group, "engine": w.engine, "variant": w.variant, "size": w.size,
-                           "n": w.n, "threads": w.threads}
+    row: dict[str, Any] = {
+        "group": w.group,
+        "engine": w.engine,
+        "variant": w.variant,
+        "size": w.size,
+        "n": w.n,
+        "threads": w.threads,
+    }
     info = result.get("info") or {}
     notes = [str(info["notes"])] if info.get("notes") else []
     if result.get("ok") and result.get("wall_s"):
         wall = np.asarray(result["wall_s"]) * 1e3
         cpu = np.asarray(result["cpu_s"]) * 1e3
         med = float(np.median(wall))
-        row.update({
-            "steps_per_run": result["steps_per_run"], "runs": result["runs"],
-            "ms_min": float(wall.min()), "ms_median": med, "steps_per_s": 1e3 / med,
-            "cpu_ms_median": float(np.median(cpu)), "build_s": result["build_s"],
-            "peak_rss_mb": result["rss_peak_mb"],
-            "workload_mb": max(0.0, result["rss_peak_mb"] - result["rss_start_mb"]),
-            "stage_split": stage_split(result.get("stages_s") or {}), "ok": True,
-        })
+        row.update(
+            {
+                "steps_per_run": result["steps_per_run"],
+                "runs": result["runs"],
+                "ms_min": float(wall.min()),
+                "ms_median": med,
+                "steps_per_s": 1e3 / med,
+                "cpu_ms_median": float(np.median(cpu)),
+                "build_s": result["build_s"],
+                "peak_rss_mb": result["rss_peak_mb"],
+                "workload_mb": max(0.0, result["rss_peak_mb"] - result["rss_start_mb"]),
+                "stage_split": stage_split(result.get("stages_s") or {}),
+                "ok": True,
+            }
+        )
         last = info.get("last_step") or {}
         if last.get("substeps"):
             notes.append(f"{last['substeps']} substeps/step")
@@ -77,7 +121,8 @@ def find(rows, **match) -> dict[str, Any] | None:
     return hits[0] if hits else None
 
 
-# ---- CSV -------------------------------------------------------------------------------------------
+# ---- CSV -----------------------------------------------------------------------------------------
+
 
 def write_csv(path: str, rows: list[dict[str, Any]], machine: dict[str, Any]) -> None:
     """CSV whose leading '# key: value' lines describe the machine (read it with comment='#')."""
@@ -101,7 +146,8 @@ def read_csv(path: str) -> list[dict[str, str]]:
         return list(csv.DictReader(line for line in f if not line.startswith("#")))
 
 
-# ---- scaling ----------------------------------------------------------------------------------------
+# ---- scaling -------------------------------------------------------------------------------------
+
 
 def series(rows) -> dict[tuple, list[dict[str, Any]]]:
     """Rows of the size-swept groups keyed by (group, engine, variant, threads), sorted by n."""
@@ -126,8 +172,16 @@ def slopes(rows) -> list[dict[str, Any]]:
     for (group, engine, variant, threads), rs in series(rows).items():
         s = loglog_slope([r["n"] for r in rs], [r["ms_median"] for r in rs])
         if s is not None:
-            out.append({"group": group, "engine": engine, "variant": variant, "threads": threads,
-                        "sizes": f"{rs[0]['size']} .. {rs[-1]['size']}", "slope": s})
+            out.append(
+                {
+                    "group": group,
+                    "engine": engine,
+                    "variant": variant,
+                    "threads": threads,
+                    "sizes": f"{rs[0]['size']} .. {rs[-1]['size']}",
+                    "slope": s,
+                }
+            )
     return out
 
 
@@ -135,8 +189,10 @@ def collision_stage_slope(rows) -> tuple[float | None, str]:
     """Slope of the self-collision stage's cost against vertices (1 thread, >= 1000 vertices if
     there are two such sizes), and how it was obtained."""
     for integrator in ("implicit", "explicit"):
-        rs = sorted(ok_rows(rows, group="cloth", variant=f"{integrator}+self-collision", threads=1),
-                    key=lambda r: r["n"])
+        rs = sorted(
+            ok_rows(rows, group="cloth", variant=f"{integrator}+self-collision", threads=1),
+            key=lambda r: r["n"],
+        )
         pts = []
         for r in rs:
             cost = sum(v for k, v in r["_stages_s"].items() if "collision" in k or "collide" in k)
@@ -146,7 +202,11 @@ def collision_stage_slope(rows) -> tuple[float | None, str]:
         use = big if len(big) >= 2 else pts
         s = loglog_slope([p[0] for p in use], [p[1] for p in use])
         if s is not None:
-            return s, f"{integrator}, self-collision stage, {len(use)} sizes from {use[0][0]} to {use[-1][0]} vertices"
+            return (
+                s,
+                f"{integrator}, self-collision stage, {len(use)} sizes "
+                f"from {use[0][0]} to {use[-1][0]} vertices",
+            )
     return None, "no self-collision stage timings (self-collision not measured)"
 
 
@@ -161,7 +221,7 @@ def plot(path: str, rows, title: str = "") -> list[dict[str, Any]]:
     ser = series(rows)
     fig, axes = plt.subplots(1, 2, figsize=(13, 5.2))
     panels = {"cloth": axes[0], "air": axes[1]}
-    for (group, engine, variant, threads), rs in sorted(ser.items(), key=lambda kv: str(kv[0])):
+    for (_group, engine, variant, threads), rs in sorted(ser.items(), key=lambda kv: str(kv[0])):
         panel = "air" if rs[0]["size"].endswith("^3") else "cloth"
         ax = panels[panel]
         n = [r["n"] for r in rs]
@@ -195,7 +255,8 @@ def plot(path: str, rows, title: str = "") -> list[dict[str, Any]]:
     return slopes(rows)
 
 
-# ---- peers side by side -------------------------------------------------------------------------------
+# ---- peers side by side --------------------------------------------------------------------------
+
 
 def comparisons(rows) -> list[dict[str, Any]]:
     """flagsim's steps/s over each peer's at the same size (cloth: implicit, 1 thread; air: the
@@ -203,18 +264,31 @@ def comparisons(rows) -> list[dict[str, Any]]:
     out = []
     for r in ok_rows(rows, group="peers"):
         if r["engine"] == "numpy":
-            mine = [m for m in ok_rows(rows, group="air", engine="flagsim", size=r["size"], threads=1)
-                    if m["variant"].count("/") == 1]
+            mine = [
+                m
+                for m in ok_rows(rows, group="air", engine="flagsim", size=r["size"], threads=1)
+                if m["variant"].count("/") == 1
+            ]
             mine = sorted(mine, key=lambda m: (m["variant"] != "sl/fft", m["variant"]))[:1]
         else:
-            mine = ok_rows(rows, group="cloth", engine="flagsim", variant="implicit", size=r["size"], threads=1)
+            mine = ok_rows(
+                rows, group="cloth", engine="flagsim", variant="implicit", size=r["size"], threads=1
+            )
         if not mine:
             continue
         m = mine[0]
-        out.append({"workload": "air" if r["engine"] == "numpy" else "cloth", "size": r["size"],
-                    "flagsim_variant": m["variant"], "flagsim_steps_per_s": m["steps_per_s"],
-                    "peer": r["engine"], "peer_notes": r["note"], "peer_steps_per_s": r["steps_per_s"],
-                    "ratio": m["steps_per_s"] / r["steps_per_s"]})
+        out.append(
+            {
+                "workload": "air" if r["engine"] == "numpy" else "cloth",
+                "size": r["size"],
+                "flagsim_variant": m["variant"],
+                "flagsim_steps_per_s": m["steps_per_s"],
+                "peer": r["engine"],
+                "peer_notes": r["note"],
+                "peer_steps_per_s": r["steps_per_s"],
+                "ratio": m["steps_per_s"] / r["steps_per_s"],
+            }
+        )
     return out
 
 
@@ -226,7 +300,8 @@ def write_peers_csv(path: str, comps: list[dict[str, Any]]) -> None:
             w.writerow({k: _csv_value(c[k]) for k in PEER_COLUMNS})
 
 
-# ---- targets ------------------------------------------------------------------------------------------
+# ---- targets -------------------------------------------------------------------------------------
+
 
 def _verdict(ok: bool | None) -> str:
     return "not measured" if ok is None else ("met" if ok else "missed")
@@ -238,34 +313,69 @@ def targets(rows, comps, accuracy: dict[str, Any] | None) -> list[tuple[str, str
     full = find(rows, group="paper", variant="full", threads=1)
     builtin = find(rows, group="paper", variant="builtin", threads=1)
     if full:
-        out.append(("paper scene, full pipeline: >= 5,000 steps/s, 1 thread",
-                    f"{full['steps_per_s']:,.0f} steps/s", _verdict(full["steps_per_s"] >= 5000)))
+        out.append(
+            (
+                "paper scene, full pipeline: >= 5,000 steps/s, 1 thread",
+                f"{full['steps_per_s']:,.0f} steps/s",
+                _verdict(full["steps_per_s"] >= 5000),
+            )
+        )
     else:
-        extra = f" (built-in scene without the missing stages: {builtin['steps_per_s']:,.0f} steps/s)" if builtin else ""
-        out.append(("paper scene, full pipeline: >= 5,000 steps/s, 1 thread", "not run" + extra, _verdict(None)))
+        extra = (
+            f" (built-in scene without the missing stages: {builtin['steps_per_s']:,.0f} steps/s)"
+            if builtin
+            else ""
+        )
+        out.append(
+            (
+                "paper scene, full pipeline: >= 5,000 steps/s, 1 thread",
+                "not run" + extra,
+                _verdict(None),
+            )
+        )
 
     air = [c for c in comps if c["workload"] == "air"]
     if air:
         worst = min(air, key=lambda c: c["ratio"])
-        out.append(("air step >= 5x the numpy baseline at every size",
-                    ", ".join(f"{c['size']}: {c['ratio']:.1f}x" for c in air),
-                    _verdict(worst["ratio"] >= 5)))
+        out.append(
+            (
+                "air step >= 5x the numpy baseline at every size",
+                ", ".join(f"{c['size']}: {c['ratio']:.1f}x" for c in air),
+                _verdict(worst["ratio"] >= 5),
+            )
+        )
     else:
-        out.append(("air step >= 5x the numpy baseline at every size", "not run (needs --peers and flagsim.Fluid)",
-                    _verdict(None)))
+        out.append(
+            (
+                "air step >= 5x the numpy baseline at every size",
+                "not run (needs --peers and flagsim.Fluid)",
+                _verdict(None),
+            )
+        )
 
-    fl, ff = find(rows, group="air", engine="flagsim", variant="sl/fft", size="64^3", threads=1), \
-        find(rows, group="air", engine="fftw", size="64^3")
+    fl, ff = (
+        find(rows, group="air", engine="flagsim", variant="sl/fft", size="64^3", threads=1),
+        find(rows, group="air", engine="fftw", size="64^3"),
+    )
     if fl and ff:
         r = fl["ms_median"] / ff["ms_median"]
-        out.append(("air 64^3 (sl/fft): <= 3x the FFTW transforms alone",
-                    f"{fl['ms_median']:.2f} ms vs {ff['ms_median']:.2f} ms = {r:.1f}x", _verdict(r <= 3)))
+        out.append(
+            (
+                "air 64^3 (sl/fft): <= 3x the FFTW transforms alone",
+                f"{fl['ms_median']:.2f} ms vs {ff['ms_median']:.2f} ms = {r:.1f}x",
+                _verdict(r <= 3),
+            )
+        )
     else:
-        out.append(("air 64^3 (sl/fft): <= 3x the FFTW transforms alone", "not run", _verdict(None)))
+        out.append(
+            ("air 64^3 (sl/fft): <= 3x the FFTW transforms alone", "not run", _verdict(None))
+        )
 
     for n in ("64^3", "128^3"):
-        a, b = find(rows, group="air", engine="flagsim", variant="sl/fft", size=n, threads=1), \
-            find(rows, group="air", engine="flagsim", variant="sl/fft", size=n, threads=2)
+        a, b = (
+            find(rows, group="air", engine="flagsim", variant="sl/fft", size=n, threads=1),
+            find(rows, group="air", engine="flagsim", variant="sl/fft", size=n, threads=2),
+        )
         name = f"air {n}: 2 threads >= 1.6x one thread"
         if a and b:
             s = a["ms_median"] / b["ms_median"]
@@ -278,43 +388,82 @@ def targets(rows, comps, accuracy: dict[str, Any] | None) -> list[tuple[str, str
     beside = f"; explicit (adaptive substeps): {expl['steps_per_s']:,.1f} steps/s" if expl else ""
     if pbd:
         c = pbd[0]
-        out.append(("cloth 128x128 implicit, dt = 0.01: >= 2x pyPBD's steps/s",
-                    f"{c['flagsim_steps_per_s']:,.1f} vs {c['peer_steps_per_s']:,.1f} steps/s = {c['ratio']:.2f}x"
-                    + beside, _verdict(c["ratio"] >= 2)))
+        out.append(
+            (
+                "cloth 128x128 implicit, dt = 0.01: >= 2x pyPBD's steps/s",
+                f"{c['flagsim_steps_per_s']:,.1f} vs {c['peer_steps_per_s']:,.1f} steps/s "
+                f"= {c['ratio']:.2f}x" + beside,
+                _verdict(c["ratio"] >= 2),
+            )
+        )
     else:
         impl = find(rows, group="cloth", variant="implicit", size="128x128", threads=1)
-        peer_failed = any(r["group"] == "peers" and r["engine"] == "pypbd" and r["size"] == "128x128"
-                          and not r["ok"] for r in rows)
-        got = (f"flagsim {impl['steps_per_s']:,.1f} steps/s, pyPBD {'failed' if peer_failed else 'not run'}"
-               if impl else "not run")
-        out.append(("cloth 128x128 implicit, dt = 0.01: >= 2x pyPBD's steps/s", got + beside, _verdict(None)))
+        peer_failed = any(
+            r["group"] == "peers"
+            and r["engine"] == "pypbd"
+            and r["size"] == "128x128"
+            and not r["ok"]
+            for r in rows
+        )
+        got = (
+            f"flagsim {impl['steps_per_s']:,.1f} steps/s, "
+            f"pyPBD {'failed' if peer_failed else 'not run'}"
+            if impl
+            else "not run"
+        )
+        out.append(
+            (
+                "cloth 128x128 implicit, dt = 0.01: >= 2x pyPBD's steps/s",
+                got + beside,
+                _verdict(None),
+            )
+        )
 
     s, how = collision_stage_slope(rows)
-    out.append(("self-collision cost per vertex flat, 1k-16k vertices: log-log slope <= 1.15",
-                f"{s:.2f} ({how})" if s is not None else how, _verdict(None if s is None else s <= 1.15)))
+    out.append(
+        (
+            "self-collision cost per vertex flat, 1k-16k vertices: log-log slope <= 1.15",
+            f"{s:.2f} ({how})" if s is not None else how,
+            _verdict(None if s is None else s <= 1.15),
+        )
+    )
 
-    out.append(("no heap allocation inside a step (paper scene; 64^3 air)",
-                "C++ test NoAlloc.* (ctest -R NoAlloc), not a bench figure", "see tests"))
+    out.append(
+        (
+            "no heap allocation inside a step (paper scene; 64^3 air)",
+            "C++ test NoAlloc.* (ctest -R NoAlloc), not a bench figure",
+            "see tests",
+        )
+    )
 
     speedups = []
     for d in ok_rows(rows, group="air", engine="flagsim", variant="sl/fft", threads=1):
-        f = find(rows, group="air", engine="flagsim", variant="sl/fft/float", size=d["size"], threads=1)
+        f = find(
+            rows, group="air", engine="flagsim", variant="sl/fft/float", size=d["size"], threads=1
+        )
         if f:
             speedups.append(f"{d['size']}: {d['ms_median'] / f['ms_median']:.2f}x")
     acc = ""
     if accuracy and "float_vs_double" in accuracy:
-        acc = (f"; Taylor-Green {accuracy['n']}^3 after {accuracy['steps']} steps: float vs double "
-               f"{accuracy['float_vs_double']:.1e} (relative), error vs exact: double "
-               f"{accuracy['error_double']:.2e}, float {accuracy['error_float']:.2e}")
+        acc = (
+            f"; Taylor-Green {accuracy['n']}^3 after {accuracy['steps']} steps: float vs double "
+            f"{accuracy['float_vs_double']:.1e} (relative), error vs exact: double "
+            f"{accuracy['error_double']:.2e}, float {accuracy['error_float']:.2e}"
+        )
     elif accuracy and accuracy.get("error"):
         acc = f"; Taylor-Green check failed: {accuracy['error']}"
-    out.append(("float32 grid: speed-up and Taylor-Green error against double",
-                ("speed-up " + ", ".join(speedups) if speedups else "not run") + acc,
-                "reported" if speedups else _verdict(None)))
+    out.append(
+        (
+            "float32 grid: speed-up and Taylor-Green error against double",
+            ("speed-up " + ", ".join(speedups) if speedups else "not run") + acc,
+            "reported" if speedups else _verdict(None),
+        )
+    )
     return out
 
 
-# ---- markdown -------------------------------------------------------------------------------------------
+# ---- markdown ------------------------------------------------------------------------------------
+
 
 def _fmt_rate(x) -> str:
     if x == "" or x is None:
@@ -338,23 +487,69 @@ def _rows_table(rows) -> list[str]:
     body = []
     for r in rows:
         if r["ok"]:
-            body.append([r["engine"], r["variant"], r["size"], r["threads"], _fmt_rate(r["steps_per_s"]),
-                         _fmt_ms(r["ms_median"]), _fmt_ms(r["ms_min"]), _fmt_ms(r["cpu_ms_median"]),
-                         f"{r['workload_mb']:.1f}", r["stage_split"], r["note"]])
+            body.append(
+                [
+                    r["engine"],
+                    r["variant"],
+                    r["size"],
+                    r["threads"],
+                    _fmt_rate(r["steps_per_s"]),
+                    _fmt_ms(r["ms_median"]),
+                    _fmt_ms(r["ms_min"]),
+                    _fmt_ms(r["cpu_ms_median"]),
+                    f"{r['workload_mb']:.1f}",
+                    r["stage_split"],
+                    r["note"],
+                ]
+            )
         else:
-            body.append([r["engine"], r["variant"], r["size"], r["threads"], "failed", "", "", "", "", "",
-                         r["note"]])
-    return _table(["engine", "variant", "size", "threads", "steps/s", "median ms", "min ms", "cpu ms",
-                   "+MiB", "stage split", "note"], body)
+            body.append(
+                [
+                    r["engine"],
+                    r["variant"],
+                    r["size"],
+                    r["threads"],
+                    "failed",
+                    "",
+                    "",
+                    "",
+                    "",
+                    "",
+                    r["note"],
+                ]
+            )
+    return _table(
+        [
+            "engine",
+            "variant",
+            "size",
+            "threads",
+            "steps/s",
+            "median ms",
+            "min ms",
+            "cpu ms",
+            "+MiB",
+            "stage split",
+            "note",
+        ],
+        body,
+    )
 
 
 def side_by_side(rows, comps) -> list[str]:
     """The issue's table: rows = workloads, columns = flagsim and each peer (steps/s, ratio)."""
-    peers = [p for p in ("pybullet", "pypbd", "mujoco", "numpy") if any(c["peer"] == p for c in comps)]
+    peers = [
+        p for p in ("pybullet", "pypbd", "mujoco", "numpy") if any(c["peer"] == p for c in comps)
+    ]
     if not peers:
         return []
-    header = ["workload", "flagsim (cloth: implicit)", "flagsim explicit"] + [PEER_NAMES[p] for p in peers]
-    sizes = {(c["workload"], c["size"]): next(r["n"] for r in rows if r["size"] == c["size"]) for c in comps}
+    header = ["workload", "flagsim (cloth: implicit)", "flagsim explicit"] + [
+        PEER_NAMES[p] for p in peers
+    ]
+    sizes = {
+        (c["workload"], c["size"]): next(r["n"] for r in rows if r["size"] == c["size"])
+        for c in comps
+    }
     keys = sorted(sizes, key=lambda k: (k[0] != "cloth", sizes[k]))
     body = []
     for workload, size in keys:
@@ -367,13 +562,22 @@ def side_by_side(rows, comps) -> list[str]:
             m = [c for c in comps if c["workload"] == "air" and c["size"] == size][0]
             line += [f"{_fmt_rate(m['flagsim_steps_per_s'])} ({m['flagsim_variant']})", ""]
         for p in peers:
-            c = [c for c in comps if c["peer"] == p and c["size"] == size and c["workload"] == workload]
-            failed = [r for r in rows if r["group"] == "peers" and r["engine"] == p and r["size"] == size
-                      and not r["ok"]]
+            c = [
+                c
+                for c in comps
+                if c["peer"] == p and c["size"] == size and c["workload"] == workload
+            ]
+            failed = [
+                r
+                for r in rows
+                if r["group"] == "peers" and r["engine"] == p and r["size"] == size and not r["ok"]
+            ]
             if c:
                 sub = re.search(r"(\d+) substeps \(smallest stable\)", c[0]["peer_notes"])
                 extra = f", {sub.group(1)} substeps" if sub else ""
-                line.append(f"{_fmt_rate(c[0]['peer_steps_per_s'])} (flagsim {c[0]['ratio']:.2g}x{extra})")
+                line.append(
+                    f"{_fmt_rate(c[0]['peer_steps_per_s'])} (flagsim {c[0]['ratio']:.2g}x{extra})"
+                )
             else:
                 line.append("failed" if failed else "")
         body.append(line)
@@ -384,76 +588,152 @@ def side_by_side(rows, comps) -> list[str]:
         first = next((c["peer_notes"] for c in comps if c["peer"] == p and c["peer_notes"]), "")
         if first:
             searched = "(smallest stable)" in first
-            notes.append(f"- {PEER_NAMES[p]}: " + re.sub(r"(, )?\d+ substeps \(smallest stable\)|; max strain.*$",
-                                                      "", first).strip(", ")
-                         + (", smallest stable substep count per size" if searched else ""))
+            notes.append(
+                f"- {PEER_NAMES[p]}: "
+                + re.sub(r"(, )?\d+ substeps \(smallest stable\)|; max strain.*$", "", first).strip(
+                    ", "
+                )
+                + (", smallest stable substep count per size" if searched else "")
+            )
     for r in rows:
         if r["group"] == "peers" and not r["ok"]:
-            notes.append(f"- {PEER_NAMES.get(r['engine'], r['engine'])} {r['size']} failed: {r['note']}")
-    notes.append("- max strain after the runs (largest |l - L| / L of the grid edges) is in the Peers and "
-                 "Cloth tables: the engines do not stretch alike under the same nominal stiffness.")
+            notes.append(
+                f"- {PEER_NAMES.get(r['engine'], r['engine'])} {r['size']} failed: {r['note']}"
+            )
+    notes.append(
+        "- max strain after the runs (largest |l - L| / L of the grid edges) is in the Peers and "
+        "Cloth tables: the engines do not stretch alike under the same nominal stiffness."
+    )
     return _table(header, body) + [""] + notes
 
 
-def markdown(rows, machine: dict[str, Any], skipped, comps, slope_list, target_list, *, command: str,
-             plot_name: str | None, protocol: dict[str, Any], load_end: str, docs: bool = False) -> str:
+def markdown(
+    rows,
+    machine: dict[str, Any],
+    skipped,
+    comps,
+    slope_list,
+    target_list,
+    *,
+    command: str,
+    plot_name: str | None,
+    protocol: dict[str, Any],
+    load_end: str,
+    docs: bool = False,
+) -> str:
     L: list[str] = []
     L.append("# flagsim performance" if docs else "# flagsim benchmark results")
     L.append("")
     if docs:
-        L.append("Generated by `flagsim bench` (`python -m flagsim.bench`); regenerate it on a quiet machine "
-                 "with `make bench` (which runs `python -m flagsim.bench --peers --docs docs/performance.md`"
-                 " after installing the peers with `pip install .[bench]`). Do not edit by hand.")
+        L.append(
+            "Generated by `flagsim bench` (`python -m flagsim.bench`); regenerate it on a quiet "
+            "machine with `make bench` (which runs "
+            "`python -m flagsim.bench --peers --docs docs/performance.md`"
+            " after installing the peers with `pip install .[bench]`). Do not edit by hand."
+        )
         L.append("")
     L.append(f"Command: `{command}`  ")
-    L.append(f"Protocol: build outside the timing, drop the first {protocol['warmup']} steps, steps per run "
-             f"grown until a run lasts >= {protocol['min_time']:g} s, {protocol['repeats']} runs; figures are "
-             "wall-clock ms per step (median and min of the runs), cpu ms is the process CPU time per step "
-             "(all threads; cpu < wall on one thread means the process was waiting for a core), +MiB is "
-             "the peak resident memory the workload added (ru_maxrss of its own process). Stage split: "
-             "the Simulation's stage timers over the measured runs.")
+    L.append(
+        f"Protocol: build outside the timing, drop the first {protocol['warmup']} steps, steps "
+        f"per run grown until a run lasts >= {protocol['min_time']:g} s, {protocol['repeats']} "
+        "runs; figures are wall-clock ms per step (median and min of the runs), cpu ms is the "
+        "process CPU time per step "
+        "(all threads; cpu < wall on one thread means the process was waiting for a core), +MiB is "
+        "the peak resident memory the workload added (ru_maxrss of its own process). Stage split: "
+        "the Simulation's stage timers over the measured runs."
+    )
     L.append("")
     L.append("## Machine")
     L.append("")
     L += _table(["", ""], [[k, v] for k, v in machine.items()] + [["load_average_end", load_end]])
     L.append("")
-    L.append("A load average near or above the core count means the figures are noisy (other processes "
-             "shared the cores); compare the cpu and wall columns.")
+    L.append(
+        "A load average near or above the core count means the figures are noisy (other processes "
+        "shared the cores); compare the cpu and wall columns."
+    )
     L.append("")
     paper = [r for r in rows if r["group"] == "paper"]
     if paper:
         L += ["## Paper scene", ""] + _rows_table(paper) + [""]
     sbs = side_by_side(rows, comps)
     if sbs:
-        L += ["## Side by side with the peers", "",
-              "flagsim's steps/s as a multiple of each peer's at the same size (cloth: implicit, 1 thread; "
-              "air: flagsim.Fluid against the numpy Stable Fluids baseline, 1 thread). Same flag in each "
-              "engine: size, mass, pole pins, dt = 0.01 s, gravity, comparable stiffness, wind where the "
-              "peer has it.", ""] + sbs + [""]
+        L += (
+            [
+                "## Side by side with the peers",
+                "",
+                "flagsim's steps/s as a multiple of each peer's at the same size (cloth: implicit, "
+                "1 thread; air: flagsim.Fluid against the numpy Stable Fluids baseline, 1 thread). "
+                "Same flag in each engine: size, mass, pole pins, dt = 0.01 s, gravity, comparable "
+                "stiffness, wind where the "
+                "peer has it.",
+                "",
+            ]
+            + sbs
+            + [""]
+        )
     cloth = [r for r in rows if r["group"] == "cloth"]
     if cloth:
-        L += ["## Cloth alone", "", "The paper scene's flag (0.81 x 0.54 m, pole pins, 2 m/s analytic wind, "
-              "dt = 0.01 s) meshed finer.", ""] + _rows_table(cloth) + [""]
+        L += (
+            [
+                "## Cloth alone",
+                "",
+                "The paper scene's flag (0.81 x 0.54 m, pole pins, 2 m/s analytic wind, "
+                "dt = 0.01 s) meshed finer.",
+                "",
+            ]
+            + _rows_table(cloth)
+            + [""]
+        )
     air = [r for r in rows if r["group"] == "air"]
     if air:
-        L += ["## Air alone", "", "flagsim.Fluid on a periodic 2 m box from a seeded smooth random field, "
-              "dt = 0.01 s, air viscosity. The fftw rows are the floor of an FFT projection: 3 forward r2c + "
-              "3 inverse c2r double transforms, one thread, FFTW_ESTIMATE plans.", ""] + _rows_table(air) + [""]
+        L += (
+            [
+                "## Air alone",
+                "",
+                "flagsim.Fluid on a periodic 2 m box from a seeded smooth random field, "
+                "dt = 0.01 s, air viscosity. The fftw rows are the floor of an FFT projection: "
+                "3 forward r2c + "
+                "3 inverse c2r double transforms, one thread, FFTW_ESTIMATE plans.",
+                "",
+            ]
+            + _rows_table(air)
+            + [""]
+        )
     peer_rows = [r for r in rows if r["group"] == "peers"]
     if peer_rows:
         L += ["## Peers", ""] + _rows_table(peer_rows) + [""]
     if slope_list or plot_name:
-        L += ["## Scaling", "", "Cost per step against size, log-log; slope of the least-squares line through "
-              "log(ms per step) against log(size) (1 = linear in vertices or cells)."]
+        L += [
+            "## Scaling",
+            "",
+            "Cost per step against size, log-log; slope of the least-squares line through "
+            "log(ms per step) against log(size) (1 = linear in vertices or cells).",
+        ]
         if plot_name:
             L += ["", f"![cost against size]({plot_name})"]
         if slope_list:
-            L += [""] + _table(["group", "engine", "variant", "threads", "sizes", "slope"],
-                               [[s["group"], s["engine"], s["variant"], s["threads"], s["sizes"],
-                                 f"{s['slope']:.2f}"] for s in slope_list])
+            L += [""] + _table(
+                ["group", "engine", "variant", "threads", "sizes", "slope"],
+                [
+                    [
+                        s["group"],
+                        s["engine"],
+                        s["variant"],
+                        s["threads"],
+                        s["sizes"],
+                        f"{s['slope']:.2f}",
+                    ]
+                    for s in slope_list
+                ],
+            )
         L += [""]
     if target_list:
-        L += ["## Targets (issue 8)", "", "Not asserted anywhere; measured on the machine above.", ""]
+        L += [
+            "## Targets (issue 8)",
+            "",
+            "Not asserted anywhere; measured on the machine above.",
+            "",
+        ]
         L += _table(["target", "measured", "verdict"], [list(t) for t in target_list]) + [""]
     if skipped:
         L += ["## Skipped", ""] + [f"- {what}: {why}" for what, why in skipped] + [""]

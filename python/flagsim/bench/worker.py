@@ -10,6 +10,7 @@ doubled/extrapolated until one run lasts at least ``min_time`` -> ``repeats`` ru
 steps, each giving wall and CPU seconds per step; the stage split is the difference of the
 engine's cumulative stage timers over those runs.
 """
+
 from __future__ import annotations
 
 import json
@@ -64,8 +65,9 @@ def build(spec: dict[str, Any]):
     p = spec["params"]
     kind = p["kind"]
     if kind == "cloth":
-        return engines.SimulationStepper(engines.cloth_scene(p["rows"], p["cols"], p["integrator"],
-                                                             p["self_collision"]))
+        return engines.SimulationStepper(
+            engines.cloth_scene(p["rows"], p["cols"], p["integrator"], p["self_collision"])
+        )
     if kind == "paper":
         return engines.SimulationStepper(engines.paper_scene(p["full"]))
     if kind == "fluid":
@@ -90,8 +92,14 @@ def run(spec: dict[str, Any]) -> dict[str, Any]:
     stepper = build(spec)
     out["build_s"] = time.perf_counter() - t0
     try:
-        out.update(measure(stepper, min_time=float(proto["min_time"]), repeats=int(proto["repeats"]),
-                           warmup=int(proto["warmup"])))
+        out.update(
+            measure(
+                stepper,
+                min_time=float(proto["min_time"]),
+                repeats=int(proto["repeats"]),
+                warmup=int(proto["warmup"]),
+            )
+        )
     except flagsim.DivergenceError as e:
         out["error"] = f"diverged: {e}"
         return out
@@ -112,9 +120,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         result = run(spec)
     except Exception as e:  # reported in the table, never fatal to the benchmark
-        result = {"name": spec.get("name", "?"), "ok": False,
-                  "error": f"{type(e).__name__}: {e}".strip(),
-                  "traceback": traceback.format_exc(limit=6)}
+        result = {
+            "name": spec.get("name", "?"),
+            "ok": False,
+            "error": f"{type(e).__name__}: {e}".strip(),
+            "traceback": traceback.format_exc(limit=6),
+        }
     with open(argv[1], "w", encoding="utf-8") as f:
         json.dump(result, f)
     return 0

@@ -8,6 +8,7 @@ with ``--peers`` the same cloth in PyBullet, MuJoCo and pyPBD and the numpy Stab
 baseline. Every workload runs at each requested thread count (1 and 2 by default) except the
 peers and baselines, which are single-threaded.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -32,11 +33,11 @@ PROTOCOLS = {
 
 @dataclass
 class Workload:
-    group: str      # paper | cloth | air | peers
-    engine: str     # flagsim | numpy | fftw | pybullet | mujoco | pypbd
-    variant: str    # e.g. implicit, implicit+self-collision, sl/fft, sl/fft/float, builtin, full
-    size: str       # 8x11, 64^3
-    n: int          # vertices or cells
+    group: str  # paper | cloth | air | peers
+    engine: str  # flagsim | numpy | fftw | pybullet | mujoco | pypbd
+    variant: str  # e.g. implicit, implicit+self-collision, sl/fft, sl/fft/float, builtin, full
+    size: str  # 8x11, 64^3
+    n: int  # vertices or cells
     threads: int
     params: dict[str, Any] = field(default_factory=dict)
 
@@ -45,14 +46,19 @@ class Workload:
         return f"{self.group}/{self.engine}/{self.variant}/{self.size}/t{self.threads}"
 
     def spec(self, protocol: dict[str, Any]) -> dict[str, Any]:
-        return {"name": self.name, "threads": self.threads, "params": self.params, "protocol": protocol}
+        return {
+            "name": self.name,
+            "threads": self.threads,
+            "params": self.params,
+            "protocol": protocol,
+        }
 
 
 @dataclass
 class Selection:
-    mode: str = "full"                       # full | quick | smoke
+    mode: str = "full"  # full | quick | smoke
     groups: tuple[str, ...] = ("paper", "cloth", "air")
-    cloth_sizes: tuple[tuple[int, int], ...] | None = None   # None: the mode's default
+    cloth_sizes: tuple[tuple[int, int], ...] | None = None  # None: the mode's default
     air_sizes: tuple[int, ...] | None = None
     threads: tuple[int, ...] | None = None
     integrators: tuple[str, ...] = INTEGRATORS
@@ -83,9 +89,12 @@ def _thread_counts(sel: Selection, threads, is_largest: bool, main_variant: bool
     return threads[:1]
 
 
-def catalogue(sel: Selection, features: dict[str, tuple[bool, str]],
-              peer_status: dict[str, tuple[bool, str]] | None = None,
-              baselines: dict[str, tuple[bool, str]] | None = None):
+def catalogue(
+    sel: Selection,
+    features: dict[str, tuple[bool, str]],
+    peer_status: dict[str, tuple[bool, str]] | None = None,
+    baselines: dict[str, tuple[bool, str]] | None = None,
+):
     """(workloads to run, [(what, why skipped)]) for a selection, given the features this build
     has (engines.features()), the peers installed and the baselines available."""
     cloth_sizes, air_sizes, threads = _defaults(sel)
@@ -96,17 +105,30 @@ def catalogue(sel: Selection, features: dict[str, tuple[bool, str]],
 
     if "paper" in sel.groups:
         for t in threads if sel.mode != "smoke" else threads[:1]:
-            work.append(Workload("paper", "flagsim", "builtin", "8x11", 88, t,
-                                 {"kind": "paper", "full": False}))
-        missing = [why for key, (ok, why) in features.items()
-                   if key in ("grid_air", "self_collision", "flapping") and not ok]
+            work.append(
+                Workload(
+                    "paper", "flagsim", "builtin", "8x11", 88, t, {"kind": "paper", "full": False}
+                )
+            )
+        missing = [
+            why
+            for key, (ok, why) in features.items()
+            if key in ("grid_air", "self_collision", "flapping") and not ok
+        ]
         if missing:
-            skipped.append(("paper scene, full pipeline (grid air + self-collision + flapping)",
-                            "; ".join(missing)))
+            skipped.append(
+                (
+                    "paper scene, full pipeline (grid air + self-collision + flapping)",
+                    "; ".join(missing),
+                )
+            )
         else:
             for t in threads if sel.mode != "smoke" else threads[:1]:
-                work.append(Workload("paper", "flagsim", "full", "8x11", 88, t,
-                                     {"kind": "paper", "full": True}))
+                work.append(
+                    Workload(
+                        "paper", "flagsim", "full", "8x11", 88, t, {"kind": "paper", "full": True}
+                    )
+                )
 
     want_cloth = "cloth" in sel.groups
     if want_cloth:
@@ -114,8 +136,12 @@ def catalogue(sel: Selection, features: dict[str, tuple[bool, str]],
         if sel.mode == "smoke":
             collision_options = collision_options[:1]
         if True in collision_options and not features.get("self_collision", (False, ""))[0]:
-            skipped.append(("cloth with self-collision", features.get(
-                "self_collision", (False, "self-collision is not built"))[1]))
+            skipped.append(
+                (
+                    "cloth with self-collision",
+                    features.get("self_collision", (False, "self-collision is not built"))[1],
+                )
+            )
             collision_options = [c for c in collision_options if not c]
         largest = max(cloth_sizes, key=lambda rc: rc[0] * rc[1])
         for integrator in sel.integrators:
@@ -124,36 +150,93 @@ def catalogue(sel: Selection, features: dict[str, tuple[bool, str]],
                     main = integrator == sel.integrators[0] and not sc
                     for t in _thread_counts(sel, threads, (rows, cols) == largest, main):
                         variant = integrator + ("+self-collision" if sc else "")
-                        work.append(Workload("cloth", "flagsim", variant, f"{rows}x{cols}", rows * cols, t,
-                                             {"kind": "cloth", "rows": rows, "cols": cols,
-                                              "integrator": integrator, "self_collision": sc}))
+                        work.append(
+                            Workload(
+                                "cloth",
+                                "flagsim",
+                                variant,
+                                f"{rows}x{cols}",
+                                rows * cols,
+                                t,
+                                {
+                                    "kind": "cloth",
+                                    "rows": rows,
+                                    "cols": cols,
+                                    "integrator": integrator,
+                                    "self_collision": sc,
+                                },
+                            )
+                        )
 
     if "air" in sel.groups:
         if not features.get("fluid", (False, ""))[0]:
-            skipped.append(("air alone (flagsim.Fluid)", features.get("fluid", (False, "no Fluid"))[1]))
+            skipped.append(
+                ("air alone (flagsim.Fluid)", features.get("fluid", (False, "no Fluid"))[1])
+            )
         else:
             largest = max(air_sizes)
             for adv in sel.advection:
                 for pres in sel.pressure:
                     main = adv == sel.advection[0] and pres == sel.pressure[0]
-                    sizes = air_sizes if (main or sel.mode == "full" or sel.air_sizes) else air_sizes[:2]
+                    sizes = (
+                        air_sizes
+                        if (main or sel.mode == "full" or sel.air_sizes)
+                        else air_sizes[:2]
+                    )
                     for n in sizes:
                         for t in _thread_counts(sel, threads, n == max(sizes), main):
-                            work.append(Workload("air", "flagsim", f"{SHORT[adv]}/{pres}", f"{n}^3", n**3, t,
-                                                 {"kind": "fluid", "n": n, "advection": adv,
-                                                  "pressure": pres, "precision": "double"}))
+                            work.append(
+                                Workload(
+                                    "air",
+                                    "flagsim",
+                                    f"{SHORT[adv]}/{pres}",
+                                    f"{n}^3",
+                                    n**3,
+                                    t,
+                                    {
+                                        "kind": "fluid",
+                                        "n": n,
+                                        "advection": adv,
+                                        "pressure": pres,
+                                        "precision": "double",
+                                    },
+                                )
+                            )
             if sel.float_grid and sel.mode != "smoke":
                 adv, pres = sel.advection[0], sel.pressure[0]
                 for n in air_sizes:
                     for t in _thread_counts(sel, threads, n == largest, True):
-                        work.append(Workload("air", "flagsim", f"{SHORT[adv]}/{pres}/float", f"{n}^3", n**3, t,
-                                             {"kind": "fluid", "n": n, "advection": adv, "pressure": pres,
-                                              "precision": "float"}))
+                        work.append(
+                            Workload(
+                                "air",
+                                "flagsim",
+                                f"{SHORT[adv]}/{pres}/float",
+                                f"{n}^3",
+                                n**3,
+                                t,
+                                {
+                                    "kind": "fluid",
+                                    "n": n,
+                                    "advection": adv,
+                                    "pressure": pres,
+                                    "precision": "float",
+                                },
+                            )
+                        )
         ok, why = baselines.get("fftw", (False, "not checked"))
         if ok:
             for n in air_sizes:
-                work.append(Workload("air", "fftw", "3r2c+3c2r", f"{n}^3", n**3, 1,
-                                     {"kind": "fftw_floor", "n": n}))
+                work.append(
+                    Workload(
+                        "air",
+                        "fftw",
+                        "3r2c+3c2r",
+                        f"{n}^3",
+                        n**3,
+                        1,
+                        {"kind": "fftw_floor", "n": n},
+                    )
+                )
         else:
             skipped.append(("FFTW floor (3 r2c + 3 c2r)", why))
 
@@ -164,26 +247,60 @@ def catalogue(sel: Selection, features: dict[str, tuple[bool, str]],
                 skipped.append((f"peer {peer}", why))
                 continue
             for rows, cols in peer_sizes:
-                work.append(Workload("peers", peer, "cloth", f"{rows}x{cols}", rows * cols, 1,
-                                     {"kind": "peer", "peer": peer, "rows": rows, "cols": cols}))
+                work.append(
+                    Workload(
+                        "peers",
+                        peer,
+                        "cloth",
+                        f"{rows}x{cols}",
+                        rows * cols,
+                        1,
+                        {"kind": "peer", "peer": peer, "rows": rows, "cols": cols},
+                    )
+                )
         # flagsim's side of the comparison, at one thread, if the cloth group did not measure it
         have = {w.name for w in work}
         for integrator in INTEGRATORS:
             for rows, cols in peer_sizes:
-                w = Workload("cloth", "flagsim", integrator, f"{rows}x{cols}", rows * cols, 1,
-                             {"kind": "cloth", "rows": rows, "cols": cols, "integrator": integrator,
-                              "self_collision": False})
+                w = Workload(
+                    "cloth",
+                    "flagsim",
+                    integrator,
+                    f"{rows}x{cols}",
+                    rows * cols,
+                    1,
+                    {
+                        "kind": "cloth",
+                        "rows": rows,
+                        "cols": cols,
+                        "integrator": integrator,
+                        "self_collision": False,
+                    },
+                )
                 if w.name not in have:
                     work.append(w)
         ok, why = baselines.get("numpy", (False, "not checked"))
         if not ok:
             skipped.append(("numpy Stable Fluids baseline", why))
         elif not features.get("fluid", (False, ""))[0]:
-            skipped.append(("numpy Stable Fluids baseline", "nothing to compare it with: "
-                            + features.get("fluid", (False, ""))[1]))
+            skipped.append(
+                (
+                    "numpy Stable Fluids baseline",
+                    "nothing to compare it with: " + features.get("fluid", (False, ""))[1],
+                )
+            )
         else:
             numpy_sizes = air_sizes if sel.mode != "quick" or sel.air_sizes else air_sizes[:2]
             for n in numpy_sizes:
-                work.append(Workload("peers", "numpy", "stable fluids", f"{n}^3", n**3, 1,
-                                     {"kind": "numpy_fluid", "n": n}))
+                work.append(
+                    Workload(
+                        "peers",
+                        "numpy",
+                        "stable fluids",
+                        f"{n}^3",
+                        n**3,
+                        1,
+                        {"kind": "numpy_fluid", "n": n},
+                    )
+                )
     return work, skipped

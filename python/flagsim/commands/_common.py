@@ -1,4 +1,5 @@
 """Helpers shared by the sub-commands: scene lookup, animation options."""
+
 from __future__ import annotations
 
 import hashlib
@@ -23,13 +24,17 @@ def load_scene(spec):
             raise FileNotFoundError(f"scene file '{spec}' not found")
         # Scene.load's own ValueError (e.g. an unknown key, named with its section) passes on.
         scene = flagsim.Scene.load(str(path))
-        source = {"file": str(path.resolve()),
-                  "sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
+        source = {
+            "file": str(path.resolve()),
+            "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
+        }
     else:
         known = flagsim.Scene.builtins()
         if spec not in known:
-            raise UnknownScene(f"unknown scene '{spec}': the built-in scenes are "
-                               f"{', '.join(sorted(known))} (or give a .toml scene file)")
+            raise UnknownScene(
+                f"unknown scene '{spec}': the built-in scenes are "
+                f"{', '.join(sorted(known))} (or give a .toml scene file)"
+            )
         scene = flagsim.Scene.named(spec)
         source = {"builtin": spec}
     from flagsim.scene import to_dict
@@ -39,14 +44,22 @@ def load_scene(spec):
 
 def add_animation_options(parser):
     group = parser.add_mutually_exclusive_group()
-    group.add_argument("--gif", action="store_true",
-                       help="assemble the frames into an animated GIF, DIR/flag.gif (default)")
-    group.add_argument("--mp4", action="store_true",
-                       help="assemble the frames into an H.264 MP4, DIR/flag.mp4 (needs ffmpeg)")
-    parser.add_argument("--jobs", type=int, metavar="N",
-                        help="POV-Ray processes at once (default: three per core)")
-    parser.add_argument("--quiet", "-q", action="store_true",
-                        help="no progress bars; print only the resulting path")
+    group.add_argument(
+        "--gif",
+        action="store_true",
+        help="assemble the frames into an animated GIF, DIR/flag.gif (default)",
+    )
+    group.add_argument(
+        "--mp4",
+        action="store_true",
+        help="assemble the frames into an H.264 MP4, DIR/flag.mp4 (needs ffmpeg)",
+    )
+    parser.add_argument(
+        "--jobs", type=int, metavar="N", help="POV-Ray processes at once (default: three per core)"
+    )
+    parser.add_argument(
+        "--quiet", "-q", action="store_true", help="no progress bars; print only the resulting path"
+    )
 
 
 def check_animation_tools(args):
@@ -57,8 +70,10 @@ def check_animation_tools(args):
 
     find_povray()
     if args.mp4 and shutil.which("ffmpeg") is None:
-        raise FfmpegNotFound("--mp4 needs ffmpeg, which is not installed: install the Debian "
-                             "package 'ffmpeg' (sudo apt-get install ffmpeg), or use --gif")
+        raise FfmpegNotFound(
+            "--mp4 needs ffmpeg, which is not installed: install the Debian "
+            "package 'ffmpeg' (sudo apt-get install ffmpeg), or use --gif"
+        )
     if args.jobs is not None and args.jobs < 1:
         raise ValueError(f"--jobs should be >= 1, got {args.jobs}")
 
@@ -70,8 +85,9 @@ def render_and_assemble(out_dir, args, *, width=None, height=None, force=False):
     from .. import povray
 
     quiet = args.quiet
-    result = povray.render(out_dir, width=width, height=height, jobs=args.jobs,
-                           progress=not quiet, force=force)
+    result = povray.render(
+        out_dir, width=width, height=height, jobs=args.jobs, progress=not quiet, force=force
+    )
     for frame, lines in sorted(result.diagnostics.items()):
         print(f"flagsim: POV-Ray said for frame {frame}: " + " | ".join(lines), file=sys.stderr)
     manifest = povray.read_manifest(out_dir)
@@ -81,6 +97,9 @@ def render_and_assemble(out_dir, args, *, width=None, height=None, force=False):
     else:
         path = povray.make_gif(result.images, Path(out_dir) / "flag.gif", fps)
     if not quiet:
-        print(f"rendered {len(result.rendered)} frames ({len(result.skipped)} up to date) in "
-              f"{result.wall_seconds:.1f} s", file=sys.stderr)
+        print(
+            f"rendered {len(result.rendered)} frames ({len(result.skipped)} up to date) in "
+            f"{result.wall_seconds:.1f} s",
+            file=sys.stderr,
+        )
     return path

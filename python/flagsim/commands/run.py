@@ -12,6 +12,7 @@ examples:
   flagsim run paper --seconds 4 --fps 25 --out out/demo --render --gif
   flagsim run my_scene.toml --out out/mine --render --width 800 --height 600 --texture flag.png
 """
+
 from __future__ import annotations
 
 import sys
@@ -21,25 +22,45 @@ from ._common import add_animation_options, check_animation_tools, load_scene, r
 
 
 def configure(p):
-    p.add_argument("scene", metavar="SCENE",
-                   help="a built-in scene name ('flagsim scenes' lists them) or a TOML scene file")
+    p.add_argument(
+        "scene",
+        metavar="SCENE",
+        help="a built-in scene name ('flagsim scenes' lists them) or a TOML scene file",
+    )
     p.add_argument("--out", "-o", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--seconds", type=float, default=4.0, metavar="S",
-                   help="simulated time, s (default 4)")
-    p.add_argument("--fps", type=float, default=25.0, metavar="F",
-                   help="frames per simulated second, independent of the time step (default 25)")
-    p.add_argument("--render", action="store_true",
-                   help="render the frames with POV-Ray and assemble an animation")
-    p.add_argument("--width", type=int, default=480, metavar="W", help="picture width, pixels "
-                   "(default 480)")
-    p.add_argument("--height", type=int, default=360, metavar="H",
-                   help="picture height, pixels (default 360)")
-    p.add_argument("--texture", metavar="IMAGE",
-                   help="image (png, jpeg, gif, tga, ppm, tiff, ...) mapped onto the flag; "
-                        "default: a built-in red flag with a white cross")
-    p.add_argument("--overwrite", action="store_true",
-                   help="replace a flagsim export of another scene or other settings (or with a "
-                        "damaged export.json) in DIR; other files in DIR are kept")
+    p.add_argument(
+        "--seconds", type=float, default=4.0, metavar="S", help="simulated time, s (default 4)"
+    )
+    p.add_argument(
+        "--fps",
+        type=float,
+        default=25.0,
+        metavar="F",
+        help="frames per simulated second, independent of the time step (default 25)",
+    )
+    p.add_argument(
+        "--render",
+        action="store_true",
+        help="render the frames with POV-Ray and assemble an animation",
+    )
+    p.add_argument(
+        "--width", type=int, default=480, metavar="W", help="picture width, pixels " "(default 480)"
+    )
+    p.add_argument(
+        "--height", type=int, default=360, metavar="H", help="picture height, pixels (default 360)"
+    )
+    p.add_argument(
+        "--texture",
+        metavar="IMAGE",
+        help="image (png, jpeg, gif, tga, ppm, tiff, ...) mapped onto the flag; "
+        "default: a built-in red flag with a white cross",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace a flagsim export of another scene or other settings (or with a "
+        "damaged export.json) in DIR; other files in DIR are kept",
+    )
     add_animation_options(p)
 
 
@@ -56,14 +77,26 @@ def run(args):
         check_animation_tools(args)
     sim = flagsim.Simulation(scene)
     key = {"scene": description, "fps": float(args.fps), "dt": float(scene.dt)}
-    result = povray.export(sim, args.out, seconds=args.seconds, fps=args.fps, scene=scene,
-                           width=args.width, height=args.height, texture=args.texture, key=key,
-                           overwrite=args.overwrite, progress=not args.quiet)
+    result = povray.export(
+        sim,
+        args.out,
+        seconds=args.seconds,
+        fps=args.fps,
+        scene=scene,
+        width=args.width,
+        height=args.height,
+        texture=args.texture,
+        key=key,
+        overwrite=args.overwrite,
+        progress=not args.quiet,
+    )
     out = Path(args.out)
     if not args.quiet:
-        print(f"exported {result.frames} frames to {out} ({result.written} written, "
-              f"{result.kept} kept; {result.steps} steps in {result.wall_seconds:.1f} s)",
-              file=sys.stderr)
+        print(
+            f"exported {result.frames} frames to {out} ({result.written} written, "
+            f"{result.kept} kept; {result.steps} steps in {result.wall_seconds:.1f} s)",
+            file=sys.stderr,
+        )
     if not render:
         if not args.quiet:
             print(f"render it with:  flagsim render {out}", file=sys.stderr)

@@ -1,5 +1,6 @@
 """List the built-in scenes, one per line with a one-line description. Any of them can be run
 with `flagsim run NAME --out DIR`."""
+
 from __future__ import annotations
 
 

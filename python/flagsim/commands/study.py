@@ -15,6 +15,7 @@ examples:
   flagsim study stability --out out/stability --jobs 2
   flagsim study accuracy --out out/accuracy --docs docs   # regenerate docs/accuracy.md
 """
+
 from __future__ import annotations
 
 import os
@@ -22,13 +23,26 @@ import os
 
 def configure(p):
     p.add_argument("study", choices=("accuracy", "stability"), help="which study to run")
-    p.add_argument("--out", required=True, metavar="DIR", help="directory for CSV, report and plots")
-    p.add_argument("--jobs", type=int, default=1, metavar="N",
-                   help="worker processes (default 1: timings undisturbed)")
-    p.add_argument("--quick", action="store_true",
-                   help="a reduced sweep / matrix (minutes instead of tens of minutes)")
-    p.add_argument("--docs", metavar="DIR",
-                   help="also write the report (and plots) into DIR as accuracy.md / stability.md")
+    p.add_argument(
+        "--out", required=True, metavar="DIR", help="directory for CSV, report and plots"
+    )
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="worker processes (default 1: timings undisturbed)",
+    )
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="a reduced sweep / matrix (minutes instead of tens of minutes)",
+    )
+    p.add_argument(
+        "--docs",
+        metavar="DIR",
+        help="also write the report (and plots) into DIR as accuracy.md / stability.md",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -40,9 +54,15 @@ def run(args):
         return error(f"--jobs should be >= 1, got {args.jobs}", EXIT_USAGE)
     report = os.path.join(args.docs, f"{args.study}.md") if args.docs else None
     if args.study == "stability":
-        rows = study.run_stability(args.out, reduced=args.quick, jobs=args.jobs,
-                                   progress=not args.quiet, report_path=report)
+        rows = study.run_stability(
+            args.out,
+            reduced=args.quick,
+            jobs=args.jobs,
+            progress=not args.quiet,
+            report_path=report,
+        )
         from ..study.stability import headline, summarize
+
         for (integ,), c in summarize(rows).items():
             print(f"{integ:>18}: " + ", ".join(f"{n} {o}" for o, n in c.items()))
         print(headline(rows))
@@ -50,8 +70,14 @@ def run(args):
         silent = total["implausible"] + total["nonfinite"]
     else:
         plot_dir = os.path.join(args.docs, "images") if args.docs else None
-        study.run_accuracy(args.out, quick=args.quick, jobs=args.jobs, progress=not args.quiet,
-                           report_path=report, plot_dir=plot_dir)
+        study.run_accuracy(
+            args.out,
+            quick=args.quick,
+            jobs=args.jobs,
+            progress=not args.quiet,
+            report_path=report,
+            plot_dir=plot_dir,
+        )
         silent = 0
     print(f"report: {report or os.path.join(args.out, args.study + '.md')}")
     return 1 if silent else 0

@@ -10,6 +10,7 @@
 
 Only numpy and the compiled core load with this module; tqdm and imageio load when used.
 """
+
 from .export import ExportConflict, ExportResult, export, frame_steps, read_manifest
 from .lock import ExportBusy, ExportLock
 from .mesh import format_mesh2, mesh_arrays, vertex_normals, write_mesh2
@@ -32,9 +33,30 @@ from .render import (
 from .scenefiles import TEMPLATE_DIR
 
 __all__ = [
-    "ExportBusy", "ExportConflict", "ExportLock", "ExportResult", "FfmpegNotFound", "FrameJob", "FrameResult",
-    "IncompleteExport", "PovrayNotFound", "RenderError", "RenderResult", "TEMPLATE_DIR",
-    "export", "find_povray", "format_mesh2", "frame_steps", "load_export", "make_gif",
-    "make_mp4", "mesh_arrays", "povray_diagnostics", "read_manifest", "render", "render_frame",
-    "vertex_normals", "write_mesh2",
+    "ExportBusy",
+    "ExportConflict",
+    "ExportLock",
+    "ExportResult",
+    "FfmpegNotFound",
+    "FrameJob",
+    "FrameResult",
+    "IncompleteExport",
+    "PovrayNotFound",
+    "RenderError",
+    "RenderResult",
+    "TEMPLATE_DIR",
+    "export",
+    "find_povray",
+    "format_mesh2",
+    "frame_steps",
+    "load_export",
+    "make_gif",
+    "make_mp4",
+    "mesh_arrays",
+    "povray_diagnostics",
+    "read_manifest",
+    "render",
+    "render_frame",
+    "vertex_normals",
+    "write_mesh2",
 ]

@@ -5,11 +5,11 @@ round(k / (fps * dt)) steps (within dt / 2 of t = k / fps). Every file is writte
 all, so an interrupted export leaves only complete frames; running the same export again re-runs
 the (deterministic) simulation and keeps every frame file that already holds the same text.
 """
+
 from __future__ import annotations
 
 import json
 import math
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,10 +34,10 @@ class ExportConflict(ValueError):
 @dataclass
 class ExportResult:
     out_dir: Path
-    frames: int          # frame files in the export
-    written: int         # written by this call
-    kept: int            # already there with the same content (resumed)
-    steps: int           # simulation steps taken
+    frames: int  # frame files in the export
+    written: int  # written by this call
+    kept: int  # already there with the same content (resumed)
+    steps: int  # simulation steps taken
     wall_seconds: float
 
 
@@ -50,11 +50,14 @@ def frame_steps(seconds, fps, dt):
     if not (math.isfinite(dt) and dt > 0):
         raise ValueError(f"dt should be finite and > 0, got {dt}")
     if fps * dt > 1.0 + 1e-9:
-        raise ValueError(f"fps should be <= 1 / dt = {1.0 / dt:g} (one frame per step at most), "
-                         f"got {fps}")
+        raise ValueError(
+            f"fps should be <= 1 / dt = {1.0 / dt:g} (one frame per step at most), " f"got {fps}"
+        )
     if not seconds / dt <= MAX_STEPS:
-        raise ValueError(f"seconds / dt should be at most {MAX_STEPS:.0e} steps, got "
-                         f"{seconds / dt:.3g} (seconds = {seconds:g}, dt = {dt:g})")
+        raise ValueError(
+            f"seconds / dt should be at most {MAX_STEPS:.0e} steps, got "
+            f"{seconds / dt:.3g} (seconds = {seconds:g}, dt = {dt:g})"
+        )
     frames = seconds * fps
     if not frames < MAX_FRAMES:  # also an overflow to inf
         raise ValueError(f"seconds * fps should be < {MAX_FRAMES} frames, got {frames:g}")
@@ -82,19 +85,26 @@ def read_manifest(out_dir):
     except (ValueError, UnicodeDecodeError) as e:
         raise ExportConflict(f"{path} is not a flagsim export manifest ({e})") from None
     except RecursionError:
-        raise ExportConflict(f"{path} is not a flagsim export manifest (nested too deeply)") from None
+        raise ExportConflict(
+            f"{path} is not a flagsim export manifest (nested too deeply)"
+        ) from None
     if not isinstance(manifest, dict) or "key" not in manifest:
-        raise ExportConflict(f"{path} is not a flagsim export manifest (expected an object with "
-                             f"a 'key', got {type(manifest).__name__})")
+        raise ExportConflict(
+            f"{path} is not a flagsim export manifest (expected an object with "
+            f"a 'key', got {type(manifest).__name__})"
+        )
     return manifest
 
 
 def _foreign_entries(out):
     """What a folder without a manifest holds besides flagsim's lock and the temporary file of a
     manifest write that was interrupted: anything there is the user's."""
-    return sorted(p.name for p in out.iterdir()
-                  if not p.name.startswith(LOCK_NAME)
-                  and not (p.name.startswith(f".{MANIFEST}.") and p.name.endswith(".tmp")))
+    return sorted(
+        p.name
+        for p in out.iterdir()
+        if not p.name.startswith(LOCK_NAME)
+        and not (p.name.startswith(f".{MANIFEST}.") and p.name.endswith(".tmp"))
+    )
 
 
 def _prepare_folder(out, key, overwrite):
@@ -112,14 +122,18 @@ def _prepare_folder(out, key, overwrite):
         foreign = _foreign_entries(out)
         if foreign:
             shown = ", ".join(foreign[:5]) + (", ..." if len(foreign) > 5 else "")
-            raise ExportConflict(f"{out} is not empty ({shown}) and holds no flagsim export "
-                                 f"({MANIFEST}); flagsim writes only into a new or empty folder "
-                                 f"or one of its own exports, so choose another output folder")
+            raise ExportConflict(
+                f"{out} is not empty ({shown}) and holds no flagsim export "
+                f"({MANIFEST}); flagsim writes only into a new or empty folder "
+                f"or one of its own exports, so choose another output folder"
+            )
         return None
     if old.get("key") != key:
         if not overwrite:
-            raise ExportConflict(f"{out} holds an export of another scene or other settings; "
-                                 f"choose another output folder or overwrite it")
+            raise ExportConflict(
+                f"{out} holds an export of another scene or other settings; "
+                f"choose another output folder or overwrite it"
+            )
         _clear(out)
         return None
     return old
@@ -143,14 +157,30 @@ def _remove_stale(out, old_frames, frames):
 
 def _clear(out):
     """The frames and pictures of the export being replaced (only files flagsim names)."""
-    for sub, pattern in ((scenefiles.FRAME_DIR, "flag_*.inc"),
-                         (scenefiles.RENDER_DIR, "frame_*.png")):
+    for sub, pattern in (
+        (scenefiles.FRAME_DIR, "flag_*.inc"),
+        (scenefiles.RENDER_DIR, "frame_*.png"),
+    ):
         for p in (out / sub).glob(pattern):
             p.unlink()
 
 
-def export(sim, out_dir, *, seconds, fps=25.0, dt=None, scene=None, width=640, height=480,
-           texture=None, key=None, overwrite=False, progress=True, povray_binary=None):
+def export(
+    sim,
+    out_dir,
+    *,
+    seconds,
+    fps=25.0,
+    dt=None,
+    scene=None,
+    width=640,
+    height=480,
+    texture=None,
+    key=None,
+    overwrite=False,
+    progress=True,
+    povray_binary=None,
+):
     """Simulate ``seconds`` of ``sim`` and write a POV-Ray animation into ``out_dir``.
 
     sim        a flagsim.Simulation (or anything with step(n), step_count, time and the mesh
@@ -191,8 +221,9 @@ def export(sim, out_dir, *, seconds, fps=25.0, dt=None, scene=None, width=640, h
         if not isinstance(old_frames, int) or isinstance(old_frames, bool) or old_frames < 0:
             old_frames = 0  # a damaged count: every stale frame and picture goes
         _remove_stale(out, old_frames, len(steps))
-        return _export_frames(sim, out, steps, dt, key, pole, width, height, texture, progress,
-                              povray_binary, fps)
+        return _export_frames(
+            sim, out, steps, dt, key, pole, width, height, texture, progress, povray_binary, fps
+        )
 
 
 def output_folder(out_dir) -> Path:
@@ -206,12 +237,21 @@ def output_folder(out_dir) -> Path:
     return out
 
 
-def _export_frames(sim, out, steps, dt, key, pole, width, height, texture, progress,
-                   povray_binary, fps):
-    manifest = {"format": MANIFEST_FORMAT, "flagsim": __version__, "key": key,
-                "fps": float(fps), "dt": dt, "frames": len(steps), "complete": False,
-                "width": width, "height": height,
-                "times": [s * dt for s in steps]}
+def _export_frames(
+    sim, out, steps, dt, key, pole, width, height, texture, progress, povray_binary, fps
+):
+    manifest = {
+        "format": MANIFEST_FORMAT,
+        "flagsim": __version__,
+        "key": key,
+        "fps": float(fps),
+        "dt": dt,
+        "frames": len(steps),
+        "complete": False,
+        "width": width,
+        "height": height,
+        "times": [s * dt for s in steps],
+    }
     # The manifest first: from then on the folder is recognisably an export.
     scenefiles.write_text(out / MANIFEST, json.dumps(manifest, indent=1) + "\n")
     (out / scenefiles.FRAME_DIR).mkdir(exist_ok=True)
@@ -221,9 +261,13 @@ def _export_frames(sim, out, steps, dt, key, pole, width, height, texture, progr
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=round(steps[-1] * dt, 6), unit="s", desc="simulating",
-                   bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.2f}/{total:.2f} s simulated "
-                              "[{elapsed}<{remaining}{postfix}]")
+        bar = tqdm(
+            total=round(steps[-1] * dt, 6),
+            unit="s",
+            desc="simulating",
+            bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.2f}/{total:.2f} s simulated "
+            "[{elapsed}<{remaining}{postfix}]",
+        )
     start_step = sim.step_count
     written = kept = 0
     facing = np.zeros(3)  # area-weighted normal summed over the frames: where the flag faces
@@ -260,13 +304,26 @@ def _export_frames(sim, out, steps, dt, key, pole, width, height, texture, progr
             bar.close()
 
     view = scenefiles.frame_view(lo, hi, pole, facing=facing, aspect=width / height)
-    scenefiles.write_static_files(out, view=view, pole=pole, texture=texture, width=width,
-                                  height=height, final_frame=len(steps) - 1,
-                                  final_clock=steps[-1] * dt, povray_binary=povray_binary)
+    scenefiles.write_static_files(
+        out,
+        view=view,
+        pole=pole,
+        texture=texture,
+        width=width,
+        height=height,
+        final_frame=len(steps) - 1,
+        final_clock=steps[-1] * dt,
+        povray_binary=povray_binary,
+    )
     manifest["complete"] = True
     manifest["texture"] = None if texture is None else Path(texture).name
     manifest["bounds"] = [lo.tolist(), hi.tolist()]
     scenefiles.write_text(out / MANIFEST, json.dumps(manifest, indent=1) + "\n")
-    return ExportResult(out_dir=out, frames=len(steps), written=written, kept=kept,
-                        steps=sim.step_count - start_step,
-                        wall_seconds=time.perf_counter() - t0)
+    return ExportResult(
+        out_dir=out,
+        frames=len(steps),
+        written=written,
+        kept=kept,
+        steps=sim.step_count - start_step,
+        wall_seconds=time.perf_counter() - t0,
+    )

@@ -5,6 +5,7 @@ A second writer is refused with a message naming the holder (pid, host, start ti
 A lock left by a process that no longer runs on this host (kill -9, OOM) is taken over. A lock
 from another host is never taken over: remove the file by hand once that process is gone.
 """
+
 from __future__ import annotations
 
 import datetime as _dt
@@ -33,8 +34,10 @@ def _alive(pid: int) -> bool:
 
 
 def _describe(holder: dict) -> str:
-    return (f"pid {holder.get('pid')} on {holder.get('host')} since {holder.get('started')} "
-            f"({holder.get('command')})")
+    return (
+        f"pid {holder.get('pid')} on {holder.get('host')} since {holder.get('started')} "
+        f"({holder.get('command')})"
+    )
 
 
 class ExportLock:
@@ -44,9 +47,12 @@ class ExportLock:
     def __init__(self, out_dir):
         self.path = Path(out_dir) / LOCK_NAME
         self.held = False
-        self.record = {"pid": os.getpid(), "host": socket.gethostname(),
-                       "started": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-                       "command": " ".join(Path(sys.argv[0]).name.split() + sys.argv[1:])[:200]}
+        self.record = {
+            "pid": os.getpid(),
+            "host": socket.gethostname(),
+            "started": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            "command": " ".join(Path(sys.argv[0]).name.split() + sys.argv[1:])[:200],
+        }
 
     def _create(self) -> bool:
         # Whole or not at all: the record goes into a private file, which is then linked to the
@@ -81,8 +87,11 @@ class ExportLock:
             holder = self._holder()
             if holder is None:
                 continue  # released in between
-            stale = (holder.get("host") == self.record["host"]
-                     and isinstance(holder.get("pid"), int) and not _alive(holder["pid"]))
+            stale = (
+                holder.get("host") == self.record["host"]
+                and isinstance(holder.get("pid"), int)
+                and not _alive(holder["pid"])
+            )
             if not stale:
                 break
             try:  # take over a dead process's lock: remove it, then race for a fresh one
@@ -90,9 +99,11 @@ class ExportLock:
             except FileNotFoundError:
                 pass
         holder = self._holder() or {}
-        raise ExportBusy(f"{self.path.parent} is being written by "
-                         f"{_describe(holder) if holder else 'another process'}; wait for it to "
-                         f"finish, or remove {self.path} if that process is gone")
+        raise ExportBusy(
+            f"{self.path.parent} is being written by "
+            f"{_describe(holder) if holder else 'another process'}; wait for it to "
+            f"finish, or remove {self.path} if that process is gone"
+        )
 
     def release(self) -> None:
         if not self.held:
@@ -100,8 +111,11 @@ class ExportLock:
         self.held = False
         try:
             holder = self._holder()
-            if holder and holder.get("pid") == self.record["pid"] and \
-                    holder.get("started") == self.record["started"]:
+            if (
+                holder
+                and holder.get("pid") == self.record["pid"]
+                and holder.get("started") == self.record["started"]
+            ):
                 self.path.unlink()
         except OSError as e:
             if e.errno != errno.ENOENT:

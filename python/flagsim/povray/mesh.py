@@ -1,4 +1,5 @@
 """Per-frame flag meshes as POV-Ray mesh2 include files (the C++ writer does the work)."""
+
 from __future__ import annotations
 
 import os
@@ -42,8 +43,9 @@ def vertex_normals(positions, triangles):
 def format_mesh2(sim, *, name="FlagMesh", decimals=7, comment=""):
     """The mesh2 text ``write_mesh2`` would write for ``sim``."""
     positions, normals, uv, triangles = mesh_arrays(sim)
-    return _core.format_mesh2(positions, normals, uv, triangles, name=name, decimals=decimals,
-                              comment=comment)
+    return _core.format_mesh2(
+        positions, normals, uv, triangles, name=name, decimals=decimals, comment=comment
+    )
 
 
 def write_mesh2(sim, path, *, name="FlagMesh", decimals=7, comment=""):
@@ -55,5 +57,13 @@ def write_mesh2(sim, path, *, name="FlagMesh", decimals=7, comment=""):
     ``normals``, ``uv``, ``triangles`` (see ``mesh_arrays``).
     """
     positions, normals, uv, triangles = mesh_arrays(sim)
-    _core.write_mesh2_arrays(os.fspath(path), positions, normals, uv, triangles, name=name,
-                             decimals=decimals, comment=comment)
+    _core.write_mesh2_arrays(
+        os.fspath(path),
+        positions,
+        normals,
+        uv,
+        triangles,
+        name=name,
+        decimals=decimals,
+        comment=comment,
+    )

@@ -5,6 +5,7 @@ anything with the Executor interface (a cluster's, a thread pool) can take its p
 touching this code: a frame is a picklable ``FrameJob`` and ``render_frame`` a module-level
 function. A failed frame is retried once, then reported by number in ``RenderError``.
 """
+
 from __future__ import annotations
 
 import os
@@ -46,15 +47,16 @@ def find_povray(binary=None):
         raise PovrayNotFound(
             f"POV-Ray ('{name}') is not installed or not on PATH: install the Debian package "
             f"'{DEBIAN_PACKAGE}' (sudo apt-get install {DEBIAN_PACKAGE}) or set FLAGSIM_POVRAY "
-            f"to the povray binary")
+            f"to the povray binary"
+        )
     return path
 
 
 @dataclass
 class FrameJob:
     frame: int
-    out_dir: str      # the export folder; POV-Ray runs there with relative paths
-    image: str        # relative path of the image to produce
+    out_dir: str  # the export folder; POV-Ray runs there with relative paths
+    image: str  # relative path of the image to produce
     povray: str
     width: int
     height: int
@@ -103,10 +105,24 @@ def povray_env(out_dir):
 
 
 def povray_command(job):
-    cmd = [job.povray, f"+I{scenefiles.SCENE_FILE}", f"+O{job.image}",
-           f"+W{job.width}", f"+H{job.height}", "+FN", "-D", "-P", "-V",
-           "-GS", "-GR", "-GD", "+GW", "+GF", f"+WT{job.threads}",
-           f"Declare=FRAME={job.frame}"]
+    cmd = [
+        job.povray,
+        f"+I{scenefiles.SCENE_FILE}",
+        f"+O{job.image}",
+        f"+W{job.width}",
+        f"+H{job.height}",
+        "+FN",
+        "-D",
+        "-P",
+        "-V",
+        "-GS",
+        "-GR",
+        "-GD",
+        "+GW",
+        "+GF",
+        f"+WT{job.threads}",
+        f"Declare=FRAME={job.frame}",
+    ]
     cmd += [f"+A{job.antialias}"] if job.antialias > 0 else ["-A"]
     return cmd
 
@@ -133,19 +149,33 @@ def render_frame(job):
     tmp = out / tmp_rel
     cmd = povray_command(replace(job, image=tmp_rel))
     try:
-        proc = subprocess.run(cmd, cwd=out, env=povray_env(out), capture_output=True, text=True,
-                              errors="replace", timeout=job.timeout, check=False,
-                              preexec_fn=_povray_preexec())
+        proc = subprocess.run(
+            cmd,
+            cwd=out,
+            env=povray_env(out),
+            capture_output=True,
+            text=True,
+            errors="replace",
+            timeout=job.timeout,
+            check=False,
+            preexec_fn=_povray_preexec(),
+        )
     except (OSError, subprocess.TimeoutExpired) as e:
         tmp.unlink(missing_ok=True)
-        return FrameResult(job.frame, False, f"{type(e).__name__}: {e}",
-                           seconds=time.perf_counter() - t0)
+        return FrameResult(
+            job.frame, False, f"{type(e).__name__}: {e}", seconds=time.perf_counter() - t0
+        )
     diagnostics = povray_diagnostics(proc.stderr)
     if proc.returncode != 0 or not tmp.is_file():
         tmp.unlink(missing_ok=True)
         detail = "; ".join(diagnostics[-3:]) or "no output"
-        return FrameResult(job.frame, False, f"povray exited with {proc.returncode}: {detail}",
-                           diagnostics, time.perf_counter() - t0)
+        return FrameResult(
+            job.frame,
+            False,
+            f"povray exited with {proc.returncode}: {detail}",
+            diagnostics,
+            time.perf_counter() - t0,
+        )
     os.replace(tmp, final)
     return FrameResult(job.frame, True, "", diagnostics, time.perf_counter() - t0)
 
@@ -172,15 +202,20 @@ def load_export(out_dir):
     out = Path(out_dir)
     manifest = read_manifest(out)
     if manifest is None:
-        raise IncompleteExport(f"{out} is not a flagsim export (no {out / 'export.json'}): make "
-                               f"one with  flagsim run SCENE --out {out}")
+        raise IncompleteExport(
+            f"{out} is not a flagsim export (no {out / 'export.json'}): make "
+            f"one with  flagsim run SCENE --out {out}"
+        )
     _check_manifest_fields(out / "export.json", manifest)
-    missing = [k for k in range(manifest["frames"])
-               if not (out / scenefiles.frame_file(k)).is_file()]
+    missing = [
+        k for k in range(manifest["frames"]) if not (out / scenefiles.frame_file(k)).is_file()
+    ]
     if not manifest.get("complete") or missing or not (out / scenefiles.SCENE_FILE).is_file():
         what = f" (frames {_ranges(missing)} missing)" if missing else ""
-        raise IncompleteExport(f"the export in {out} is incomplete{what}: run the same "
-                               f"flagsim run command again to resume it")
+        raise IncompleteExport(
+            f"the export in {out} is incomplete{what}: run the same "
+            f"flagsim run command again to resume it"
+        )
     return manifest
 
 
@@ -189,19 +224,22 @@ def _check_manifest_fields(path, manifest):
     from .export import MAX_FRAMES, ExportConflict
 
     def bad(field, expected):
-        raise ExportConflict(f"{path}: {field} should be {expected}, got "
-                             f"{manifest.get(field)!r}; run the flagsim run command again with "
-                             f"--overwrite to replace this export")
+        raise ExportConflict(
+            f"{path}: {field} should be {expected}, got "
+            f"{manifest.get(field)!r}; run the flagsim run command again with "
+            f"--overwrite to replace this export"
+        )
+
     frames = manifest.get("frames")
     if not isinstance(frames, int) or isinstance(frames, bool) or not 1 <= frames <= MAX_FRAMES:
         bad("frames", f"an integer in [1, {MAX_FRAMES}]")
     fps = manifest.get("fps")
     if not isinstance(fps, (int, float)) or isinstance(fps, bool) or not 0 < fps < 1e6:
         bad("fps", "a number in (0, 1e6)")
-    for field in ("width", "height"):
-        v = manifest.get(field)
+    for name in ("width", "height"):
+        v = manifest.get(name)
         if not isinstance(v, int) or isinstance(v, bool) or not 16 <= v <= 8192:
-            bad(field, "an integer in [16, 8192]")
+            bad(name, "an integer in [16, 8192]")
 
 
 def _ranges(numbers):
@@ -217,10 +255,10 @@ def _ranges(numbers):
 
 @dataclass
 class RenderResult:
-    images: list          # Path of every frame's image, in frame order
-    rendered: list        # frame numbers rendered by this call
-    skipped: list         # frame numbers already up to date
-    diagnostics: dict     # frame -> POV-Ray warning lines (empty when clean)
+    images: list  # Path of every frame's image, in frame order
+    rendered: list  # frame numbers rendered by this call
+    skipped: list  # frame numbers already up to date
+    diagnostics: dict  # frame -> POV-Ray warning lines (empty when clean)
     wall_seconds: float
 
 
@@ -230,8 +268,20 @@ def _default_executor(jobs):
     return worker_pool(jobs)  # workers (and their POV-Ray processes) die with this process
 
 
-def render(out_dir, *, width=None, height=None, executor=None, jobs=None, retries=1,
-           antialias=0.3, progress=True, povray_binary=None, worker=render_frame, force=False):
+def render(
+    out_dir,
+    *,
+    width=None,
+    height=None,
+    executor=None,
+    jobs=None,
+    retries=1,
+    antialias=0.3,
+    progress=True,
+    povray_binary=None,
+    worker=render_frame,
+    force=False,
+):
     """Render every frame of the export in ``out_dir`` to render/frame_NNN.png, holding the
     folder's lock (ExportBusy while another process writes into it); see _render_frames."""
     from .lock import ExportLock
@@ -239,13 +289,35 @@ def render(out_dir, *, width=None, height=None, executor=None, jobs=None, retrie
     if not Path(out_dir).is_dir():
         load_export(out_dir)  # the clear error for a folder that is not there
     with ExportLock(out_dir):
-        return _render_frames(out_dir, width=width, height=height, executor=executor, jobs=jobs,
-                              retries=retries, antialias=antialias, progress=progress,
-                              povray_binary=povray_binary, worker=worker, force=force)
+        return _render_frames(
+            out_dir,
+            width=width,
+            height=height,
+            executor=executor,
+            jobs=jobs,
+            retries=retries,
+            antialias=antialias,
+            progress=progress,
+            povray_binary=povray_binary,
+            worker=worker,
+            force=force,
+        )
 
 
-def _render_frames(out_dir, *, width, height, executor, jobs, retries, antialias, progress,
-                   povray_binary, worker, force):
+def _render_frames(
+    out_dir,
+    *,
+    width,
+    height,
+    executor,
+    jobs,
+    retries,
+    antialias,
+    progress,
+    povray_binary,
+    worker,
+    force,
+):
     """Render every frame of the export in ``out_dir`` to render/frame_NNN.png.
 
     width, height  default: the export's (export.json)
@@ -280,9 +352,12 @@ def _render_frames(out_dir, *, width, height, executor, jobs, retries, antialias
     if texture:
         shared.append(out / ("texture" + Path(texture).suffix.lower()))
     images = [out / scenefiles.render_file(k, final) for k in range(n)]
-    todo = [k for k in range(n)
-            if force or not _up_to_date(images[k], shared + [out / scenefiles.frame_file(k)],
-                                        (width, height))]
+    todo = [
+        k
+        for k in range(n)
+        if force
+        or not _up_to_date(images[k], shared + [out / scenefiles.frame_file(k)], (width, height))
+    ]
     skipped = [k for k in range(n) if k not in set(todo)]
     cores = os.cpu_count() or 1
     # POV-Ray 3.7 idles ~0.6 s per run in its polling loops (strace: 10-100 ms sleeps), longer
@@ -294,9 +369,16 @@ def _render_frames(out_dir, *, width, height, executor, jobs, retries, antialias
         executor = _default_executor(workers)
 
     def job(k):
-        return FrameJob(frame=k, out_dir=str(out), image=scenefiles.render_file(k, final),
-                        povray=povray, width=width, height=height, threads=threads,
-                        antialias=antialias)
+        return FrameJob(
+            frame=k,
+            out_dir=str(out),
+            image=scenefiles.render_file(k, final),
+            povray=povray,
+            width=width,
+            height=height,
+            threads=threads,
+            antialias=antialias,
+        )
 
     bar = None
     if progress and todo:
@@ -346,11 +428,19 @@ def _render_frames(out_dir, *, width, height, executor, jobs, retries, antialias
             executor.shutdown(wait=True, cancel_futures=True)
     if failed:
         first = min(failed)
-        raise RenderError(f"{len(failed)} of {n} frames failed to render after "
-                          f"{retries + 1} tries: frames {_ranges(failed)} (frame {first}: "
-                          f"{failed[first]})", sorted(failed))
-    return RenderResult(images=images, rendered=sorted(rendered), skipped=skipped,
-                        diagnostics=diagnostics, wall_seconds=time.perf_counter() - t0)
+        raise RenderError(
+            f"{len(failed)} of {n} frames failed to render after "
+            f"{retries + 1} tries: frames {_ranges(failed)} (frame {first}: "
+            f"{failed[first]})",
+            sorted(failed),
+        )
+    return RenderResult(
+        images=images,
+        rendered=sorted(rendered),
+        skipped=skipped,
+        diagnostics=diagnostics,
+        wall_seconds=time.perf_counter() - t0,
+    )
 
 
 def _atomic_output(path):
@@ -381,16 +471,35 @@ def make_mp4(out_dir, path, fps, final_frame, ffmpeg=None):
     """H.264 MP4 of render/frame_NNN.png with ffmpeg, written whole or not at all."""
     exe = shutil.which(ffmpeg or "ffmpeg")
     if exe is None:
-        raise FfmpegNotFound("MP4 output needs ffmpeg, which is not installed: install the "
-                             "Debian package 'ffmpeg' (sudo apt-get install ffmpeg), or make a "
-                             "GIF instead (--gif)")
+        raise FfmpegNotFound(
+            "MP4 output needs ffmpeg, which is not installed: install the "
+            "Debian package 'ffmpeg' (sudo apt-get install ffmpeg), or make a "
+            "GIF instead (--gif)"
+        )
     out = Path(out_dir)
     digits = len(str(final_frame))
     tmp = _atomic_output(path)
-    cmd = [exe, "-y", "-loglevel", "error", "-framerate", f"{fps:g}", "-start_number", "0",
-           "-i", str(out / scenefiles.RENDER_DIR / f"frame_%0{digits}d.png"),
-           "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-c:v", "libx264", "-pix_fmt", "yuv420p",
-           "-f", "mp4", str(tmp)]
+    cmd = [
+        exe,
+        "-y",
+        "-loglevel",
+        "error",
+        "-framerate",
+        f"{fps:g}",
+        "-start_number",
+        "0",
+        "-i",
+        str(out / scenefiles.RENDER_DIR / f"frame_%0{digits}d.png"),
+        "-vf",
+        "pad=ceil(iw/2)*2:ceil(ih/2)*2",
+        "-c:v",
+        "libx264",
+        "-pix_fmt",
+        "yuv420p",
+        "-f",
+        "mp4",
+        str(tmp),
+    ]
     try:
         proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
         if proc.returncode != 0:

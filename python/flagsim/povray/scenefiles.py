@@ -5,6 +5,7 @@ Everything POV-Ray reads is written inside the export folder under fixed, plain 
 runs POV-Ray in that folder with relative paths: the folder's own path (spaces, ';', '#', quotes)
 never appears in a file or on POV-Ray's command line, so it cannot be read as syntax.
 """
+
 from __future__ import annotations
 
 import math
@@ -23,8 +24,17 @@ TEMPLATE_DIR = Path(__file__).resolve().parent / "templates"
 
 #: image file suffix -> POV-Ray image_map type keyword
 IMAGE_TYPES = {
-    ".png": "png", ".jpg": "jpeg", ".jpeg": "jpeg", ".gif": "gif", ".tga": "tga",
-    ".ppm": "ppm", ".pgm": "pgm", ".tif": "tiff", ".tiff": "tiff", ".exr": "exr", ".hdr": "hdr",
+    ".png": "png",
+    ".jpg": "jpeg",
+    ".jpeg": "jpeg",
+    ".gif": "gif",
+    ".tga": "tga",
+    ".ppm": "ppm",
+    ".pgm": "pgm",
+    ".tif": "tiff",
+    ".tiff": "tiff",
+    ".exr": "exr",
+    ".hdr": "hdr",
 }
 
 # A red flag with an off-centre white cross (u = 0 is the pole side, v = 1 the top): its colour is
@@ -103,8 +113,13 @@ def view_direction(facing=None, *, min_elevation=-25.0, max_elevation=40.0):
     azimuth = math.atan2(horizontal[0], horizontal[2]) + math.radians(17.0)
     elevation = math.degrees(math.asin(float(np.clip(f[1], -1.0, 1.0)))) - 5.0
     elevation = math.radians(min(max(elevation, min_elevation), max_elevation))
-    return np.array([math.cos(elevation) * math.sin(azimuth), math.sin(elevation),
-                     math.cos(elevation) * math.cos(azimuth)])
+    return np.array(
+        [
+            math.cos(elevation) * math.sin(azimuth),
+            math.sin(elevation),
+            math.cos(elevation) * math.cos(azimuth),
+        ]
+    )
 
 
 def frame_view(lo, hi, pole=None, *, facing=None, aspect=4 / 3, angle=40.0):
@@ -134,12 +149,18 @@ def frame_view(lo, hi, pole=None, *, facing=None, aspect=4 / 3, angle=40.0):
     for corner in np.array(np.meshgrid(*zip(lo, hi))).T.reshape(-1, 3):
         rel = corner - target
         depth_offset = rel @ d
-        dist = max(dist, abs(rel @ right) / tan_h + depth_offset,
-                   abs(rel @ up) / tan_v + depth_offset)
+        dist = max(
+            dist, abs(rel @ right) / tan_h + depth_offset, abs(rel @ up) / tan_v + depth_offset
+        )
     dist = max(dist, 1e-3)
     sun = _unit(0.55 * d - 0.45 * right + 0.8 * np.array([0.0, 1.0, 0.0]))
-    return View(location=target + dist * d, look_at=target, angle=angle, sun_direction=sun,
-                ground_y=ground_y)
+    return View(
+        location=target + dist * d,
+        look_at=target,
+        angle=angle,
+        sun_direction=sun,
+        ground_y=ground_y,
+    )
 
 
 # PoleParams' defaults (csrc/collision/params.h): the pole drawn for a flag pinned to a pole
@@ -161,8 +182,9 @@ def scene_pole(scene):
 
 
 def pole_enabled(pole):
-    return (bool(getattr(pole, "enabled", True)) and float(pole.height) > 0
-            and float(pole.radius) > 0)
+    return (
+        bool(getattr(pole, "enabled", True)) and float(pole.height) > 0 and float(pole.radius) > 0
+    )
 
 
 def pole_text(pole):
@@ -225,17 +247,21 @@ def check_texture(texture):
         return None
     texture = Path(texture)
     if texture.suffix.lower() not in IMAGE_TYPES:
-        raise ValueError(f"texture should be an image file ({', '.join(sorted(IMAGE_TYPES))}), "
-                         f"got '{texture}'")
+        raise ValueError(
+            f"texture should be an image file ({', '.join(sorted(IMAGE_TYPES))}), "
+            f"got '{texture}'"
+        )
     if not texture.is_file():
         raise FileNotFoundError(f"texture image '{texture}' not found")
     kind = IMAGE_TYPES[texture.suffix.lower()]
     with open(texture, "rb") as f:
         head = f.read(32)
     if not _SIGNATURES[kind](head):
-        raise ValueError(f"texture should be a {kind} image, as its name says, but '{texture}' "
-                         f"does not start like one (first bytes {head[:8]!r}); POV-Ray could not "
-                         f"read it")
+        raise ValueError(
+            f"texture should be a {kind} image, as its name says, but '{texture}' "
+            f"does not start like one (first bytes {head[:8]!r}); POV-Ray could not "
+            f"read it"
+        )
     return texture
 
 
@@ -279,8 +305,13 @@ def scene_text(view, pole, texture_name):
 
 
 def ini_text(width, height, final_frame, final_clock):
-    return fill_template("flag.ini.in", width=int(width), height=int(height),
-                         final_frame=int(final_frame), final_clock=f"{final_clock:.6f}")
+    return fill_template(
+        "flag.ini.in",
+        width=int(width),
+        height=int(height),
+        final_frame=int(final_frame),
+        final_clock=f"{final_clock:.6f}",
+    )
 
 
 def library_paths(povray_binary=None):
@@ -297,20 +328,33 @@ def povray_home_files(povray_binary=None):
     export): without it POV-Ray warns that the user configuration file is missing.
     I/O is restricted to the export folder (read and write) and the standard include folders."""
     libs = [p for p in library_paths(povray_binary) if not set(p) & set(' \t";=')]
-    conf = ["; flagsim: POV-Ray user configuration for this export (HOME is this folder when",
-            "; flagsim renders).", "[File I/O Security]", "restricted",
-            "[Shellout Security]", "forbidden", "[Permitted Paths]"]
+    conf = [
+        "; flagsim: POV-Ray user configuration for this export (HOME is this folder when",
+        "; flagsim renders).",
+        "[File I/O Security]",
+        "restricted",
+        "[Shellout Security]",
+        "forbidden",
+        "[Permitted Paths]",
+    ]
     conf += [f"read* = {p}" for p in libs]
     conf += ["read+write* = %HOME%"]
-    ini = ["; flagsim: POV-Ray defaults for this export", "Display=Off", "Pause_When_Done=Off",
-           "Verbose=Off"]
+    ini = [
+        "; flagsim: POV-Ray defaults for this export",
+        "Display=Off",
+        "Pause_When_Done=Off",
+        "Verbose=Off",
+    ]
     ini += [f'Library_Path="{p}"' for p in libs]
-    return {".povray/3.7/povray.conf": "\n".join(conf) + "\n",
-            ".povray/3.7/povray.ini": "\n".join(ini) + "\n"}
+    return {
+        ".povray/3.7/povray.conf": "\n".join(conf) + "\n",
+        ".povray/3.7/povray.ini": "\n".join(ini) + "\n",
+    }
 
 
-def write_static_files(out_dir, *, view, pole, texture, width, height, final_frame, final_clock,
-                       povray_binary=None):
+def write_static_files(
+    out_dir, *, view, pole, texture, width, height, final_frame, final_clock, povray_binary=None
+):
     """Write flag.pov, flag.ini, the texture copy and POV-Ray's private config (unchanged files
     are left alone). Returns the list of files written."""
     out = Path(out_dir)
@@ -318,7 +362,9 @@ def write_static_files(out_dir, *, view, pole, texture, width, height, final_fra
     (out / RENDER_DIR).mkdir(parents=True, exist_ok=True)
     (out / ".povray" / "3.7").mkdir(parents=True, exist_ok=True)
     texture_name = copy_texture(out, texture)
-    files = {SCENE_FILE: scene_text(view, pole, texture_name),
-             INI_FILE: ini_text(width, height, final_frame, final_clock)}
+    files = {
+        SCENE_FILE: scene_text(view, pole, texture_name),
+        INI_FILE: ini_text(width, height, final_frame, final_clock),
+    }
     files.update(povray_home_files(povray_binary))
     return [name for name, text in files.items() if write_text(out / name, text)]

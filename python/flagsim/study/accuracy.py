@@ -11,6 +11,7 @@ Parts (each point: settings, error, median wall time per step over repeats, step
 Cases run as pure functions of their settings through the study runner; each case stores its
 final state (trajectory, coupled) so errors are computed after all cases finished.
 """
+
 from __future__ import annotations
 
 import math
@@ -22,8 +23,22 @@ import numpy as np
 
 import flagsim
 
-COLUMNS = ["id", "part", "method", "dt", "resolution", "advection", "pressure", "tolerance",
-           "refinement", "steps", "error", "seconds_per_step", "steps_per_second", "state"]
+COLUMNS = [
+    "id",
+    "part",
+    "method",
+    "dt",
+    "resolution",
+    "advection",
+    "pressure",
+    "tolerance",
+    "refinement",
+    "steps",
+    "error",
+    "seconds_per_step",
+    "steps_per_second",
+    "state",
+]
 
 METHODS = ("implicit", "explicit_adaptive", "explicit_sub8")
 
@@ -35,6 +50,7 @@ def _set_method(scene: flagsim.Scene, method: str) -> None:
 
 
 # ---- scenes -------------------------------------------------------------------------------------
+
 
 def pair_scene(method: str, dt: float, k: float = 100.0) -> flagsim.Scene:
     """One free mass on a vertical spring (vertices 0-2 pinned): period 2 pi sqrt(m_3 / k)."""
@@ -54,7 +70,7 @@ def pair_scene(method: str, dt: float, k: float = 100.0) -> flagsim.Scene:
 
 def trajectory_scene(method: str, dt: float) -> flagsim.Scene:
     s = flagsim.Scene.paper()
-    s.air.model = "uniform"        # cloth alone: the coupled part runs the grid
+    s.air.model = "uniform"  # cloth alone: the coupled part runs the grid
     s.flapping.mode = "off"
     s.air.wind = (2.0, 0.0, 0.6)  # out of the flag's plane, so it swings
     s.integrator.cg_tolerance = 1e-10
@@ -72,6 +88,7 @@ def banner_scene(method: str, dt: float) -> flagsim.Scene:
 
 # ---- cases --------------------------------------------------------------------------------------
 
+
 def cases(quick: bool = False) -> list[dict[str, Any]]:
     out: list[dict[str, Any]] = []
     pair_divs = (25, 50, 100, 200) if quick else (25, 50, 100, 200, 400, 800, 1600)
@@ -81,16 +98,31 @@ def cases(quick: bool = False) -> list[dict[str, Any]]:
     traj_dts = (0.02, 0.01, 0.005) if quick else (0.02, 0.01, 0.005, 0.0025, 0.00125, 0.000625)
     for m in METHODS:
         for dt in traj_dts:
-            out.append(dict(id=f"trajectory-{m}-{dt:g}", part="trajectory", method=m, dt=dt,
-                            repeats=1 if quick else 3))
+            out.append(
+                dict(
+                    id=f"trajectory-{m}-{dt:g}",
+                    part="trajectory",
+                    method=m,
+                    dt=dt,
+                    repeats=1 if quick else 3,
+                )
+            )
     ref_dts = (2e-3, 1e-3) if quick else (2e-4, 1e-4)
     for dt in ref_dts:
-        out.append(dict(id=f"trajectory-reference-{dt:g}", part="trajectory-reference",
-                        method="implicit", dt=dt, repeats=1))
+        out.append(
+            dict(
+                id=f"trajectory-reference-{dt:g}",
+                part="trajectory-reference",
+                method="implicit",
+                dt=dt,
+                repeats=1,
+            )
+        )
     for m in ("implicit", "explicit_adaptive"):
-        for dt in ((0.02, 0.01) if quick else (0.04, 0.02, 0.01, 0.005)):
+        for dt in (0.02, 0.01) if quick else (0.04, 0.02, 0.01, 0.005):
             out.append(dict(id=f"banner-{m}-{dt:g}", part="banner", method=m, dt=dt, repeats=1))
     from . import accuracy_air
+
     out += accuracy_air.cases(quick)
     return out
 
@@ -111,6 +143,7 @@ def run_case(case: dict[str, Any], state_dir: str = "") -> dict[str, Any]:
     if part == "banner":
         return _run_banner(case)
     from . import accuracy_air
+
     return accuracy_air.run_case(case, state_dir)
 
 
@@ -138,6 +171,7 @@ def _run_pair(case: dict[str, Any]) -> dict[str, Any]:
 
 def _save_state(state_dir: str, case_id: str, x: np.ndarray) -> str:
     from .report import save_npy
+
     name = case_id.replace("/", "_") + ".npy"
     save_npy(os.path.join(state_dir, name), x)
     return name
@@ -152,16 +186,33 @@ def _run_trajectory(case: dict[str, Any], state_dir: str) -> dict[str, Any]:
         try:
             sim = flagsim.Simulation(trajectory_scene(case["method"], dt))
         except ValueError as e:  # a setting that cannot run, named before any step
-            return dict(dt=dt, steps=0, error="", seconds_per_step="", steps_per_second="",
-                        state=f"rejected: {str(e).split(' should')[0]}")
+            return dict(
+                dt=dt,
+                steps=0,
+                error="",
+                seconds_per_step="",
+                steps_per_second="",
+                state=f"rejected: {str(e).split(' should')[0]}",
+            )
         try:
             times.append(_timed_run(sim, steps) / steps)
         except flagsim.DivergenceError as e:
-            return dict(dt=dt, steps=sim.step_count, error="", seconds_per_step="",
-                        steps_per_second="", state=f"diverged: {e.cause}")
+            return dict(
+                dt=dt,
+                steps=sim.step_count,
+                error="",
+                seconds_per_step="",
+                steps_per_second="",
+                state=f"diverged: {e.cause}",
+            )
     spp = float(np.median(times))
-    return dict(dt=dt, steps=steps, seconds_per_step=spp, steps_per_second=1 / spp,
-                state=_save_state(state_dir, case["id"], sim.positions.copy()))
+    return dict(
+        dt=dt,
+        steps=steps,
+        seconds_per_step=spp,
+        steps_per_second=1 / spp,
+        state=_save_state(state_dir, case["id"], sim.positions.copy()),
+    )
 
 
 def _run_banner(case: dict[str, Any]) -> dict[str, Any]:
@@ -171,7 +222,9 @@ def _run_banner(case: dict[str, Any]) -> dict[str, Any]:
     steps = round(20.0 / dt)
     spp = _timed_run(sim, steps) / steps
     u = float(np.linalg.norm(s.air.wind[0][1]))
-    want = math.atan(0.5 * s.drag.coefficient * s.air.density * u * u / (s.flag.areal_density * 9.81))
+    want = math.atan(
+        0.5 * s.drag.coefficient * s.air.density * u * u / (s.flag.areal_density * 9.81)
+    )
     x = sim.positions.reshape(s.flag.rows, s.flag.cols, 3)
     d = x[1:] - x[:1]
     err = float(np.abs(np.arctan2(d[..., 2], -d[..., 1]) - want).max())
@@ -180,9 +233,12 @@ def _run_banner(case: dict[str, Any]) -> dict[str, Any]:
 
 # ---- analysis -----------------------------------------------------------------------------------
 
+
 def fill_state_errors(rows: list[dict[str, str]], state_dir: str) -> None:
     """Errors of the cases that stored a final state, against their part's reference."""
-    refs = sorted((r for r in rows if r["part"] == "trajectory-reference"), key=lambda r: float(r["dt"]))
+    refs = sorted(
+        (r for r in rows if r["part"] == "trajectory-reference"), key=lambda r: float(r["dt"])
+    )
     if len(refs) == 2 and all(r["state"].endswith(".npy") for r in refs):
         fine = np.load(os.path.join(state_dir, refs[0]["state"]))
         coarse = np.load(os.path.join(state_dir, refs[1]["state"]))
@@ -193,15 +249,23 @@ def fill_state_errors(rows: list[dict[str, str]], state_dir: str) -> None:
                 r["error"] = repr(float(np.sqrt(((x - reference) ** 2).sum(axis=1).mean())))
         refs[0]["error"] = repr(float(np.sqrt(((fine - reference) ** 2).sum(axis=1).mean())))
     from . import accuracy_air
+
     accuracy_air.fill_state_errors(rows, state_dir)
 
 
-def observed_order(rows: list[dict[str, str]], part: str, method: str, key: str = "dt",
-                   **match: str) -> float:
+def observed_order(
+    rows: list[dict[str, str]], part: str, method: str, key: str = "dt", **match: str
+) -> float:
     """Least-squares slope of log(error) against log(key) over the part's points."""
-    pts = [(float(r[key]), float(r["error"])) for r in rows
-           if r["part"] == part and r["method"] == method and r["error"] not in ("", "nan")
-           and float(r["error"]) > 0 and all(r.get(k) == v for k, v in match.items())]
+    pts = [
+        (float(r[key]), float(r["error"]))
+        for r in rows
+        if r["part"] == part
+        and r["method"] == method
+        and r["error"] not in ("", "nan")
+        and float(r["error"]) > 0
+        and all(r.get(k) == v for k, v in match.items())
+    ]
     if len(pts) < 2:
         return math.nan
     h, e = np.log([p[0] for p in pts]), np.log([p[1] for p in pts])

@@ -8,6 +8,7 @@ h: the whole method, where advect-then-project splitting makes both schemes firs
 and "dt~h^2" (time error negligible: the spatial order, where semi-Lagrangian's per-step
 interpolation error accumulates as h^2/dt and MacCormack's as h^3/dt).
 """
+
 from __future__ import annotations
 
 import math
@@ -36,25 +37,61 @@ def cases(quick: bool) -> list[dict[str, Any]]:
             tols = (1e-8,) if p == "fft" or quick else (1e-4, 1e-6, 1e-8)
             for tol in tols:
                 for n in sizes:
-                    out.append(dict(id=f"air-{adv}-{p}-{tol:g}-{n}", part="air", method=adv,
-                                    advection=adv, pressure=p, tolerance=tol, resolution=n,
-                                    refinement="cfl", repeats=1 if quick else 3))
+                    out.append(
+                        dict(
+                            id=f"air-{adv}-{p}-{tol:g}-{n}",
+                            part="air",
+                            method=adv,
+                            advection=adv,
+                            pressure=p,
+                            tolerance=tol,
+                            resolution=n,
+                            refinement="cfl",
+                            repeats=1 if quick else 3,
+                        )
+                    )
         for n in sizes:  # spatial order: fft (or pcg without FFTW) at its tightest tolerance
             p = "fft" if flagsim.has_fftw() else "pcg"
-            out.append(dict(id=f"air-{adv}-{p}-h2-{n}", part="air", method=adv, advection=adv,
-                            pressure=p, tolerance=1e-8, resolution=n, refinement="dt~h^2",
-                            repeats=1))
+            out.append(
+                dict(
+                    id=f"air-{adv}-{p}-h2-{n}",
+                    part="air",
+                    method=adv,
+                    advection=adv,
+                    pressure=p,
+                    tolerance=1e-8,
+                    resolution=n,
+                    refinement="dt~h^2",
+                    repeats=1,
+                )
+            )
     if _paper_has_grid():
         res = (8, 16) if quick else (8, 16, 32)
         dts = (0.02, 0.01) if quick else (0.02, 0.01, 0.005, 0.0025)
         for m in ("implicit", "explicit_adaptive"):
             for n in res:
                 for dt in dts:
-                    out.append(dict(id=f"coupled-{m}-{n}-{dt:g}", part="coupled", method=m,
-                                    resolution=n, dt=dt, repeats=1))
+                    out.append(
+                        dict(
+                            id=f"coupled-{m}-{n}-{dt:g}",
+                            part="coupled",
+                            method=m,
+                            resolution=n,
+                            dt=dt,
+                            repeats=1,
+                        )
+                    )
         ref = (24, 0.005) if quick else (48, 0.00125)
-        out.append(dict(id="coupled-reference", part="coupled-reference", method="implicit",
-                        resolution=ref[0], dt=ref[1], repeats=1))
+        out.append(
+            dict(
+                id="coupled-reference",
+                part="coupled-reference",
+                method="implicit",
+                resolution=ref[0],
+                dt=ref[1],
+                repeats=1,
+            )
+        )
     return out
 
 
@@ -66,8 +103,14 @@ def taylor_green(points: np.ndarray, t: float = 0.0) -> np.ndarray:
     k = 2 * math.pi / L
     decay = math.exp(-2 * NU * k * k * t)
     x, y = points[:, 0], points[:, 1]
-    return np.stack([U * np.sin(k * x) * np.cos(k * y) * decay,
-                     -U * np.cos(k * x) * np.sin(k * y) * decay, np.zeros_like(x)], axis=1)
+    return np.stack(
+        [
+            U * np.sin(k * x) * np.cos(k * y) * decay,
+            -U * np.cos(k * x) * np.sin(k * y) * decay,
+            np.zeros_like(x),
+        ],
+        axis=1,
+    )
 
 
 def run_case(case: dict[str, Any], state_dir: str) -> dict[str, Any]:
@@ -85,10 +128,17 @@ def _run_tg(case: dict[str, Any]) -> dict[str, Any]:
     dt = T_END / steps
     times, err = [], math.nan
     for _ in range(int(case.get("repeats", 1))):
-        fluid = flagsim.Fluid(resolution=(n, n, nz), cell_size=h, origin=(0.0, 0.0, 0.0),
-                              boundary="periodic", viscosity=NU, density=1.2,
-                              advection=case["advection"], pressure=case["pressure"],
-                              **({"pcg_tolerance": float(case["tolerance"])} if case["pressure"] == "pcg" else {}))
+        fluid = flagsim.Fluid(
+            resolution=(n, n, nz),
+            cell_size=h,
+            origin=(0.0, 0.0, 0.0),
+            boundary="periodic",
+            viscosity=NU,
+            density=1.2,
+            advection=case["advection"],
+            pressure=case["pressure"],
+            **({"pcg_tolerance": float(case["tolerance"])} if case["pressure"] == "pcg" else {}),
+        )
         fluid.set_velocity(lambda p: taylor_green(p, 0.0))
         t0 = time.perf_counter()
         for _ in range(steps):
@@ -98,13 +148,14 @@ def _run_tg(case: dict[str, Any]) -> dict[str, Any]:
         X, Y, Z = np.meshgrid(c, c, (np.arange(nz) + 0.5) * h, indexing="ij")
         pts = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
         diff = fluid.sample(pts) - taylor_green(pts, fluid.time)
-        err = float(np.sqrt((diff ** 2).sum(axis=1).mean()))
+        err = float(np.sqrt((diff**2).sum(axis=1).mean()))
     spp = float(np.median(times))
     return dict(dt=dt, steps=steps, error=err, seconds_per_step=spp, steps_per_second=1 / spp)
 
 
 def coupled_scene(method: str, resolution: int, dt: float) -> flagsim.Scene:
     from .accuracy import _set_method
+
     s = flagsim.Scene.paper()
     n0 = s.air.resolution
     size = [r * s.air.cell_size for r in n0]
@@ -119,6 +170,7 @@ def coupled_scene(method: str, resolution: int, dt: float) -> flagsim.Scene:
 
 def _run_coupled(case: dict[str, Any], state_dir: str) -> dict[str, Any]:
     from .accuracy import _save_state
+
     dt = float(case["dt"])
     steps = round(1.0 / dt)
     sim = flagsim.Simulation(coupled_scene(case["method"], int(case["resolution"]), dt))
@@ -128,8 +180,13 @@ def _run_coupled(case: dict[str, Any], state_dir: str) -> dict[str, Any]:
     except flagsim.DivergenceError as e:
         return dict(dt=dt, steps=sim.step_count, state=f"diverged: {e.cause}")
     spp = (time.perf_counter() - t0) / steps
-    return dict(dt=dt, steps=steps, seconds_per_step=spp, steps_per_second=1 / spp,
-                state=_save_state(state_dir, case["id"], sim.positions.copy()))
+    return dict(
+        dt=dt,
+        steps=steps,
+        seconds_per_step=spp,
+        steps_per_second=1 / spp,
+        state=_save_state(state_dir, case["id"], sim.positions.copy()),
+    )
 
 
 def fill_state_errors(rows: list[dict[str, str]], state_dir: str) -> None:

@@ -1,4 +1,5 @@
 """Shared report helpers: machine description and whole-or-nothing file writes."""
+
 from __future__ import annotations
 
 import os
@@ -27,18 +28,30 @@ def machine_description() -> str:
         pass
     rev = "unknown"
     try:
-        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                             cwd=os.path.dirname(__file__), timeout=5).stdout.strip() or rev
+        rev = (
+            subprocess.run(
+                ["git", "rev-parse", "--short", "HEAD"],
+                capture_output=True,
+                text=True,
+                cwd=os.path.dirname(__file__),
+                timeout=5,
+            ).stdout.strip()
+            or rev
+        )
     except (OSError, subprocess.SubprocessError):
         pass
     import flagsim
-    return (f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, "
-            f"flagsim {flagsim.__version__} (git {rev})")
+
+    return (
+        f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, "
+        f"flagsim {flagsim.__version__} (git {rev})"
+    )
 
 
 def save_npy(path: str, array) -> None:
     """np.save, whole or not at all."""
     import numpy as np
+
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     tmp = f"{path}.tmp{os.getpid()}.npy"
     np.save(tmp, array)

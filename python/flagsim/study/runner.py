@@ -5,6 +5,7 @@ Each case is a plain dict of settings with a unique "id"; the case function is a
 finish (one write per row, flushed), so an interrupted study resumes by skipping the ids already
 in the file. Results do not depend on where or in which order a case ran.
 """
+
 from __future__ import annotations
 
 import concurrent.futures as cf
@@ -40,10 +41,17 @@ def _rewrite_clean(path: str, columns: Sequence[str], rows: list[dict[str, str]]
     os.replace(tmp, path)
 
 
-def run_cases(cases: Sequence[dict[str, Any]], fn: Callable[[dict[str, Any]], dict[str, Any]],
-              path: str, columns: Sequence[str], *, jobs: int = 1,
-              executor: cf.Executor | None = None, progress: bool = True,
-              desc: str = "cases") -> list[dict[str, str]]:
+def run_cases(
+    cases: Sequence[dict[str, Any]],
+    fn: Callable[[dict[str, Any]], dict[str, Any]],
+    path: str,
+    columns: Sequence[str],
+    *,
+    jobs: int = 1,
+    executor: cf.Executor | None = None,
+    progress: bool = True,
+    desc: str = "cases",
+) -> list[dict[str, str]]:
     """Run every case not yet in `path`, appending its row; return all rows in case order.
 
     jobs = 1 runs in this process (best for timing); jobs > 1 uses a process pool unless an
@@ -57,8 +65,10 @@ def run_cases(cases: Sequence[dict[str, Any]], fn: Callable[[dict[str, Any]], di
         with open(path, newline="") as f:
             header = f.readline().strip().split(",")
         if header != list(columns):
-            raise ValueError(f"{path} has columns {header}, expected {list(columns)}: "
-                             "remove it or choose another --out")
+            raise ValueError(
+                f"{path} has columns {header}, expected {list(columns)}: "
+                "remove it or choose another --out"
+            )
         existing = read_rows(path)
     else:
         os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
@@ -70,6 +80,7 @@ def run_cases(cases: Sequence[dict[str, Any]], fn: Callable[[dict[str, Any]], di
     bar = None
     if progress and todo:
         from tqdm import tqdm
+
         bar = tqdm(total=len(todo), desc=desc, unit="case", dynamic_ncols=True)
 
     def record(case: dict[str, Any], result: dict[str, Any]) -> None:
@@ -104,6 +115,7 @@ def run_cases(cases: Sequence[dict[str, Any]], fn: Callable[[dict[str, Any]], di
 
 def _csv_line(values: Iterable[Any]) -> str:
     import io
+
     buf = io.StringIO()
     csv.writer(buf).writerow(["" if v is None else v for v in values])
     return buf.getvalue()

@@ -13,6 +13,7 @@ integrator, plus pathological cases. Each case ends in exactly one outcome (docs
                must never happen
   nonfinite    some output is not finite without an error: must never happen
 """
+
 from __future__ import annotations
 
 import itertools
@@ -27,35 +28,86 @@ import flagsim
 INTEGRATORS = ("explicit", "explicit_adaptive", "implicit")
 FLAPPING = ("off", "displace", "force")
 OUTCOMES = ("plausible", "diverged", "implausible", "nonfinite")
-FULL = dict(k_s=(1e1, 1e3, 1e5, 1e7), wind=(0.0, 2.0, 10.0, 30.0, 60.0, 100.0),
-            dt=(1e-4, 1e-3, 1e-2, 5e-2), density=(1e-3, 1e-1, 10.0), flapping=FLAPPING)
-REDUCED = dict(k_s=(1e1, 1e7), wind=(0.0, 100.0), dt=(1e-3, 5e-2), density=(1e-3, 10.0),
-               flapping=("off",))
+FULL = dict(
+    k_s=(1e1, 1e3, 1e5, 1e7),
+    wind=(0.0, 2.0, 10.0, 30.0, 60.0, 100.0),
+    dt=(1e-4, 1e-3, 1e-2, 5e-2),
+    density=(1e-3, 1e-1, 10.0),
+    flapping=FLAPPING,
+)
+REDUCED = dict(
+    k_s=(1e1, 1e7), wind=(0.0, 100.0), dt=(1e-3, 5e-2), density=(1e-3, 10.0), flapping=("off",)
+)
 # The reduced set's flapping cases: displace and force at k_s 1e5..1e7 in the paper's wind and a
 # storm, light and heavy, at the paper's dt and 5x it.
-REDUCED_FLAPPING = dict(k_s=(1e5, 1e7), wind=(2.0, 30.0), dt=(1e-2, 5e-2), density=(0.15, 10.0),
-                        flapping=("displace", "force"))
-PATHOLOGICAL = ("coincident_masses", "strip_2xN", "fine_128x192", "wind_reversal_at_pole",
-                "gust_30ms", "long_run_1000s", "blown_into_pole", "self_collision",
-                "heavy_stiff_flapping")
+REDUCED_FLAPPING = dict(
+    k_s=(1e5, 1e7),
+    wind=(2.0, 30.0),
+    dt=(1e-2, 5e-2),
+    density=(0.15, 10.0),
+    flapping=("displace", "force"),
+)
+PATHOLOGICAL = (
+    "coincident_masses",
+    "strip_2xN",
+    "fine_128x192",
+    "wind_reversal_at_pole",
+    "gust_30ms",
+    "long_run_1000s",
+    "blown_into_pole",
+    "self_collision",
+    "heavy_stiff_flapping",
+)
 # Strain a scene with integrator.strain_limit = s promises: (1 + s + this) x rest length; the
 # check stage holds every step to it (kStrainLimitSlack, csrc/cloth/params.h).
 STRAIN_SLACK = flagsim._core.STRAIN_LIMIT_SLACK
 
-COLUMNS = ["id", "kind", "integrator", "flapping", "k_s", "wind", "dt", "density", "duration",
-           "outcome", "cause", "steps", "max_strain", "strain_promise", "energy_min",
-           "energy_max", "energy_scale", "unexplained", "worst_step_unexplained",
-           "ledger_error", "max_substeps", "max_cg_iterations", "energy_halvings", "wall_s"]
+COLUMNS = [
+    "id",
+    "kind",
+    "integrator",
+    "flapping",
+    "k_s",
+    "wind",
+    "dt",
+    "density",
+    "duration",
+    "outcome",
+    "cause",
+    "steps",
+    "max_strain",
+    "strain_promise",
+    "energy_min",
+    "energy_max",
+    "energy_scale",
+    "unexplained",
+    "worst_step_unexplained",
+    "ledger_error",
+    "max_substeps",
+    "max_cg_iterations",
+    "energy_halvings",
+    "wall_s",
+]
 
 
 def matrix_cases(axes: dict[str, tuple], duration: float) -> list[dict[str, Any]]:
     cases = []
-    for k, w, dt, rho, flap, integ in itertools.product(axes["k_s"], axes["wind"], axes["dt"],
-                                                        axes["density"], axes["flapping"],
-                                                        INTEGRATORS):
-        cases.append(dict(id=f"m-{integ}-{flap}-k{k:g}-w{w:g}-dt{dt:g}-rho{rho:g}",
-                          kind="matrix", integrator=integ, flapping=flap, k_s=k, wind=w, dt=dt,
-                          density=rho, duration=duration))
+    for k, w, dt, rho, flap, integ in itertools.product(
+        axes["k_s"], axes["wind"], axes["dt"], axes["density"], axes["flapping"], INTEGRATORS
+    ):
+        cases.append(
+            dict(
+                id=f"m-{integ}-{flap}-k{k:g}-w{w:g}-dt{dt:g}-rho{rho:g}",
+                kind="matrix",
+                integrator=integ,
+                flapping=flap,
+                k_s=k,
+                wind=w,
+                dt=dt,
+                density=rho,
+                duration=duration,
+            )
+        )
     return cases
 
 
@@ -67,13 +119,25 @@ def pathological_cases(reduced: bool) -> list[dict[str, Any]]:
         if reduced and name == "fine_128x192":
             continue
         for integ in INTEGRATORS:
-            duration = {"long_run_1000s": 20.0 if reduced else 1000.0,
-                        "fine_128x192": 0.1}.get(name, 0.5 if reduced else 2.0)
+            duration = {"long_run_1000s": 20.0 if reduced else 1000.0, "fine_128x192": 0.1}.get(
+                name, 0.5 if reduced else 2.0
+            )
             k, rho, flap = 100.0, 0.15, "off"
             if name == "heavy_stiff_flapping":  # the matrix's heavy, stiff corner, flapping into
                 k, rho, flap = 1e7, 10.0, "displace"  # the pole in a gust
-            cases.append(dict(id=f"p-{name}-{integ}", kind=name, integrator=integ, flapping=flap,
-                              k_s=k, wind=2.0, dt=0.01, density=rho, duration=duration))
+            cases.append(
+                dict(
+                    id=f"p-{name}-{integ}",
+                    kind=name,
+                    integrator=integ,
+                    flapping=flap,
+                    k_s=k,
+                    wind=2.0,
+                    dt=0.01,
+                    density=rho,
+                    duration=duration,
+                )
+            )
     return cases
 
 
@@ -98,6 +162,7 @@ def build_scene(case: dict[str, Any]) -> tuple[flagsim.Scene, Any]:
     _integrator(s, case["integrator"])
     prepare = None
     if kind == "coincident_masses":
+
         def prepare(sim):  # two neighbouring masses at one point: a spring of zero length
             x = sim.positions.copy()
             x[2] = x[1]
@@ -138,8 +203,10 @@ def unexplained(ledger: dict[str, float], since: dict[str, float]) -> float:
     of the integrator remainder's change plus that of the projections' (strain limiting, pole,
     self-collision) together; the check stage's measure for a step (EnergyLedger in
     csrc/scene/simulation.h)."""
+
     def change(*keys):
         return sum(ledger[k] - since[k] for k in keys)
+
     return max(change("integrator"), 0.0) + max(change(*_PROJECTIONS), 0.0)
 
 
@@ -162,11 +229,23 @@ def run_case(case: dict[str, Any]) -> dict[str, Any]:
     try:
         sim = flagsim.Simulation(scene)
     except ValueError as err:  # parameters that make a plausible run impossible, named up front
-        return dict(outcome="diverged", cause=f"rejected: {str(err).split(' should')[0]}",
-                    steps=0, max_strain="", strain_promise=f"{strain_promise(scene):.6g}",
-                    energy_min="", energy_max="", energy_scale="", unexplained="",
-                    worst_step_unexplained="", ledger_error="", max_substeps=0,
-                    max_cg_iterations=0, energy_halvings=0, wall_s="0")
+        return dict(
+            outcome="diverged",
+            cause=f"rejected: {str(err).split(' should')[0]}",
+            steps=0,
+            max_strain="",
+            strain_promise=f"{strain_promise(scene):.6g}",
+            energy_min="",
+            energy_max="",
+            energy_scale="",
+            unexplained="",
+            worst_step_unexplained="",
+            ledger_error="",
+            max_substeps=0,
+            max_cg_iterations=0,
+            energy_halvings=0,
+            wall_s="0",
+        )
     if prepare:
         prepare(sim)
     steps = max(1, round(float(case["duration"]) / scene.dt))
@@ -194,10 +273,15 @@ def run_case(case: dict[str, Any]) -> dict[str, Any]:
             done += n
             e = sum(sim.energy().values())
             ledger = sim.energy_ledger()
-            ledger_error = max(ledger_error, abs(e - e0 - sum(v for k, v in ledger.items()
-                                                              if k not in ("gravity", "edits"))
-                                                 + sum(v for k, v in l0.items()
-                                                       if k not in ("gravity", "edits"))))
+            ledger_error = max(
+                ledger_error,
+                abs(
+                    e
+                    - e0
+                    - sum(v for k, v in ledger.items() if k not in ("gravity", "edits"))
+                    + sum(v for k, v in l0.items() if k not in ("gravity", "edits"))
+                ),
+            )
             e_min, e_max = min(e_min, e), max(e_max, e)
             strain = max(strain, sim.max_strain())
             if not _all_finite(sim, e):
@@ -215,26 +299,45 @@ def run_case(case: dict[str, Any]) -> dict[str, Any]:
             why.append(f"strain {strain:.3g} > promised {promise:.3g}")
         allowed = scene.integrator.energy_tolerance * scale
         if most > allowed:
-            why.append(f"unexplained energy {most:.3g} J > "
-                       f"{scene.integrator.energy_tolerance:g} x scale {scale:.3g} J")
+            why.append(
+                f"unexplained energy {most:.3g} J > "
+                f"{scene.integrator.energy_tolerance:g} x scale {scale:.3g} J"
+            )
         if worst_step > allowed:
-            why.append(f"a step made {worst_step:.3g} J unexplained > "
-                       f"{scene.integrator.energy_tolerance:g} x scale {scale:.3g} J")
+            why.append(
+                f"a step made {worst_step:.3g} J unexplained > "
+                f"{scene.integrator.energy_tolerance:g} x scale {scale:.3g} J"
+            )
         if ledger_error > 1e-9 * (scale + max(abs(e_min), abs(e_max))):
             why.append(f"ledger off by {ledger_error:.3g} J")
         if why:
             outcome, cause = "implausible", "; ".join(why)
-    return dict(outcome=outcome, cause=cause, steps=sim.step_count, max_strain=f"{strain:.6g}",
-                strain_promise=f"{promise:.6g}", energy_min=f"{e_min:.6g}",
-                energy_max=f"{e_max:.6g}", energy_scale=f"{scale:.6g}",
-                unexplained=f"{most:.6g}", worst_step_unexplained=f"{worst_step:.6g}",
-                ledger_error=f"{ledger_error:.3g}", max_substeps=subs, max_cg_iterations=cgs,
-                energy_halvings=halvings, wall_s=f"{time.perf_counter() - t0:.4g}")
+    return dict(
+        outcome=outcome,
+        cause=cause,
+        steps=sim.step_count,
+        max_strain=f"{strain:.6g}",
+        strain_promise=f"{promise:.6g}",
+        energy_min=f"{e_min:.6g}",
+        energy_max=f"{e_max:.6g}",
+        energy_scale=f"{scale:.6g}",
+        unexplained=f"{most:.6g}",
+        worst_step_unexplained=f"{worst_step:.6g}",
+        ledger_error=f"{ledger_error:.3g}",
+        max_substeps=subs,
+        max_cg_iterations=cgs,
+        energy_halvings=halvings,
+        wall_s=f"{time.perf_counter() - t0:.4g}",
+    )
 
 
 def _all_finite(sim: flagsim.Simulation, energy: float) -> bool:
-    return bool(np.isfinite(sim.positions).all() and np.isfinite(sim.velocities).all()
-                and np.isfinite(sim.normals).all() and math.isfinite(energy))
+    return bool(
+        np.isfinite(sim.positions).all()
+        and np.isfinite(sim.velocities).all()
+        and np.isfinite(sim.normals).all()
+        and math.isfinite(energy)
+    )
 
 
 def cases(reduced: bool) -> list[dict[str, Any]]:
@@ -246,8 +349,9 @@ def cases(reduced: bool) -> list[dict[str, Any]]:
     return matrix_cases(axes, duration) + flapping + pathological_cases(reduced)
 
 
-def summarize(rows: list[dict[str, str]], by: tuple[str, ...] = ("integrator",)
-              ) -> dict[tuple[str, ...], dict[str, int]]:
+def summarize(
+    rows: list[dict[str, str]], by: tuple[str, ...] = ("integrator",)
+) -> dict[tuple[str, ...], dict[str, int]]:
     """Counts of each outcome per value of the `by` columns."""
     out: dict[tuple[str, ...], dict[str, int]] = {}
     for r in rows:
@@ -264,41 +368,64 @@ def headline(rows: list[dict[str, str]]) -> str:
     """One sentence for the README: counts over the whole study."""
     total = summarize(rows, by=())[()]
     per = summarize(rows)
-    parts = ", ".join(f"{i} {per[(i,)]['plausible']} of {sum(per[(i,)].values())} plausible"
-                      for i in INTEGRATORS if (i,) in per)
-    return (f"{len(rows)} cases: {parts}; {total['implausible']} implausible and "
-            f"{total['nonfinite']} non-finite; every other case raised DivergenceError.")
+    parts = ", ".join(
+        f"{i} {per[(i,)]['plausible']} of {sum(per[(i,)].values())} plausible"
+        for i in INTEGRATORS
+        if (i,) in per
+    )
+    return (
+        f"{len(rows)} cases: {parts}; {total['implausible']} implausible and "
+        f"{total['nonfinite']} non-finite; every other case raised DivergenceError."
+    )
 
 
 def write_report(rows: list[dict[str, str]], path: str, machine: str) -> None:
     head = "| {} | " + " | ".join(OUTCOMES) + " |"
     rule = "|---|" + "---:|" * len(OUTCOMES)
-    lines = ["# Stability study", "",
-             "Generated by `flagsim study stability`; rerun it to regenerate this page.", "",
-             f"Machine: {machine}", "",
-             "Each case runs the paper's flag (8 x 11 masses, pinned to the pole, gravity, paper "
-             "drag, uniform wind along (1, 0, 0.3)) with the settings of its row; springs: "
-             "stretch k_s, shear k_s/5, bend k_s/20; strain limit 10 %, energy tolerance 0.1 "
-             "(the defaults). Outcomes (docs/energy.md):", "",
-             "- **plausible**: ran to the end, finite, the energy ledger balanced (to 1e-9 of "
-             "the energy scale m g H + m U^2/2; no step, and not the run as a whole, made more "
-             "than integrator.energy_tolerance x that scale beyond the stages' work) and strain "
-             f"within the scene's promise (strain limit + {STRAIN_SLACK:g});",
-             "- **diverged** (reported): DivergenceError raised with the state restored, cause "
-             "given; or the scene rejected before any step (ValueError naming the parameter, "
-             "cause `rejected: <parameter>`);",
-             "- **implausible**: finite but failing the ledger or the strain test (must never "
-             "happen);",
-             "- **nonfinite**: non-finite output without an error (must never happen).", "",
-             "`unexplained`: the most energy the run held beyond its stages' work (net integrator "
-             "remainder + strain limiting + pole + self-collision since the start), J; `energy "
-             "halvings`: the most halvings one step needed, of the step or of an implicit piece, "
-             "before it was plausible.", "",
-             "## Counts", "", headline(rows), "", head.format("integrator"), rule]
+    lines = [
+        "# Stability study",
+        "",
+        "Generated by `flagsim study stability`; rerun it to regenerate this page.",
+        "",
+        f"Machine: {machine}",
+        "",
+        "Each case runs the paper's flag (8 x 11 masses, pinned to the pole, gravity, paper "
+        "drag, uniform wind along (1, 0, 0.3)) with the settings of its row; springs: "
+        "stretch k_s, shear k_s/5, bend k_s/20; strain limit 10 %, energy tolerance 0.1 "
+        "(the defaults). Outcomes (docs/energy.md):",
+        "",
+        "- **plausible**: ran to the end, finite, the energy ledger balanced (to 1e-9 of "
+        "the energy scale m g H + m U^2/2; no step, and not the run as a whole, made more "
+        "than integrator.energy_tolerance x that scale beyond the stages' work) and strain "
+        f"within the scene's promise (strain limit + {STRAIN_SLACK:g});",
+        "- **diverged** (reported): DivergenceError raised with the state restored, cause "
+        "given; or the scene rejected before any step (ValueError naming the parameter, "
+        "cause `rejected: <parameter>`);",
+        "- **implausible**: finite but failing the ledger or the strain test (must never "
+        "happen);",
+        "- **nonfinite**: non-finite output without an error (must never happen).",
+        "",
+        "`unexplained`: the most energy the run held beyond its stages' work (net integrator "
+        "remainder + strain limiting + pole + self-collision since the start), J; `energy "
+        "halvings`: the most halvings one step needed, of the step or of an implicit piece, "
+        "before it was plausible.",
+        "",
+        "## Counts",
+        "",
+        headline(rows),
+        "",
+        head.format("integrator"),
+        rule,
+    ]
     for (integ,), c in sorted(summarize(rows).items(), key=lambda kv: INTEGRATORS.index(kv[0][0])):
         lines.append(_count_row(integ, c))
-    lines += ["", "Per integrator and flapping mode:", "",
-              head.format("integrator, flapping"), rule]
+    lines += [
+        "",
+        "Per integrator and flapping mode:",
+        "",
+        head.format("integrator, flapping"),
+        rule,
+    ]
     by_flap = summarize(rows, by=("integrator", "flapping"))
     for integ, flap in itertools.product(INTEGRATORS, FLAPPING):
         if (integ, flap) in by_flap:
@@ -310,26 +437,39 @@ def write_report(rows: list[dict[str, str]], path: str, machine: str) -> None:
             causes[key] = causes.get(key, 0) + 1
     if causes:
         lines += ["", "Causes: " + ", ".join(f"{k} x {v}" for k, v in sorted(causes.items()))]
-    lines += ["", "## Pathological cases", "",
-              "| case | integrator | flapping | outcome | cause | max strain | energy range (J) | "
-              "unexplained (J) | energy scale (J) | max substeps | energy halvings | wall (s) |",
-              "|---|---|---|---|---|---:|---|---:|---:|---:|---:|---:|"]
+    lines += [
+        "",
+        "## Pathological cases",
+        "",
+        "| case | integrator | flapping | outcome | cause | max strain | energy range (J) | "
+        "unexplained (J) | energy scale (J) | max substeps | energy halvings | wall (s) |",
+        "|---|---|---|---|---|---:|---|---:|---:|---:|---:|---:|",
+    ]
     for r in rows:
         if r["kind"] != "matrix":
-            lines.append(f"| {r['kind']} | {r['integrator']} | {r['flapping']} | {r['outcome']} | "
-                         f"{r['cause']} | {r['max_strain']} | {r['energy_min']} .. "
-                         f"{r['energy_max']} | {r['unexplained']} | {r['energy_scale']} | "
-                         f"{r['max_substeps']} | {r['energy_halvings']} | {r['wall_s']} |")
-    lines += ["", "## Matrix", "",
-              "| integrator | flapping | k_s (N/m) | wind (m/s) | dt (s) | density (kg/m^2) | "
-              "outcome | cause | max strain | unexplained (J) | max substeps | energy halvings | "
-              "wall (s) |",
-              "|---|---|---:|---:|---:|---:|---|---|---:|---:|---:|---:|---:|"]
+            lines.append(
+                f"| {r['kind']} | {r['integrator']} | {r['flapping']} | {r['outcome']} | "
+                f"{r['cause']} | {r['max_strain']} | {r['energy_min']} .. "
+                f"{r['energy_max']} | {r['unexplained']} | {r['energy_scale']} | "
+                f"{r['max_substeps']} | {r['energy_halvings']} | {r['wall_s']} |"
+            )
+    lines += [
+        "",
+        "## Matrix",
+        "",
+        "| integrator | flapping | k_s (N/m) | wind (m/s) | dt (s) | density (kg/m^2) | "
+        "outcome | cause | max strain | unexplained (J) | max substeps | energy halvings | "
+        "wall (s) |",
+        "|---|---|---:|---:|---:|---:|---|---|---:|---:|---:|---:|---:|",
+    ]
     for r in rows:
         if r["kind"] == "matrix":
-            lines.append(f"| {r['integrator']} | {r['flapping']} | {r['k_s']} | {r['wind']} | "
-                         f"{r['dt']} | {r['density']} | {r['outcome']} | {r['cause']} | "
-                         f"{r['max_strain']} | {r['unexplained']} | {r['max_substeps']} | "
-                         f"{r['energy_halvings']} | {r['wall_s']} |")
+            lines.append(
+                f"| {r['integrator']} | {r['flapping']} | {r['k_s']} | {r['wind']} | "
+                f"{r['dt']} | {r['density']} | {r['outcome']} | {r['cause']} | "
+                f"{r['max_strain']} | {r['unexplained']} | {r['max_substeps']} | "
+                f"{r['energy_halvings']} | {r['wall_s']} |"
+            )
     from .report import write_text
+
     write_text(path, "\n".join(lines) + "\n")

@@ -1,4 +1,5 @@
 """Starting shapes for tests and benchmarks."""
+
 import numpy as np
 
 

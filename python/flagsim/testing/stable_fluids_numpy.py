@@ -14,6 +14,7 @@ agrees to round-off:
 
 No mean-flow driving and no fans: the k = 0 mode is left as it is.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -34,8 +35,9 @@ class StableFluidsNumpy:
     ``u``, ``v``, ``w`` are (nx, ny, nz) float64 arrays (m/s), assigned freely between steps.
     """
 
-    def __init__(self, resolution=(16, 16, 16), cell_size=0.125, origin=(0.0, 0.0, 0.0),
-                 viscosity=0.0):
+    def __init__(
+        self, resolution=(16, 16, 16), cell_size=0.125, origin=(0.0, 0.0, 0.0), viscosity=0.0
+    ):
         self.n = tuple(int(x) for x in resolution)
         if len(self.n) != 3 or min(self.n) < 1:
             raise ValueError(f"resolution should be 3 cell counts >= 1, got {resolution}")
@@ -51,8 +53,9 @@ class StableFluidsNumpy:
         self.v = np.zeros(self.n)
         self.w = np.zeros(self.n)
         # node indices (cells) of a (nx, ny, nz) array, stacked on the last axis
-        self._index = np.stack(np.meshgrid(*[np.arange(k, dtype=float) for k in self.n],
-                                           indexing="ij"), axis=-1)
+        self._index = np.stack(
+            np.meshgrid(*[np.arange(k, dtype=float) for k in self.n], indexing="ij"), axis=-1
+        )
         theta = [2.0 * np.pi * np.arange(k) / k for k in self.n]
         t = np.meshgrid(*theta, indexing="ij")
         self._div_symbol = [(np.exp(1j * td) - 1.0) / self.h for td in t]
@@ -82,7 +85,9 @@ class StableFluidsNumpy:
         fx, fy, fz = f[..., 0], f[..., 1], f[..., 2]
 
         def at(a, b, c):
-            return q[(idx1[0] if a else idx0[0], idx1[1] if b else idx0[1], idx1[2] if c else idx0[2])]
+            return q[
+                (idx1[0] if a else idx0[0], idx1[1] if b else idx0[1], idx1[2] if c else idx0[2])
+            ]
 
         def lerp(a, b, t):
             return a + t * (b - a)
@@ -99,8 +104,10 @@ class StableFluidsNumpy:
         out = []
         for c in range(3):
             x = self._index + _offset(c)  # node positions in cell units
-            vel = np.stack([fields[e] if e == c else self._interpolate(fields[e], e, x)
-                            for e in range(3)], axis=-1)
+            vel = np.stack(
+                [fields[e] if e == c else self._interpolate(fields[e], e, x) for e in range(3)],
+                axis=-1,
+            )
             out.append(self._interpolate(fields[c], c, x - (dt / self.h) * vel))
         self.u, self.v, self.w = out
 
@@ -118,8 +125,14 @@ class StableFluidsNumpy:
 
     def divergence(self) -> np.ndarray:
         """Cell divergence (nx, ny, nz), 1/s."""
-        return (np.roll(self.u, -1, 0) - self.u + np.roll(self.v, -1, 1) - self.v
-                + np.roll(self.w, -1, 2) - self.w) / self.h
+        return (
+            np.roll(self.u, -1, 0)
+            - self.u
+            + np.roll(self.v, -1, 1)
+            - self.v
+            + np.roll(self.w, -1, 2)
+            - self.w
+        ) / self.h
 
     def step(self, dt: float) -> None:
         """One Stable Fluids step: advect, diffuse, project."""

@@ -38,7 +38,8 @@ TEST(Topology, MassAndAreaAddUpAndPinsHaveZeroInverseMass) {
   EXPECT_FALSE(t.pinned(1));
   // structural + shear + bend counts of an R x C grid
   const int R = p.rows, C = p.cols;
-  EXPECT_EQ(t.num_springs(), R * (C - 1) + (R - 1) * C + 2 * (R - 1) * (C - 1) + R * (C - 2) + (R - 2) * C);
+  EXPECT_EQ(t.num_springs(),
+            R * (C - 1) + (R - 1) * C + 2 * (R - 1) * (C - 1) + R * (C - 2) + (R - 2) * C);
   // every rest triangle faces +z
   MatX3 n;
   compute_vertex_normals(t, t.rest_positions, n);
@@ -98,7 +99,8 @@ TEST_P(DragJacobian, VelocityJacobianMatchesCentralDifferences) {
     std::vector<Mat3> Ds, Jws;
     drag_velocity_jacobians(t, drag, rho, x, v, u, Ds, Jws);
     for (Index i = 0; i < n; ++i) {
-      const Mat3 extra = 0.5 * drag.coefficient * rho * t.area[i] * Vec3(u.row(i)).norm() * Mat3::Identity();
+      const Mat3 extra =
+          0.5 * drag.coefficient * rho * t.area[i] * Vec3(u.row(i)).norm() * Mat3::Identity();
       EXPECT_LT((Ds[i] - Dv[i] - extra).norm(), 1e-14);
     }
   }

@@ -33,8 +33,10 @@ double pair_max_error(const std::string& method, double k, double dt, double del
     worst = std::max(worst, std::abs(y + delta * std::cos(w * sim.time())) / delta);
     if (period_out && prev < 0 && y >= 0) {
       const double tc = (i + (-prev) / (y - prev)) * dt;
-      if (first < 0) first = tc;
-      else if (*period_out == 0) *period_out = tc - first;
+      if (first < 0)
+        first = tc;
+      else if (*period_out == 0)
+        *period_out = tc - first;
     }
     prev = y;
   }
@@ -51,7 +53,8 @@ TEST_P(SpringPair, PeriodMatchesAnalyticAndErrorFallsAtFirstOrder) {
   const double T = 2 * kPi * std::sqrt(m / k);
   // Largest error over one period; dt = T/100, T/200, T/400, T/800: both methods first order.
   std::vector<double> err;
-  for (double div : {100.0, 200.0, 400.0, 800.0}) err.push_back(pair_max_error(method, k, T / div, delta, T));
+  for (double div : {100.0, 200.0, 400.0, 800.0})
+    err.push_back(pair_max_error(method, k, T / div, delta, T));
   const auto p = observed_orders(err);
   for (double q : p) {
     EXPECT_GT(q, 0.85) << method;
@@ -75,13 +78,14 @@ TEST(Explicit, UndampedClothEnergyStaysBoundedOver1e4Steps) {
   s.gravity = Vec3::Zero();
   s.integrator.method = "explicit";
   s.integrator.adaptive = false;
-  s.integrator.strain_limit = 0;  // the bare integrator: strain limiting is a dissipative projection
+  s.integrator.strain_limit =
+      0;               // the bare integrator: strain limiting is a dissipative projection
   Scene adaptive = s;  // the default dt is above the stable step: only the topology is wanted
   adaptive.integrator.adaptive = true;
   Simulation probe(adaptive);
   MatX3 zero = MatX3::Zero(probe.topology().num_vertices(), 3);
-  const double h_stable = stable_step_estimate(probe.topology(), s.drag, 1.2, false,
-                                               probe.positions(), zero, zero);
+  const double h_stable =
+      stable_step_estimate(probe.topology(), s.drag, 1.2, false, probe.positions(), zero, zero);
   s.dt = 0.1 * h_stable;
   Simulation sim(s);
   std::mt19937 rng(42);
@@ -169,8 +173,8 @@ TEST(Stiff, ExplicitStepThatBecomesUnstableRaisesDivergenceAndRestoresTheState) 
   s.integrator.method = "explicit";
   s.integrator.adaptive = false;
   s.integrator.energy_tolerance = 0;  // the mechanism under test is the stable-step refusal
-  s.dt = 5e-4;        // the stable step at rest is 0.95 ms
-  Simulation sim(s);  // stable at rest
+  s.dt = 5e-4;                        // the stable step at rest is 0.95 ms
+  Simulation sim(s);                  // stable at rest
   MatX3 x, v;
   for (int i = 0; i < 200; ++i) {
     x = sim.positions();

@@ -45,8 +45,10 @@ struct MovingFlagSystem {
     ForceSet fs;
     fs.gravity = fs.drag = fs.springs = true;
     fs.drag_params = sim.scene().drag;
-    const MatX3 u = MatX3::Constant(topo.num_vertices(), 3, 0.0).rowwise() + Vec3(2, 0, 0).transpose();
-    assemble_implicit_system(topo, fs, sim.scene().dt, sim.positions(), sim.velocities(), u, s.sys, s.tmp);
+    const MatX3 u =
+        MatX3::Constant(topo.num_vertices(), 3, 0.0).rowwise() + Vec3(2, 0, 0).transpose();
+    assemble_implicit_system(topo, fs, sim.scene().dt, sim.positions(), sim.velocities(), u, s.sys,
+                             s.tmp);
   }
 };
 
@@ -114,7 +116,8 @@ TEST_P(Multigrid32, ProductIsTheDefinedMatrix) {
   for (size_t t = 0; t < A.J.size(); ++t)
     for (int a = 0; a < 3; ++a)
       for (int b = 0; b < 3; ++b)
-        dense.block<3, 3>(3 * topo.triangles(Index(t), a), 3 * topo.triangles(Index(t), b)) += A.J[t];
+        dense.block<3, 3>(3 * topo.triangles(Index(t), a), 3 * topo.triangles(Index(t), b)) +=
+            A.J[t];
   std::mt19937 rng(11);
   for (int trial = 0; trial < 3; ++trial) {
     const MatX3 p = random_rows(topo, rng);

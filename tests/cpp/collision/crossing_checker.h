@@ -98,7 +98,8 @@ inline double segment_distance(const Vec3& p, const Vec3& a, const Vec3& b) {
 
 inline double point_triangle_distance(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) {
   if (projects_inside(p, a, b, c, 0.0)) return std::abs(plane_distance(p, a, b, c));
-  return std::min({segment_distance(p, a, b), segment_distance(p, b, c), segment_distance(p, c, a)});
+  return std::min(
+      {segment_distance(p, a, b), segment_distance(p, b, c), segment_distance(p, c, a)});
 }
 
 // Smallest distance from a vertex to a triangle it does not belong to.
@@ -107,9 +108,9 @@ inline double min_distance_nonadjacent(const MatX3& x, const MatX3i& tris) {
   for (Index t = 0; t < tris.rows(); ++t)
     for (Index v = 0; v < x.rows(); ++v) {
       if (v == tris(t, 0) || v == tris(t, 1) || v == tris(t, 2)) continue;
-      best = std::min(best, point_triangle_distance(x.row(v).transpose(), x.row(tris(t, 0)).transpose(),
-                                                    x.row(tris(t, 1)).transpose(),
-                                                    x.row(tris(t, 2)).transpose()));
+      best = std::min(best, point_triangle_distance(
+                                x.row(v).transpose(), x.row(tris(t, 0)).transpose(),
+                                x.row(tris(t, 1)).transpose(), x.row(tris(t, 2)).transpose()));
     }
   return best;
 }
@@ -122,7 +123,8 @@ inline void make_grid(int rows, int cols, const Vec3& origin, const Vec3& du, co
   x.conservativeResize(n0 + rows * cols, 3);
   tris.conservativeResize(t0 + 2 * (rows - 1) * (cols - 1), 3);
   for (int r = 0; r < rows; ++r)
-    for (int c = 0; c < cols; ++c) x.row(n0 + r * cols + c) = (origin + c * du + r * dv).transpose();
+    for (int c = 0; c < cols; ++c)
+      x.row(n0 + r * cols + c) = (origin + c * du + r * dv).transpose();
   Index t = t0;
   for (int r = 0; r + 1 < rows; ++r)
     for (int c = 0; c + 1 < cols; ++c) {

@@ -64,7 +64,8 @@ TEST(BoxTree, DegenerateSetsStillAnswerExactly) {
   BoxTree empty;
   empty.build(MatX3(0, 3), MatX3(0, 3));
   int count = 0;
-  empty.query(MatX3(0, 3), MatX3(0, 3), Vec3::Constant(-9), Vec3::Constant(9), [&](int32_t) { ++count; });
+  empty.query(MatX3(0, 3), MatX3(0, 3), Vec3::Constant(-9), Vec3::Constant(9),
+              [&](int32_t) { ++count; });
   EXPECT_EQ(count, 0);
   // All centres coincide (the split has nothing to go by): a valid tree all the same.
   const Index n = 37;
@@ -73,7 +74,8 @@ TEST(BoxTree, DegenerateSetsStillAnswerExactly) {
   tree.build(lo, hi);
   expect_brute_force(tree, lo, hi, rng);
   // Then spread out: refit alone must stay exact, however poor the shape has become.
-  for (Index i = 0; i < n; ++i) lo.row(i).array() += 0.1 * double(i) - 1.8, hi.row(i).array() += 0.1 * double(i) - 1.8;
+  for (Index i = 0; i < n; ++i)
+    lo.row(i).array() += 0.1 * double(i) - 1.8, hi.row(i).array() += 0.1 * double(i) - 1.8;
   tree.refit(lo, hi);
   expect_brute_force(tree, lo, hi, rng);
 }

@@ -30,7 +30,8 @@ TEST(SelfCollisionParams, ValidateNamesTheParameter) {
             "self_collision.friction should be finite and >= 0, got nan");
   p = SelfCollisionParams{};
   p.iterations = 0;
-  EXPECT_EQ(message(p, "self_collision"), "self_collision.iterations should be in [1, 1000], got 0");
+  EXPECT_EQ(message(p, "self_collision"),
+            "self_collision.iterations should be in [1, 1000], got 0");
 }
 
 TEST(PoleParams, ValidateNamesTheParameter) {

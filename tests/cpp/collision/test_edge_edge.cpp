@@ -36,10 +36,11 @@ TEST(EdgeEdge, ClosestParametersMatchSampling) {
     EXPECT_GE(d, sampled_segment_distance(p1, p2, q1, q2) - 2.0 / 400);
   }
   // Parallel segments: any closest pair at the right distance.
-  const Vec2 w = closest_segment_parameters(Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0.5, 1, 0),
-                                            Vec3(2, 1, 0));
-  EXPECT_NEAR(((Vec3(0, 0, 0) + w[0] * Vec3(1, 0, 0)) - (Vec3(0.5, 1, 0) + w[1] * Vec3(1.5, 0, 0))).norm(),
-              1.0, 1e-12);
+  const Vec2 w =
+      closest_segment_parameters(Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0.5, 1, 0), Vec3(2, 1, 0));
+  EXPECT_NEAR(
+      ((Vec3(0, 0, 0) + w[0] * Vec3(1, 0, 0)) - (Vec3(0.5, 1, 0) + w[1] * Vec3(1.5, 0, 0))).norm(),
+      1.0, 1e-12);
 }
 
 TEST(EdgeEdge, CrossingEdgesAreFoundAtTheirTime) {
@@ -55,8 +56,8 @@ TEST(EdgeEdge, CrossingEdgesAreFoundAtTheirTime) {
   EXPECT_FALSE(edge_edge_ccd(p1, p2, Vec3(1.5, -1, 0.1), Vec3(1.5, 1, 0.1), p1, p2,
                              Vec3(1.5, -1, -0.2), Vec3(1.5, 1, -0.2), t, su));
   // Parallel edges moving through each other's line: skipped (no single crossing point).
-  EXPECT_FALSE(edge_edge_ccd(p1, p2, Vec3(-1, 0, 0.1), Vec3(1, 0, 0.1), p1, p2,
-                             Vec3(-1, 0, -0.1), Vec3(1, 0, -0.1), t, su));
+  EXPECT_FALSE(edge_edge_ccd(p1, p2, Vec3(-1, 0, 0.1), Vec3(1, 0, 0.1), p1, p2, Vec3(-1, 0, -0.1),
+                             Vec3(1, 0, -0.1), t, su));
 }
 
 TEST(EdgeEdge, SelfCollisionStopsAnEdgeDrivenThroughAnEdgeAt30MetresPerSecond) {

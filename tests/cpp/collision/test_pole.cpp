@@ -54,9 +54,9 @@ TEST(Pole, ThirtyMetresPerSecondDoesNotTunnel) {
 TEST(Pole, CapsPinsAndOutsidePathsAreRespected) {
   const PoleParams p = pole();
   MatX3 x0(3, 3), x(3, 3), v = MatX3::Zero(3, 3);
-  x0 << 0.01, 1.2, 0.0,   // above the top cap, falls into it
-      0.0, 0.0, 0.0,      // pinned on the axis (inside): left alone
-      0.3, 0.0, 0.0;      // passes beside the pole
+  x0 << 0.01, 1.2, 0.0,  // above the top cap, falls into it
+      0.0, 0.0, 0.0,     // pinned on the axis (inside): left alone
+      0.3, 0.0, 0.0;     // passes beside the pole
   x << 0.01, 0.95, 0.0, 0.0, 0.0, 0.0, 0.3, 0.0, 0.4;
   v.row(0) << 0, -25, 0;
   VecX w(3);

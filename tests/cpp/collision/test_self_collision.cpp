@@ -134,7 +134,7 @@ struct KinematicRun {
 };
 
 KinematicRun run(MatX3 x, MatX3 v, const MatX3i& tris, const VecX& w, const SelfCollisionParams& p,
-        int steps, const PoleParams* pole = nullptr) {
+                 int steps, const PoleParams* pole = nullptr) {
   KinematicRun out;
   SelfCollision collide(tris, x.rows(), p);
   const double dt = 0.01;
@@ -309,14 +309,17 @@ TEST(SelfCollision, PairListGivesWhatAFreshQueryGives) {
   const VecX w = VecX::Ones(rest.rows());
   auto target = [&](int step) {
     const double t = step * dt;
-    const double phase = step < 60 ? 1.5 * t : step < 80 ? 1.5 * 0.6 + 12 * (t - 0.6) : 1.5 * (t - 0.2) + 9.6 * 0.2;
+    const double phase = step < 60   ? 1.5 * t
+                         : step < 80 ? 1.5 * 0.6 + 12 * (t - 0.6)
+                                     : 1.5 * (t - 0.2) + 9.6 * 0.2;
     const double wave = step < 100 ? 0.03 : std::max(0.0, 1 - (step - 100) / 40.0) * 0.03;
     const double height = step < 100 ? 0.1 : 0.004 + std::max(0.0, 1 - (step - 100) / 40.0) * 0.096;
     const double slide = step < 140 ? 0.0 : 0.1 * (step - 140) * dt;
     MatX3 x = rest;
     for (Index i = 0; i < x.rows(); ++i) {
       const double u = rest(i, 0);
-      const Vec3 p = i < sheet ? Vec3(u, rest(i, 1), wave * std::sin(2 * kPi * (u / 0.4 - phase)) * u / (cols * s))
+      const Vec3 p = i < sheet ? Vec3(u, rest(i, 1),
+                                      wave * std::sin(2 * kPi * (u / 0.4 - phase)) * u / (cols * s))
                                : Vec3(u + slide, rest(i, 1), height);
       x.row(i) = (p + Vec3(0, 0.5 * t, 0)).transpose();
     }
@@ -345,7 +348,7 @@ TEST(SelfCollision, PairListGivesWhatAFreshQueryGives) {
     }
     direct_later += step > 20 && sk.tree_queries > 0;
   }
-  EXPECT_GT(listed_steps, 100);   // the list served most steps
+  EXPECT_GT(listed_steps, 100);    // the list served most steps
   EXPECT_GT(listed_contacts, 10);  // including steps with contacts
   EXPECT_GT(direct_later, 10);     // and was rebuilt, or skipped for direct queries, later on
 }
@@ -363,7 +366,8 @@ TEST(SelfCollision, PairListResultsDoNotDependOnTheThreadCount) {
   const VecX w = VecX::Ones(rest.rows());
   auto target = [&](int step) {
     MatX3 x = rest;
-    for (Index i = 0; i < x.rows(); ++i) x(i, 2) = 0.02 * std::sin(2 * kPi * (rest(i, 0) / 0.3 - 0.5 * step * dt));
+    for (Index i = 0; i < x.rows(); ++i)
+      x(i, 2) = 0.02 * std::sin(2 * kPi * (rest(i, 0) / 0.3 - 0.5 * step * dt));
     return x;
   };
   auto run_with = [&](int threads, int& listed, Index& most, std::vector<Index>& cands) {
@@ -386,7 +390,8 @@ TEST(SelfCollision, PairListResultsDoNotDependOnTheThreadCount) {
   int listed_one = 0, listed_two = 0;
   Index most = 0;
   std::vector<Index> cands_one, cands_two;
-  const MatX3 one = run_with(1, listed_one, most, cands_one), two = run_with(2, listed_two, most, cands_two);
+  const MatX3 one = run_with(1, listed_one, most, cands_one),
+              two = run_with(2, listed_two, most, cands_two);
   EXPECT_EQ(cands_one, cands_two);
   EXPECT_GE(most, 4 * kParallelGrain) << "the list filter should run on the team";
   EXPECT_GT(listed_one, 20);

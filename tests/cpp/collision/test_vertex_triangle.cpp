@@ -41,16 +41,16 @@ TEST(Ccd, VertexThroughTheFaceHitsAtTheCrossingTime) {
   double t;
   Vec3 bary;
   // p goes from z = 0.3 to z = -0.1: plane at t = 0.75, at (0.2, 0.3).
-  ASSERT_TRUE(vertex_triangle_ccd(Vec3(0.2, 0.3, 0.3), A, B, C, Vec3(0.2, 0.3, -0.1), A, B, C, t,
-                                  bary));
+  ASSERT_TRUE(
+      vertex_triangle_ccd(Vec3(0.2, 0.3, 0.3), A, B, C, Vec3(0.2, 0.3, -0.1), A, B, C, t, bary));
   EXPECT_NEAR(t, 0.75, 1e-12);
   EXPECT_TRUE(bary.isApprox(Vec3(0.5, 0.2, 0.3), 1e-12));
   // Beside the triangle: no hit.
-  EXPECT_FALSE(vertex_triangle_ccd(Vec3(0.8, 0.8, 0.3), A, B, C, Vec3(0.8, 0.8, -0.1), A, B, C,
-                                   t, bary));
+  EXPECT_FALSE(
+      vertex_triangle_ccd(Vec3(0.8, 0.8, 0.3), A, B, C, Vec3(0.8, 0.8, -0.1), A, B, C, t, bary));
   // Stops short of the plane: no hit.
-  EXPECT_FALSE(vertex_triangle_ccd(Vec3(0.2, 0.2, 0.3), A, B, C, Vec3(0.2, 0.2, 1e-6), A, B, C,
-                                   t, bary));
+  EXPECT_FALSE(
+      vertex_triangle_ccd(Vec3(0.2, 0.2, 0.3), A, B, C, Vec3(0.2, 0.2, 1e-6), A, B, C, t, bary));
   // The triangle sweeps through a resting vertex.
   const Vec3 up(0, 0, 1);
   ASSERT_TRUE(vertex_triangle_ccd(Vec3(0.1, 0.1, 0.5), A, B, C, Vec3(0.1, 0.1, 0.5), A + up, B + up,
@@ -75,17 +75,17 @@ TEST(Ccd, AgreesWithTheSamplingChecker) {
     const long sampled = test_support::count_crossings(x0, x1, tri, 64);
     double t;
     Vec3 bary;
-    const bool hit = vertex_triangle_ccd(x0.row(0).transpose(), x0.row(1).transpose(),
-                                         x0.row(2).transpose(), x0.row(3).transpose(),
-                                         x1.row(0).transpose(), x1.row(1).transpose(),
-                                         x1.row(2).transpose(), x1.row(3).transpose(), t, bary);
+    const bool hit =
+        vertex_triangle_ccd(x0.row(0).transpose(), x0.row(1).transpose(), x0.row(2).transpose(),
+                            x0.row(3).transpose(), x1.row(0).transpose(), x1.row(1).transpose(),
+                            x1.row(2).transpose(), x1.row(3).transpose(), t, bary);
     if (sampled) {
       EXPECT_TRUE(hit) << "case " << k;
       ++found;
-      const Eigen::Vector4d f = coplanarity_cubic(
-          x0.row(0).transpose(), x0.row(1).transpose(), x0.row(2).transpose(),
-          x0.row(3).transpose(), x1.row(0).transpose(), x1.row(1).transpose(),
-          x1.row(2).transpose(), x1.row(3).transpose());
+      const Eigen::Vector4d f =
+          coplanarity_cubic(x0.row(0).transpose(), x0.row(1).transpose(), x0.row(2).transpose(),
+                            x0.row(3).transpose(), x1.row(0).transpose(), x1.row(1).transpose(),
+                            x1.row(2).transpose(), x1.row(3).transpose());
       through_and_back += (f[0] > 0) == (f.sum() > 0);  // same side at both ends
     }
     if (hit) {
@@ -94,7 +94,7 @@ TEST(Ccd, AgreesWithTheSamplingChecker) {
       EXPECT_GE(bary.minCoeff(), -1e-9);
     }
   }
-  EXPECT_GT(found, 100);  // the sample exercises real crossings
+  EXPECT_GT(found, 100);           // the sample exercises real crossings
   EXPECT_GT(through_and_back, 0);  // including through-and-back ones, invisible at the ends
 }
 

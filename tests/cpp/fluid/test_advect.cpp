@@ -1,5 +1,5 @@
-#include "fluid/advect.h"
 #include "common/simd.h"
+#include "fluid/advect.h"
 
 #include <gtest/gtest.h>
 
@@ -39,7 +39,8 @@ GridGeometry periodic_geometry(int nx, int ny, int nz) {
 
 bool same_bits(const MacGrid<double>& a, const MacGrid<double>& b) {
   for (int c = 0; c < 3; ++c)
-    if (std::memcmp(a.comp[c].data(), b.comp[c].data(), a.comp[c].size() * sizeof(double)) != 0) return false;
+    if (std::memcmp(a.comp[c].data(), b.comp[c].data(), a.comp[c].size() * sizeof(double)) != 0)
+      return false;
   return true;
 }
 
@@ -48,7 +49,8 @@ bool same_bits(const MacGrid<double>& a, const MacGrid<double>& b) {
 double max_abs_difference(const MacGrid<double>& a, const MacGrid<double>& b) {
   double m = 0;
   for (int c = 0; c < 3; ++c)
-    for (std::size_t i = 0; i < a.comp[c].size(); ++i) m = std::max(m, std::fabs(a.comp[c][i] - b.comp[c][i]));
+    for (std::size_t i = 0; i < a.comp[c].size(); ++i)
+      m = std::max(m, std::fabs(a.comp[c][i] - b.comp[c][i]));
   return m;
 }
 
@@ -140,7 +142,8 @@ void expect_widths_agree(double scale) {
   };
   const MacGrid<T> wide = run(0), narrow = run(16);
   for (int c = 0; c < 3; ++c)
-    ASSERT_EQ(std::memcmp(wide.comp[c].data(), narrow.comp[c].data(), wide.comp[c].size() * sizeof(T)), 0)
+    ASSERT_EQ(
+        std::memcmp(wide.comp[c].data(), narrow.comp[c].data(), wide.comp[c].size() * sizeof(T)), 0)
         << "component " << c;
 }
 
@@ -164,7 +167,8 @@ TEST(Advect, PaddedComponentGhostsAreTheWrappedNodes) {
   for (int i = -G; i < n0 + G; ++i)
     for (int j = -G; j < n1 + G; ++j)
       for (int k = -G; k < n2 + G; ++k)
-        ASSERT_EQ(p.data[p.index(i, j, k)], src[(wrap(i, n0) * n1 + wrap(j, n1)) * n2 + wrap(k, n2)]);
+        ASSERT_EQ(p.data[p.index(i, j, k)],
+                  src[(wrap(i, n0) * n1 + wrap(j, n1)) * n2 + wrap(k, n2)]);
 }
 
 }  // namespace flagsim

@@ -107,7 +107,8 @@ TEST(Fluid, PeriodicStepIsTheSameAtEveryVectorWidth) {
     const std::size_t bytes = f_bytes(*wide);
     for (int c = 0; c < 3; ++c)
       ASSERT_EQ(std::memcmp(wide->component_data(c), narrow->component_data(c),
-                            wide->component_shape(c).size() * bytes), 0)
+                            wide->component_shape(c).size() * bytes),
+                0)
           << precision << " component " << c;
   }
 }

@@ -26,16 +26,20 @@ TEST(FluidParams, ErrorsNameTheParameter) {
   EXPECT_NE(error_of(p).find("air.resolution should be"), std::string::npos) << error_of(p);
   p = FluidParams();
   p.cell_size = -0.1;
-  EXPECT_NE(error_of(p).find("air.cell_size should be in [1e-06, 10000], got -0.1"), std::string::npos);
+  EXPECT_NE(error_of(p).find("air.cell_size should be in [1e-06, 10000], got -0.1"),
+            std::string::npos);
   p = FluidParams();
   p.advection = "upwind";
-  EXPECT_NE(error_of(p).find("air.advection should be one of \"semi_lagrangian\", \"maccormack\", got \"upwind\""),
-            std::string::npos)
+  EXPECT_NE(
+      error_of(p).find(
+          "air.advection should be one of \"semi_lagrangian\", \"maccormack\", got \"upwind\""),
+      std::string::npos)
       << error_of(p);
   p = FluidParams();
   p.pressure = "fft";
   p.boundary = "tunnel";
-  EXPECT_NE(error_of(p).find("air.pressure should be \"pcg\" with boundary \"tunnel\""), std::string::npos)
+  EXPECT_NE(error_of(p).find("air.pressure should be \"pcg\" with boundary \"tunnel\""),
+            std::string::npos)
       << error_of(p);
   p = FluidParams();
   p.viscosity = -1;

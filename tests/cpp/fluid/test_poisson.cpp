@@ -73,7 +73,8 @@ TEST_P(CgSolves, TunnelPressureWithMicAndPeriodicWithAndWithoutIt) {
   CgScratch<double> w;
   w.resize(n);
   const double tol = 1e-10;
-  const CgResult r = solve_cg(op, 0.0, 1.0, b.data(), x.data(), tol, 500, variant == 2 ? nullptr : &mic, w);
+  const CgResult r =
+      solve_cg(op, 0.0, 1.0, b.data(), x.data(), tol, 500, variant == 2 ? nullptr : &mic, w);
   EXPECT_TRUE(r.converged);
   EXPECT_LE(residual(op, 0.0, 1.0, x, b), 1.01 * tol * 1.0);
   // MIC(0) should beat Jacobi by a wide margin on the same system.
@@ -96,7 +97,8 @@ TEST(Cg, DiffusionWithFixedEndsKeepsThemAndSolvesTheRest) {
   AlignedVector<double> b(n), x(n);
   for (int i = 0; i < 8; ++i)
     for (int j = 0; j < 5; ++j)
-      for (int k = 0; k < 4; ++k) b[op.shape.index(i, j, k)] = (i == 0 ? 3.0 : i == 7 ? -1.0 : 0.5 * j);
+      for (int k = 0; k < 4; ++k)
+        b[op.shape.index(i, j, k)] = (i == 0 ? 3.0 : i == 7 ? -1.0 : 0.5 * j);
   x = b;
   CgScratch<double> w;
   w.resize(n);

@@ -100,7 +100,7 @@ TEST_P(LinearSpring, RemainderIsWhatTheIntegratorsTheorySays) {
   Simulation sim(spring_pair_scene(method, k, 2e-3));
   const double m = sim.topology().mass[3];
   sim.positions()(3, 1) -= 1e-4;  // stretched along the spring (vertical)
-  sim.step();                      // the edit is booked; start from a stepped state
+  sim.step();                     // the edit is booked; start from a stepped state
   for (int i = 0; i < 200; ++i) {
     const double y0 = sim.positions()(3, 1), v0 = sim.velocities()(3, 1);
     const double r0 = sim.energy_ledger().integrator;

@@ -23,8 +23,8 @@ namespace {
 
 using testing::CountAllocations;
 
-#define SKIP_WITHOUT_COUNTING()                         \
-  if (!testing::allocation_counting_available())       \
+#define SKIP_WITHOUT_COUNTING()                  \
+  if (!testing::allocation_counting_available()) \
   GTEST_SKIP() << "the allocator belongs to the sanitizer"
 
 // The counter must see what it is meant to see, or a zero below would prove nothing.
