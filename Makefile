@@ -56,7 +56,7 @@ format: $(VENV)/.deps
 	$(VENV)/bin/ruff format .
 	$(VENV)/bin/clang-format -i $(CXX_SOURCES)
 
-test: lint build bench-deps
+test: lint build
 	$(CTEST) --test-dir $(BUILD) --output-on-failure -j$(JOBS)
 	$(PY) -m pytest -q
 
@@ -80,7 +80,7 @@ bench-deps: $(VENV)/.deps
 
 # Regenerates docs/performance.md (run it on a quiet machine: other processes skew the figures).
 bench: build bench-deps
-	$(PY) -m flagsim.bench --peers --out out/bench --docs docs/performance.md
+	$(PY) -m benchmarks --peers --out out/bench --docs docs/performance.md
 
 clean:
 	rm -rf $(BUILD) out

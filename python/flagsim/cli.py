@@ -30,10 +30,6 @@ COMMANDS = {
         "flagsim.commands.study",
         "accuracy (error against run time) or stability (stiff and extreme cases) study",
     ),
-    "bench": (
-        "flagsim.bench",
-        "benchmark: paper scene, cloth and air alone, threads; --peers: PyBullet, MuJoCo, pyPBD",
-    ),
 }
 
 EXIT_OK = 0

@@ -1,4 +1,4 @@
-"""One workload, measured in its own process: ``python -m flagsim.bench.worker SPEC RESULT``.
+"""One workload, measured in its own process: ``python -m benchmarks.worker SPEC RESULT``.
 
 SPEC is the workload as JSON; RESULT is the path the measurement is written to as JSON (stdout
 is left to the engines, some of which print banners). A process per workload makes the peak

@@ -1,4 +1,4 @@
-"""Command line of the benchmark (``flagsim bench`` / ``python -m flagsim.bench``)."""
+"""Command line of the benchmark: `python -m benchmarks` from the repository root (`make bench`)."""
 
 from __future__ import annotations
 
@@ -15,15 +15,15 @@ from typing import Any
 from . import workloads as wl
 
 EXAMPLES = """examples:
-  python -m flagsim.bench --quick --out out/bench            about a minute
-  python -m flagsim.bench --only cloth --sizes 8x11,128x128 --threads 1
-  python -m flagsim.bench --only air --sizes 32,64 --advection semi_lagrangian --pressure fft,pcg
-  python -m flagsim.bench --peers --docs docs/performance.md  the full run behind the docs
+  python -m benchmarks --quick --out out/bench            about a minute
+  python -m benchmarks --only cloth --sizes 8x11,128x128 --threads 1
+  python -m benchmarks --only air --sizes 32,64 --advection semi_lagrangian --pressure fft,pcg
+  python -m benchmarks --peers --docs docs/performance.md  the full run behind the docs
 """
 
 
 def configure(parser: argparse.ArgumentParser) -> None:
-    """Add the benchmark's options to a parser (the `flagsim bench` sub-command uses this)."""
+    """Add the benchmark's options to a parser (`python -m benchmarks` uses this)."""
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.epilog = EXAMPLES
     mode = parser.add_mutually_exclusive_group()
@@ -184,9 +184,11 @@ def run_workload(w: wl.Workload, protocol: dict[str, Any], timeout: float) -> di
     spec = json.dumps(w.spec(protocol))
     import flagsim
 
-    # The worker runs in a temporary directory: make sure it imports this same flagsim.
+    # The worker runs in a temporary directory: make sure it imports this same flagsim and these
+    # same benchmarks.
     package_root = os.path.dirname(os.path.dirname(os.path.abspath(flagsim.__file__)))
-    paths = [package_root] + [
+    bench_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    paths = [package_root, bench_root] + [
         os.path.abspath(p) for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p
     ]
     env = dict(
@@ -201,7 +203,7 @@ def run_workload(w: wl.Workload, protocol: dict[str, Any], timeout: float) -> di
         try:
             # cwd: engines that write logs to the working directory (MuJoCo) write them there
             proc = subprocess.run(
-                [sys.executable, "-m", "flagsim.bench.worker", spec, path],
+                [sys.executable, "-m", "benchmarks.worker", spec, path],
                 env=env,
                 stdout=subprocess.DEVNULL,
                 stderr=subprocess.PIPE,
@@ -249,7 +251,7 @@ def run(args) -> int:
     try:
         sel, protocol = selection(args)
     except ValueError as e:
-        print(f"flagsim bench: error: {e}", file=sys.stderr)
+        print(f"benchmarks: error: {e}", file=sys.stderr)
         return 2
     from . import engines, machine, peers, report
 
@@ -265,14 +267,14 @@ def run(args) -> int:
         print(f"{len(work)} workloads, {len(skipped)} skipped")
         return 0
     if not work:
-        print("flagsim bench: error: nothing to run with this selection", file=sys.stderr)
+        print("benchmarks: error: nothing to run with this selection", file=sys.stderr)
         return 2
 
     os.makedirs(args.out, exist_ok=True)
     desc = machine.describe()
     argv = getattr(args, "_argv", None)
     command = (
-        ("python -m flagsim.bench " + " ".join(argv))
+        ("python -m benchmarks " + " ".join(argv))
         if argv is not None
         else "flagsim " + " ".join(sys.argv[1:])
     )
@@ -366,11 +368,11 @@ def run(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of `python -m flagsim.bench`; returns the exit code."""
+    """Entry point of `python -m benchmarks`; returns the exit code."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    from flagsim import bench
+    import benchmarks
 
-    parser = argparse.ArgumentParser(prog="python -m flagsim.bench", description=bench.__doc__)
+    parser = argparse.ArgumentParser(prog="python -m benchmarks", description=benchmarks.__doc__)
     configure(parser)
     args = parser.parse_args(argv)
     args._argv = argv

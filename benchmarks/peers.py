@@ -51,7 +51,9 @@ def peer_available(name: str) -> tuple[bool, str]:
         found = False
     if found:
         return True, ""
-    return False, f"{display} is not installed (pip install {pip}, or pip install flagsim[bench])"
+    return False, (
+        f"{display} is not installed (pip install {pip}; make bench-deps installs every peer)"
+    )
 
 
 def cloth_spec(rows: int, cols: int) -> dict[str, Any]:
