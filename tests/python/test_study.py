@@ -248,3 +248,44 @@ def test_air_orders_semi_lagrangian_about_one_maccormack_clearly_higher_in_space
         refinement="dt~h^2",
     )
     assert mc_h2 > 1.3 and mc_h2 > sl_h2 + 0.6, (sl_h2, mc_h2)
+
+
+def test_accuracy_costs_are_wall_time_per_simulated_second_everywhere(tmp_path):
+    # Two settings whose order by time per step and by time per simulated second disagree: the
+    # small dt is cheaper per step but dearer per simulated second. Plots, Pareto marks and the
+    # cheapest-setting table must all rank by the latter (they used to disagree), so the
+    # cheapest setting for a target is a Pareto point.
+    def row(method, dt, err, sps):
+        return dict(
+            id=f"trajectory/{method}/{dt}",
+            part="trajectory",
+            method=method,
+            dt=repr(dt),
+            resolution="",
+            advection="",
+            pressure="",
+            tolerance="",
+            refinement="",
+            steps=str(round(1 / dt)),
+            error=repr(err),
+            seconds_per_step=repr(sps),
+            steps_per_second=repr(1 / sps),
+            state="",
+        )
+
+    rows = [
+        row("explicit_adaptive", 0.001, 5e-4, 1e-4),  # 0.1 s per simulated s
+        row("implicit", 0.01, 8e-4, 5e-4),
+    ]  # 0.05 s per simulated s
+    path = tmp_path / "accuracy.md"
+    accuracy.write_report(rows, str(path), {}, str(tmp_path))
+    text = path.read_text()
+    cheapest = text.split("cheapest setting per error target")[1].split("##")[0]
+    assert "| 0.001 m | implicit, dt = 0.01 s | 0.0008 | 0.05 |" in cheapest
+    table = text.split("## " + accuracy.PART_TITLES["trajectory"])[1]
+    marked = [line for line in table.splitlines() if line.endswith("| * |")]
+    assert any(line.startswith("| implicit, dt = 0.01 s | 0.0008 | 0.05 |") for line in marked)
+    # the explicit point is more accurate, so it is on the front too; nothing else is
+    assert len(marked) == 2
+    pts = [(accuracy._cost(r), float(r["error"])) for r in rows]
+    assert sorted(accuracy.pareto(pts)) == [0, 1]

@@ -1,5 +1,7 @@
+"""python -m flagsim.study: the same as `flagsim study` (an entry point: it may use the CLI)."""
+
 import sys
 
-from . import main
+from ..cli import main
 
-sys.exit(main())
+sys.exit(main(["study", *sys.argv[1:]]))

@@ -23,6 +23,9 @@ import numpy as np
 
 import flagsim
 
+from .common import save_state, set_method
+from .report import machine_description, write_text
+
 COLUMNS = [
     "id",
     "part",
@@ -43,12 +46,6 @@ COLUMNS = [
 METHODS = ("implicit", "explicit_adaptive", "explicit_sub8")
 
 
-def _set_method(scene: flagsim.Scene, method: str) -> None:
-    scene.integrator.method = "implicit" if method == "implicit" else "explicit"
-    scene.integrator.adaptive = method == "explicit_adaptive"
-    scene.integrator.substeps = int(method.split("sub")[1]) if "sub" in method else 1
-
-
 # ---- scenes -------------------------------------------------------------------------------------
 
 
@@ -64,7 +61,7 @@ def pair_scene(method: str, dt: float, k: float = 100.0) -> flagsim.Scene:
     s.gravity = (0, 0, 0)
     s.integrator.cg_tolerance = 1e-12
     s.dt = dt
-    _set_method(s, method)
+    set_method(s, method)
     return s
 
 
@@ -75,14 +72,14 @@ def trajectory_scene(method: str, dt: float) -> flagsim.Scene:
     s.air.wind = (2.0, 0.0, 0.6)  # out of the flag's plane, so it swings
     s.integrator.cg_tolerance = 1e-10
     s.dt = dt
-    _set_method(s, method)
+    set_method(s, method)
     return s
 
 
 def banner_scene(method: str, dt: float) -> flagsim.Scene:
     s = flagsim.Scene.banner()
     s.dt = dt
-    _set_method(s, method)
+    set_method(s, method)
     return s
 
 
@@ -169,14 +166,6 @@ def _run_pair(case: dict[str, Any]) -> dict[str, Any]:
     return dict(dt=dt, steps=div, error=err, seconds_per_step=spp, steps_per_second=1 / spp)
 
 
-def _save_state(state_dir: str, case_id: str, x: np.ndarray) -> str:
-    from .report import save_npy
-
-    name = case_id.replace("/", "_") + ".npy"
-    save_npy(os.path.join(state_dir, name), x)
-    return name
-
-
 def _run_trajectory(case: dict[str, Any], state_dir: str) -> dict[str, Any]:
     dt = float(case["dt"])
     steps = round(1.0 / dt)
@@ -211,7 +200,7 @@ def _run_trajectory(case: dict[str, Any], state_dir: str) -> dict[str, Any]:
         steps=steps,
         seconds_per_step=spp,
         steps_per_second=1 / spp,
-        state=_save_state(state_dir, case["id"], sim.positions.copy()),
+        state=save_state(state_dir, case["id"], sim.positions.copy()),
     )
 
 
@@ -281,3 +270,225 @@ def pareto(points: list[tuple[float, float]]) -> list[int]:
             front.append(i)
             best = points[i][1]
     return front
+
+
+# ---- report ---------------------------------------------------------------------------------
+
+PART_TITLES = {
+    "pair": "Spring-mass pair: max deviation over one period / amplitude",
+    "trajectory": "Paper flag in uniform wind: RMS vertex error at t = 1 s (m)",
+    "banner": "Banner equilibrium angle error after 20 s (rad)",
+    "air": "Taylor-Green vortex: RMS velocity error at t = T (m/s)",
+    "coupled": "Paper scene in its air grid: RMS vertex error at t = 1 s (m)",
+}
+
+
+def _series(rows, part):
+    out: dict[str, list[dict[str, str]]] = {}
+    for r in rows:
+        if r["part"] == part and r["error"] not in ("", "nan") and r["seconds_per_step"]:
+            key = (
+                r["method"]
+                if part != "air"
+                else (
+                    f"{r['advection']} + {r['pressure']} "
+                    f"(tol {float(r['tolerance']):g}, {r['refinement']})"
+                )
+            )
+            if part == "coupled":
+                key = f"{r['method']}, {r['resolution']}^3"
+            out.setdefault(key, []).append(r)
+    return out
+
+
+def write_plots(rows, directory) -> dict[str, str]:
+    """One log-log PNG per part: error against wall time per simulated second (what a user pays
+    for a second of animation: a smaller dt pays for its extra steps), the Pareto front marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    os.makedirs(directory, exist_ok=True)
+    paths = {}
+    for part, title in PART_TITLES.items():
+        series = _series(rows, part)
+        if not series:
+            continue
+        fig, ax = plt.subplots(figsize=(6.4, 4.4), dpi=100)
+        allpts = []
+        for name, rs in sorted(series.items()):
+            pts = sorted((_cost(r), float(r["error"])) for r in rs)
+            allpts += pts
+            ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", label=name, ms=4)
+        front = sorted(allpts[i] for i in pareto(allpts))
+        ax.loglog([p[0] for p in front], [p[1] for p in front], "k--", lw=1, label="Pareto front")
+        ax.set_xlabel("wall time per simulated second (s/s)")
+        ax.set_ylabel("error")
+        ax.set_title(title, fontsize=9)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        path = os.path.join(directory, f"accuracy_{part}.png")
+        tmp = path + ".tmp.png"
+        fig.savefig(tmp)
+        plt.close(fig)
+        os.replace(tmp, path)
+        paths[part] = path
+    return paths
+
+
+def _cost(r) -> float:
+    """Wall seconds per simulated second: a smaller dt pays for its extra steps."""
+    return float(r["seconds_per_step"]) / float(r["dt"])
+
+
+def _cheapest(rows, part, target):
+    ok = [
+        r
+        for r in rows
+        if r["part"] == part and r["error"] not in ("", "nan") and float(r["error"]) <= target
+    ]
+    return min(ok, key=_cost) if ok else None
+
+
+def _cheapest_table(rows, part, title) -> list[str]:
+    lines = [
+        f"## {title}: cheapest setting per error target",
+        "",
+        "Cheapest = least wall time per simulated second (seconds per step / dt).",
+        "",
+        "| target | cheapest setting | error (m) | wall s per simulated s | steps/s |",
+        "|---|---|---:|---:|---:|",
+    ]
+    for target in (1e-2, 1e-3, 1e-4):
+        r = _cheapest(rows, part, target)
+        lines.append(
+            f"| {target:g} m | "
+            + (
+                f"{_describe(r)} | {float(r['error']):.3g} | {_cost(r):.3g} | "
+                f"{float(r['steps_per_second']):,.0f} |"
+                if r
+                else "none of the sweep | | | |"
+            )
+        )
+    return lines + [""]
+
+
+def _describe(r) -> str:
+    bits = [r["method"]]
+    if r.get("resolution"):
+        bits.append(f"{r['resolution']}^3 grid")
+    if r.get("dt"):
+        bits.append(f"dt = {float(r['dt']):.4g} s")
+    return ", ".join(bits)
+
+
+def write_report(rows, path, plots, relative_to) -> None:
+    lines = [
+        "# Accuracy study: error against run time",
+        "",
+        "Generated by `flagsim study accuracy`; rerun it to regenerate this page.",
+        "",
+        f"Machine: {machine_description()}",
+        "",
+        "Each point: the settings, the error against an analytic solution or a converged "
+        "reference, and its cost as a user pays it: wall time per simulated second (the median "
+        "wall time per step over repeated runs, divided by dt), with steps per second beside "
+        "it. Plots, Pareto fronts and tables all use that cost. Points on the Pareto front (no "
+        "other point is both cheaper and more accurate) are marked with *.",
+        "",
+    ]
+    lines += [
+        "## Observed convergence orders",
+        "",
+        "| part | method | order | against |",
+        "|---|---|---:|---|",
+    ]
+    for m in ("explicit", "implicit"):
+        lines.append(f"| pair | {m} | {observed_order(rows, 'pair', m):.2f} | dt |")
+    for m in ("implicit", "explicit_adaptive", "explicit_sub8"):
+        lines.append(f"| trajectory | {m} | {observed_order(rows, 'trajectory', m):.2f} | dt |")
+    for adv in ("semi_lagrangian", "maccormack"):
+        for p in ("fft", "pcg"):
+            for ref, label in (
+                ("cfl", "h, dt proportional to h"),
+                ("dt~h^2", "h, dt proportional to h^2"),
+            ):
+                q = observed_order(
+                    rows,
+                    "air",
+                    adv,
+                    key="resolution",
+                    pressure=p,
+                    tolerance=repr(1e-8),
+                    refinement=ref,
+                )
+                if not math.isnan(q):
+                    lines.append(f"| air | {adv} + {p} | {-q:.2f} | {label} |")
+    dts = sorted({float(r["dt"]) for r in rows if r["part"] == "coupled"})
+    for m in ("implicit", "explicit_adaptive"):
+        if dts:
+            q = observed_order(rows, "coupled", m, key="resolution", dt=repr(dts[0]))
+            lines.append(
+                f"| coupled (dt = {dts[0]:g} s) | {m} | {-q:.2f} | "
+                "grid h, against the finest grid |"
+            )
+    lines.append("")
+    if any(r["part"] == "coupled" for r in rows):
+        lines += _cheapest_table(rows, "coupled", "Coupled paper scene")
+        paper = [
+            r
+            for r in rows
+            if r["part"] == "coupled"
+            and r["resolution"] == "16"
+            and abs(float(r["dt"]) - 0.01) < 1e-12
+            and r["error"]
+        ]
+        for r in paper:
+            lines.append(
+                f"The paper's own setting (16^3 grid, dt = 0.01 s, {r['method']}): "
+                f"error {float(r['error']):.3g} m at {float(r['steps_per_second']):,.0f} steps/s "
+                f"({_cost(r):.3g} wall s per simulated s)."
+            )
+            lines.append("")
+    if any(r["part"] == "trajectory" for r in rows):
+        lines += _cheapest_table(rows, "trajectory", "Cloth alone (paper flag, uniform wind)")
+    for part, title in PART_TITLES.items():
+        pr = [r for r in rows if r["part"] == part]
+        if not pr:
+            continue
+        lines += [f"## {title}", ""]
+        if part in plots:
+            lines += [f"![{part}]({os.path.relpath(plots[part], relative_to)})", ""]
+        lines += [
+            "| settings | error | wall s per simulated s | steps/s | |",
+            "|---|---:|---:|---:|---|",
+        ]
+        ok = [r for r in pr if r["error"] not in ("", "nan")]
+        front = {id(ok[i]) for i in pareto([(_cost(r), float(r["error"])) for r in ok])}
+        for r in pr:
+            settings = (
+                _describe(r)
+                if part != "air"
+                else (
+                    f"{r['advection']} + {r['pressure']}, tol {float(r['tolerance']):g}, "
+                    f"{r['resolution']}^2 x 4, "
+                    f"dt = {float(r['dt']):.3g} s"
+                )
+            )
+            if r["error"] in ("", "nan"):
+                lines.append(f"| {settings} | {r['state'] or 'n/a'} | | | |")
+            else:
+                lines.append(
+                    f"| {settings} | {float(r['error']):.3g} | {_cost(r):.3g} | "
+                    f"{float(r['steps_per_second']):,.0f} | {'*' if id(r) in front else ''} |"
+                )
+        lines.append("")
+    if not any(r["part"] in ("air", "coupled") for r in rows):
+        lines += [
+            "The air parts (Taylor-Green, coupled scene) need the Stable Fluids solver "
+            "(flagsim.Fluid) and were not run.",
+            "",
+        ]
+    write_text(path, "\n".join(lines))

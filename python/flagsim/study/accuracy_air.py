@@ -20,6 +20,8 @@ import numpy as np
 
 import flagsim
 
+from .common import save_state, set_method
+
 U, L, NU, T_END, CFL = 1.0, 1.0, 0.01, 0.25, 0.5
 
 
@@ -154,8 +156,6 @@ def _run_tg(case: dict[str, Any]) -> dict[str, Any]:
 
 
 def coupled_scene(method: str, resolution: int, dt: float) -> flagsim.Scene:
-    from .accuracy import _set_method
-
     s = flagsim.Scene.paper()
     n0 = s.air.resolution
     size = [r * s.air.cell_size for r in n0]
@@ -164,13 +164,11 @@ def coupled_scene(method: str, resolution: int, dt: float) -> flagsim.Scene:
     s.dt = dt
     s.flapping.mode = "off"  # the coupled comparison: flapping off
     s.integrator.cg_tolerance = 1e-10
-    _set_method(s, method)
+    set_method(s, method)
     return s
 
 
 def _run_coupled(case: dict[str, Any], state_dir: str) -> dict[str, Any]:
-    from .accuracy import _save_state
-
     dt = float(case["dt"])
     steps = round(1.0 / dt)
     sim = flagsim.Simulation(coupled_scene(case["method"], int(case["resolution"]), dt))
@@ -185,7 +183,7 @@ def _run_coupled(case: dict[str, Any], state_dir: str) -> dict[str, Any]:
         steps=steps,
         seconds_per_step=spp,
         steps_per_second=1 / spp,
-        state=_save_state(state_dir, case["id"], sim.positions.copy()),
+        state=save_state(state_dir, case["id"], sim.positions.copy()),
     )
 
 
