@@ -101,6 +101,13 @@ def test_bad_values_and_folders_are_user_errors(capsys, tmp_path):
     assert code == 2 and "texture should be an image file" in err
     code, _, err = flagsim_cmd(capsys, "render", str(tmp_path / "nothing"))
     assert code == 2 and "is not a flagsim export" in err and "Traceback" not in err
+    # every command's bad input goes through the one funnel: one line, exit 2
+    code, _, err = flagsim_cmd(capsys, "study", "stability", "--out", str(tmp_path), "--jobs", "0")
+    assert code == 2 and err.strip() == "flagsim: error: --jobs should be >= 1, got 0"
+    code, _, err = flagsim_cmd(
+        capsys, "run", name, "--out", str(tmp_path / "o"), "--seconds", "1e308"
+    )
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "seconds" in err
 
 
 @pytest.mark.parametrize(

@@ -48,10 +48,8 @@ def configure(p):
 
 def run(args):
     from .. import study
-    from ..cli import EXIT_USAGE, error
-
-    if args.jobs < 1:
-        return error(f"--jobs should be >= 1, got {args.jobs}", EXIT_USAGE)
+    if args.jobs < 1:  # a ValueError: the CLI's one error funnel prints it and exits 2
+        raise ValueError(f"--jobs should be >= 1, got {args.jobs}")
     report = os.path.join(args.docs, f"{args.study}.md") if args.docs else None
     if args.study == "stability":
         rows = study.run_stability(
