@@ -1,0 +1,47 @@
+"""SHA-256 of the final state of reference runs: a refactoring that must not change results
+("same bits before and after") prints the same lines before and after it. Bits depend on the
+compiler and the SIMD path this CPU takes, so compare runs on one machine, never against numbers
+from another.
+
+usage: python tools/state_hashes.py [--steps N]
+"""
+
+import argparse
+import hashlib
+
+import flagsim
+
+
+def scenes():
+    yield "paper", flagsim.Scene.paper()
+    for n in (32, 64):
+        s = flagsim.Scene.paper()  # the paper's pipeline (grid air, self-collision, eq. 5)
+        s.flag.rows = s.flag.cols = n
+        yield f"flag{n}x{n}", s
+    e = flagsim.Scene.paper()
+    e.flag.rows = e.flag.cols = 32
+    e.integrator.method = "explicit"
+    e.integrator.adaptive = True
+    yield "flag32x32-explicit", e
+    yield "flapping_demo", flagsim.Scene.flapping_demo()
+    yield "banner", flagsim.Scene.banner()
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--steps", type=int, default=100)
+    args = p.parse_args()
+    for name, scene in scenes():
+        sim = flagsim.Simulation(scene)
+        sim.step(args.steps)
+        h = hashlib.sha256()
+        for a in (sim.positions, sim.velocities, sim.render_positions):
+            h.update(a.tobytes())
+        if sim.fluid is not None:
+            for a in (sim.fluid.u, sim.fluid.v, sim.fluid.w):
+                h.update(a.tobytes())
+        print(f"{name:24s} {h.hexdigest()[:16]}")
+
+
+if __name__ == "__main__":
+    main()
