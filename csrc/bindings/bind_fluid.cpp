@@ -19,35 +19,6 @@ namespace flagsim::bindings {
 
 namespace {
 
-/// None -> empty; a 3-vector -> constant; a sequence of (time, (vx, vy, vz)) -> keyframes.
-WindSchedule to_wind(const py::handle& h) {
-  WindSchedule w;
-  if (h.is_none()) return w;
-  const char* expected = "None, a 3-vector or a sequence of (time, (vx, vy, vz))";
-  if (!py::isinstance<py::sequence>(h)) fail_param("wind", expected, std::string(py::str(h)));
-  auto seq = py::reinterpret_borrow<py::sequence>(h);
-  if (py::len(seq) == 3 && !py::isinstance<py::sequence>(seq[0])) {
-    w.keys = {{0.0, from_py<Vec3>("wind", h)}};
-    return w;
-  }
-  for (auto item : seq) {
-    if (!py::isinstance<py::sequence>(item) || py::len(item) != 2)
-      fail_param("wind", expected, std::string(py::str(h)));
-    auto pair = py::reinterpret_borrow<py::sequence>(item);
-    const std::string key = "wind[" + std::to_string(w.keys.size()) + "]";
-    w.keys.push_back(
-        {from_py<double>(key + ".time", pair[0]), from_py<Vec3>(key + ".velocity", pair[1])});
-  }
-  return w;
-}
-
-py::list wind_to_list(const WindSchedule& w) {
-  py::list out;
-  for (const auto& k : w.keys)
-    out.append(py::make_tuple(k.time, py::make_tuple(k.velocity[0], k.velocity[1], k.velocity[2])));
-  return out;
-}
-
 py::array component_view(py::object self, int c) {
   Fluid& f = self.cast<Fluid&>();
   const Shape3 sh = f.component_shape(c);
@@ -89,15 +60,15 @@ void def_fluid_fields(py::class_<AirParams>& cls, const std::string& section) {
   def_field<AirParams, double>(cls, "cell_size", &AirParams::cell_size, section, "m ('grid')");
   def_vec3_field<AirParams>(cls, "origin", &AirParams::origin, section,
                             "m, min corner of the grid ('grid')");
-  def_field<AirParams, std::string>(
+  def_field<AirParams, Boundary>(
       cls, "boundary", &AirParams::boundary, section,
       "'periodic' (mean flow = wind) | 'tunnel' (inflow = wind through x-min)");
-  def_field<AirParams, std::string>(cls, "advection", &AirParams::advection, section,
-                                    "'semi_lagrangian' | 'maccormack'");
-  def_field<AirParams, std::string>(cls, "pressure", &AirParams::pressure, section,
-                                    "'fft' (periodic, FFTW) | 'pcg' (MIC(0) conjugate gradient)");
-  def_field<AirParams, std::string>(cls, "precision", &AirParams::precision, section,
-                                    "'double' | 'float'");
+  def_field<AirParams, Advection>(cls, "advection", &AirParams::advection, section,
+                                  "'semi_lagrangian' | 'maccormack'");
+  def_field<AirParams, Pressure>(cls, "pressure", &AirParams::pressure, section,
+                                 "'fft' (periodic, FFTW) | 'pcg' (MIC(0) conjugate gradient)");
+  def_field<AirParams, Precision>(cls, "precision", &AirParams::precision, section,
+                                  "'double' | 'float'");
   def_field<AirParams, double>(cls, "pcg_tolerance", &AirParams::pcg_tolerance, section,
                                "relative max-norm residual of the pcg solves");
   def_field<AirParams, int>(cls, "pcg_max_iterations", &AirParams::pcg_max_iterations, section,
@@ -124,7 +95,7 @@ void bind_fluid(py::module_& m) {
                   const py::object& force_density, const py::object& max_speed,
                   const py::object& strength) {
         FanParams f;
-        f.shape = from_py<std::string>("shape", shape);
+        f.shape = from_py<FanShape>("shape", shape);
         f.center = from_py<Vec3>("center", center);
         f.half_size = from_py<Vec3>("half_size", half_size);
         f.radius = from_py<double>("radius", radius);
@@ -140,7 +111,7 @@ void bind_fluid(py::module_& m) {
       py::arg("direction") = py::make_tuple(1.0, 0.0, 0.0), py::arg("force_density") = 20.0,
       py::arg("max_speed") = 0.0, py::arg("strength") = py::list());
   py::class_<FanParams>& fan = fan_cls;
-  def_field<FanParams, std::string>(fan, "shape", &FanParams::shape, "fan", "'box' | 'sphere'");
+  def_field(fan, "shape", &FanParams::shape, "fan", "'box' | 'sphere'");
   def_vec3_field<FanParams>(fan, "center", &FanParams::center, "fan", "m");
   def_vec3_field<FanParams>(fan, "half_size", &FanParams::half_size, "fan", "m, box half extents");
   def_field<FanParams, double>(fan, "radius", &FanParams::radius, "fan", "m, sphere radius");
@@ -181,15 +152,15 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
                p.resolution[d] = (res[d] < -1000000 || res[d] > 1000000) ? -1 : int(res[d]);
              p.cell_size = from_py<double>("cell_size", cell_size);
              p.origin = from_py<Vec3>("origin", origin);
-             p.boundary = from_py<std::string>("boundary", boundary);
+             p.boundary = from_py<Boundary>("boundary", boundary);
              p.viscosity = from_py<double>("viscosity", viscosity);
              p.density = from_py<double>("density", density);
-             p.advection = from_py<std::string>("advection", advection);
-             p.pressure = from_py<std::string>("pressure", pressure);
-             p.precision = from_py<std::string>("precision", precision);
+             p.advection = from_py<Advection>("advection", advection);
+             p.pressure = from_py<Pressure>("pressure", pressure);
+             p.precision = from_py<Precision>("precision", precision);
              p.pcg_tolerance = from_py<double>("pcg_tolerance", pcg_tolerance);
              p.pcg_max_iterations = from_py<int>("pcg_max_iterations", pcg_max_iterations);
-             p.wind = to_wind(wind);
+             p.wind = wind_from_py("wind", wind, true);
              p.fans = from_py<std::vector<FanParams>>("fans", fans);
              return std::make_unique<Fluid>(p);
            }),
@@ -197,7 +168,7 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
            py::arg("cell_size") = 0.125, py::arg("origin") = py::make_tuple(-0.5, -1.0, -1.0),
            py::arg("boundary") = "periodic", py::arg("viscosity") = 1.5e-5,
            py::arg("density") = 1.2, py::arg("advection") = "semi_lagrangian",
-           py::arg("pressure") = FluidParams().pressure, py::arg("precision") = "double",
+           py::arg("pressure") = name_of(FluidParams().pressure), py::arg("precision") = "double",
            py::arg("pcg_tolerance") = 1e-8, py::arg("pcg_max_iterations") = 500,
            py::arg("wind") = py::none(), py::arg("fans") = py::list(),
            "resolution (nx, ny, nz) cells; cell_size m; origin m (min corner); viscosity m^2/s; "
@@ -297,10 +268,14 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
                              })
       .def_property_readonly("cell_size", [](const Fluid& f) { return f.geometry().h; })
       .def_property_readonly("origin", [](const Fluid& f) { return f.geometry().origin; })
-      .def_property_readonly("boundary", [](const Fluid& f) { return f.params().boundary; })
-      .def_property_readonly("advection", [](const Fluid& f) { return f.params().advection; })
-      .def_property_readonly("pressure", [](const Fluid& f) { return f.params().pressure; })
-      .def_property_readonly("precision", [](const Fluid& f) { return f.params().precision; })
+      .def_property_readonly("boundary",
+                             [](const Fluid& f) { return name_of(f.params().boundary); })
+      .def_property_readonly("advection",
+                             [](const Fluid& f) { return name_of(f.params().advection); })
+      .def_property_readonly("pressure",
+                             [](const Fluid& f) { return name_of(f.params().pressure); })
+      .def_property_readonly("precision",
+                             [](const Fluid& f) { return name_of(f.params().precision); })
       .def_property_readonly("viscosity", [](const Fluid& f) { return f.params().viscosity; })
       .def_property_readonly("density", [](const Fluid& f) { return f.params().density; })
       .def_property_readonly("wind", [](const Fluid& f) { return wind_to_list(f.params().wind); })
@@ -324,8 +299,9 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
         const FluidParams& p = f.params();
         return "Fluid(resolution=(" + std::to_string(g.nx) + ", " + std::to_string(g.ny) + ", " +
                std::to_string(g.nz) + "), cell_size=" + detail::to_text(g.h) + ", boundary='" +
-               p.boundary + "', advection='" + p.advection + "', pressure='" + p.pressure +
-               "', precision='" + p.precision + "', time=" + detail::to_text(f.time()) + ")";
+               name_of(p.boundary) + "', advection='" + name_of(p.advection) + "', pressure='" +
+               name_of(p.pressure) + "', precision='" + name_of(p.precision) +
+               "', time=" + detail::to_text(f.time()) + ")";
       });
 }
 

@@ -35,10 +35,28 @@ py::array view_of_vec(const Vec& v, py::handle owner) {
   return a;
 }
 
+using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+// An array-like of numbers as a float64 array, or TypeError naming `name`.
+DoubleArray double_array(const std::string& name, const py::object& o) {
+  DoubleArray a;
+  if (!PyUnicode_Check(o.ptr()) && !PyBytes_Check(o.ptr())) {
+    try {
+      a = DoubleArray::ensure(o);
+    } catch (const py::error_already_set&) {
+    }
+  }
+  if (!a) {
+    PyErr_Clear();
+    wrong_type(name, "an array of numbers", o);
+  }
+  return a;
+}
+
 // Copy an (N, 3) array-like into m in place (views stay valid); rejects other shapes and
 // non-finite.
-void assign_rows(MatX3& m, const std::string& name,
-                 const py::array_t<double, py::array::c_style | py::array::forcecast>& a) {
+void assign_rows(MatX3& m, const std::string& name, const py::object& o) {
+  const DoubleArray a = double_array(name, o);
   if (a.ndim() != 2 || a.shape(0) != m.rows() || a.shape(1) != 3)
     throw InvalidArgument(name + " should have shape (" + std::to_string(m.rows()) + ", 3), got " +
                           std::string(py::str(a.attr("shape"))));
@@ -48,37 +66,6 @@ void assign_rows(MatX3& m, const std::string& name,
       if (!std::isfinite(r(i, k)))
         fail_param(name + "[" + std::to_string(i) + "]", "finite", r(i, k));
   std::copy(a.data(), a.data() + a.size(), m.data());
-}
-
-py::list wind_to_list(const WindSchedule& w) {
-  py::list out;
-  for (const auto& k : w.keys) out.append(py::make_tuple(k.time, vec3_to_tuple(k.velocity)));
-  return out;
-}
-
-// Accepts a constant velocity (3 numbers) or keyframes [(time, (vx, vy, vz)), ...].
-WindSchedule wind_from(const std::string& name, const py::object& o) {
-  auto seq = py::reinterpret_borrow<py::sequence>(o);
-  if (!py::isinstance<py::sequence>(o) || py::isinstance<py::str>(o))
-    throw InvalidArgument(
-        name + " should be a velocity (vx, vy, vz) or keyframes [(time, (vx, vy, vz)), ...], got " +
-        std::string(py::str(py::repr(o))));
-  bool constant = seq.size() == 3;
-  if (constant)
-    for (auto item : seq)
-      constant = constant && (py::isinstance<py::float_>(item) || py::isinstance<py::int_>(item));
-  if (constant) return WindSchedule(vec3_from(name, o));
-  WindSchedule w;
-  for (size_t i = 0; i < seq.size(); ++i) {
-    const std::string key = name + "[" + std::to_string(i) + "]";
-    py::object item = seq[i];
-    if (!py::isinstance<py::sequence>(item) || py::len(item) != 2)
-      throw InvalidArgument(key + " should be a pair (time, (vx, vy, vz)), got " +
-                            std::string(py::str(py::repr(item))));
-    const double t = from_py<double>(key + ".time", item[py::int_(0)]);
-    w.keys.push_back({t, vec3_from(key + ".velocity", item[py::int_(1)])});
-  }
-  return w;
 }
 
 }  // namespace
@@ -92,7 +79,7 @@ void bind_scene(py::module_& m) {
       "wind", [](const AirParams& a) { return wind_to_list(a.wind); },
       [](AirParams& a, const py::object& o) {
         AirParams copy = a;
-        copy.wind = wind_from("air.wind", o);
+        copy.wind = wind_from_py("air.wind", o, false);
         copy.validate("air");
         a = copy;
       },
@@ -192,7 +179,7 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
   sim.def_property(
       "positions",
       [](py::object self) { return view_of(self.cast<Simulation&>().positions(), self, true); },
-      [](Simulation& s, const py::array_t<double, py::array::c_style | py::array::forcecast>& a) {
+      [](Simulation& s, const py::object& a) {
         assign_rows(s.positions(), "positions", a);
         s.update_normals();
       },
@@ -200,9 +187,7 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
   sim.def_property(
       "velocities",
       [](py::object self) { return view_of(self.cast<Simulation&>().velocities(), self, true); },
-      [](Simulation& s, const py::array_t<double, py::array::c_style | py::array::forcecast>& a) {
-        assign_rows(s.velocities(), "velocities", a);
-      },
+      [](Simulation& s, const py::object& a) { assign_rows(s.velocities(), "velocities", a); },
       "(N, 3) m/s, view");
   sim.def_property_readonly(
       "normals",
@@ -361,8 +346,8 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
       "stats['samples_outside'] counts masses that sampled it from outside its domain");
   sim.def(
       "air_velocity",
-      [](const Simulation& s,
-         const py::array_t<double, py::array::c_style | py::array::forcecast>& pts) {
+      [](const Simulation& s, const py::object& points) {
+        const DoubleArray pts = double_array("points", points);
         if (pts.ndim() != 2 || pts.shape(1) != 3)
           throw InvalidArgument("points should have shape (M, 3), got " +
                                 std::string(py::str(pts.attr("shape"))));

@@ -13,16 +13,23 @@
 #include <utility>
 #include <vector>
 
+#include "common/enums.h"
 #include "common/errors.h"
+#include "common/keyframes.h"
 #include "common/types.h"
 
 namespace flagsim::bindings {
 
 namespace py = pybind11;
 
+/// A short repr for messages: reprlib's (bounded length and nesting, so a 3,000-deep list or
+/// a long non-ASCII string cannot break the message), or a placeholder if even that fails.
 inline std::string repr_of(py::handle o) {
-  std::string s = py::str(py::repr(o));
-  return s.size() > 80 ? s.substr(0, 77) + "..." : s;
+  try {
+    return py::str(py::module_::import("reprlib").attr("repr")(o)).cast<std::string>();
+  } catch (const py::error_already_set&) {
+    return "<" + std::string(py::str(py::type::handle_of(o).attr("__name__"))) + " object>";
+  }
 }
 
 /// TypeError "<name> should be <expected>, got <repr>".
@@ -51,13 +58,25 @@ inline bool is_numpy_bool(py::handle o) {
          py::str(t.attr("__name__")).cast<std::string>().rfind("bool", 0) == 0;
 }
 inline bool is_bool(py::handle o) { return PyBool_Check(o.ptr()) || is_numpy_bool(o); }
+/// A real number: int or float, numpy's too (any object with __float__ or __index__ that is not
+/// a string, bytes, bool or complex); arrays are refused by the conversion itself.
+inline bool is_real(py::handle o) {
+  if (is_bool(o) || PyUnicode_Check(o.ptr()) || PyBytes_Check(o.ptr()) || PyComplex_Check(o.ptr()))
+    return false;
+  return PyFloat_Check(o.ptr()) || PyIndex_Check(o.ptr()) || py::hasattr(o, "__float__");
+}
 /// A sequence of exactly n items that is not a string (n < 0: any length).
 /// A sequence of the wrong length is a ValueError; anything else a TypeError.
 inline py::sequence sequence_of(const std::string& name, const std::string& expected, py::handle o,
                                 long n) {
   if (!PySequence_Check(o.ptr()) || PyUnicode_Check(o.ptr()) || PyBytes_Check(o.ptr()))
     wrong_type(name, expected, o);
-  if (n >= 0 && long(py::len(o)) != n)
+  const Py_ssize_t size = PySequence_Size(o.ptr());
+  if (size < 0) {  // a sequence type without a length (a 0-d numpy array)
+    PyErr_Clear();
+    wrong_type(name, expected, o);
+  }
+  if (n >= 0 && long(size) != n)
     throw InvalidArgument(name + " should be " + expected + ", got " + repr_of(o));
   return py::reinterpret_borrow<py::sequence>(o);
 }
@@ -74,7 +93,10 @@ T from_py(const std::string& name, py::handle o) {
   } else if constexpr (std::is_integral_v<T>) {
     if (conv::is_bool(o) || !PyIndex_Check(o.ptr())) wrong_type(name, "an integer", o);
     py::int_ i = py::reinterpret_steal<py::int_>(PyNumber_Index(o.ptr()));
-    if (!i) throw py::error_already_set();
+    if (!i) {  // __index__ refused (a float numpy array)
+      PyErr_Clear();
+      wrong_type(name, "an integer", o);
+    }
     int overflow = 0;
     const long long v = PyLong_AsLongLongAndOverflow(i.ptr(), &overflow);
     if (overflow != 0 || v < (long long)std::numeric_limits<T>::min() ||
@@ -85,17 +107,28 @@ T from_py(const std::string& name, py::handle o) {
                             "], got " + repr_of(o));
     return T(v);
   } else if constexpr (std::is_floating_point_v<T>) {
-    if (conv::is_bool(o) || !(PyFloat_Check(o.ptr()) || PyIndex_Check(o.ptr())))
-      wrong_type(name, "a number", o);
+    if (!conv::is_real(o)) wrong_type(name, "a number", o);
     const double v = PyFloat_AsDouble(o.ptr());
-    if (v == -1.0 && PyErr_Occurred()) {  // an integer too large for a double
+    if (v == -1.0 && PyErr_Occurred()) {
+      const bool overflow = PyErr_ExceptionMatches(PyExc_OverflowError);
       PyErr_Clear();
-      throw InvalidArgument(name + " should be a finite number, got " + repr_of(o));
+      if (overflow)  // an integer too large for a double
+        throw InvalidArgument(name + " should be a finite number, got " + repr_of(o));
+      wrong_type(name, "a number", o);  // e.g. an array of more than one value
     }
     return T(v);
+  } else if constexpr (std::is_enum_v<T>) {  // a mode: its name, as EnumNames<T> lists them
+    if (!PyUnicode_Check(o.ptr())) wrong_type(name, "one of " + enum_choices<T>(), o);
+    return parse_enum<T>(name, from_py<std::string>(name, o));
   } else if constexpr (std::is_same_v<T, std::string>) {
     if (!PyUnicode_Check(o.ptr())) wrong_type(name, "a string", o);
-    return o.cast<std::string>();
+    Py_ssize_t size = 0;
+    const char* text = PyUnicode_AsUTF8AndSize(o.ptr(), &size);
+    if (!text) {  // lone surrogates cannot be UTF-8
+      PyErr_Clear();
+      throw InvalidArgument(name + " should be text UTF-8 can encode, got " + repr_of(o));
+    }
+    return std::string(text, std::size_t(size));
   } else if constexpr (std::is_same_v<T, Vec3>) {
     auto s = conv::sequence_of(name, "a sequence of 3 numbers", o, 3);
     return Vec3(from_py<double>(name + "[0]", s[0]), from_py<double>(name + "[1]", s[1]),
@@ -134,11 +167,47 @@ inline Vec3 vec3_from(const std::string& name, const py::object& o) {
   return from_py<Vec3>(name, o);
 }
 
+/// A C++ value as Python: an enum as its name, anything else as pybind11 casts it.
+template <class T>
+py::object to_py(const T& v) {
+  if constexpr (std::is_enum_v<T>)
+    return py::str(name_of(v));
+  else
+    return py::cast(v);
+}
+
+/// A wind: a constant velocity (3 numbers), keyframes [(time, (vx, vy, vz)), ...], or (when
+/// allow_none) None for no keys. Each part of a bad value is named: "air.wind[1].time".
+inline WindSchedule wind_from_py(const std::string& name, py::handle o, bool allow_none) {
+  if (allow_none && o.is_none()) return WindSchedule();
+  const std::string expected = std::string(allow_none ? "None, " : "") +
+                               "a 3-vector (vx, vy, vz) or keyframes [(time, (vx, vy, vz)), ...]";
+  auto seq = conv::sequence_of(name, expected, o, -1);
+  const size_t n = py::len(seq);
+  bool constant = n == 3;
+  for (size_t i = 0; constant && i < n; ++i) constant = conv::is_real(seq[i]);
+  if (constant) return WindSchedule(from_py<Vec3>(name, o));
+  WindSchedule w;
+  for (size_t i = 0; i < n; ++i) {
+    const std::string key = name + "[" + std::to_string(i) + "]";
+    auto pair = conv::sequence_of(key, "a pair (time, (vx, vy, vz))", seq[i], 2);
+    w.keys.push_back(
+        {from_py<double>(key + ".time", pair[0]), from_py<Vec3>(key + ".velocity", pair[1])});
+  }
+  return w;
+}
+
+inline py::list wind_to_list(const WindSchedule& w) {
+  py::list out;
+  for (const auto& k : w.keys) out.append(py::make_tuple(k.time, vec3_to_tuple(k.velocity)));
+  return out;
+}
+
 template <class S, class T>
 void def_field(py::class_<S>& cls, const char* name, T S::*member, std::string section,
                const char* doc) {
   cls.def_property(
-      name, [member](const S& s) { return s.*member; },
+      name, [member](const S& s) { return to_py(s.*member); },
       [member, section, name](S& s, const py::object& value) {
         S copy = s;
         copy.*member = from_py<T>(section + "." + name, value);

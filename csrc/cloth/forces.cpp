@@ -58,13 +58,13 @@ void add_drag(const ClothTopology& topo, const DragParams& drag, double rho, con
               const MatX3& v, const MatX3& u, MatX3& f) {
   const Index n = topo.num_vertices();
   const double c = 0.5 * drag.coefficient * rho;
-  if (drag.model == "paper") {
+  if (drag.model == DragModel::kPaper) {
     // eq. 3: D = 1/2 C_D rho S (|u| u - |v| v)
     parallel_for(n, [&](Index i) {
       const Vec3 ui = u.row(i), vi = v.row(i);
       f.row(i) += c * topo.area[i] * (ui.norm() * ui - vi.norm() * vi);
     });
-  } else if (drag.model == "relative") {
+  } else if (drag.model == DragModel::kRelative) {
     parallel_for(n, [&](Index i) {
       const Vec3 w = Vec3(u.row(i)) - Vec3(v.row(i));
       f.row(i) += c * topo.area[i] * w.norm() * w;
@@ -132,13 +132,13 @@ void drag_velocity_jacobians(const ClothTopology& topo, const DragParams& drag, 
     if (l == 0) return Mat3::Zero();
     return l * Mat3::Identity() + a * a.transpose() / l;
   };
-  if (drag.model == "paper") {
+  if (drag.model == DragModel::kPaper) {
     // Exact: c S (|v| I + v v^T / |v|), which vanishes at rest, so a gust on a resting light flag
     // would get dv = h F / m. Adding c S |u| I changes the step by O(h^2) (first-order
     // consistency is kept) and bounds it: a free mass from rest gets dv -> u as h grows.
     for (Index i = 0; i < n; ++i)
       Dv[i] = c * topo.area[i] * (dnorm(v.row(i)) + Vec3(u.row(i)).norm() * Mat3::Identity());
-  } else if (drag.model == "relative") {
+  } else if (drag.model == DragModel::kRelative) {
     for (Index i = 0; i < n; ++i) Dv[i] = c * topo.area[i] * dnorm(Vec3(u.row(i)) - Vec3(v.row(i)));
   } else {
     for (Index i = 0; i < n; ++i) Dv[i].setZero();
@@ -206,7 +206,7 @@ double stable_step_estimate(const ClothTopology& topo, const DragParams& drag, d
       // |u| + |v|, which also covers a mass about to be accelerated towards the air speed.
       // "triangle" takes a factor 2 for a vertex's coupling to neighbours through triangles.
       const double a = Vec3(u.row(i)).norm() + Vec3(v.row(i)).norm();
-      const double cd = drag.model == "triangle"
+      const double cd = drag.model == DragModel::kTriangle
                             ? 2.0 * std::max(drag.coefficient, drag.tangential_coefficient)
                             : drag.coefficient;
       ci += cd * rho * topo.area[i] * a / mi;

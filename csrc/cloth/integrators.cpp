@@ -128,8 +128,9 @@ double drift_work(const ClothTopology& topo, const ForceSet& fs, const MatX3& f,
 constexpr Index kAutoMultigridVertices = 200;
 bool use_multigrid(const ClothTopology& topo, const IntegratorParams& ip,
                    const IntegratorScratch& s) {
-  if (s.mg.levels.empty() || ip.preconditioner == "jacobi") return false;
-  return ip.preconditioner == "multigrid" || topo.num_vertices() >= kAutoMultigridVertices;
+  if (s.mg.levels.empty() || ip.preconditioner == Preconditioner::kJacobi) return false;
+  return ip.preconditioner == Preconditioner::kMultigrid ||
+         topo.num_vertices() >= kAutoMultigridVertices;
 }
 
 // Symplectic Euler over h. With ip.adaptive, every substep is at most safety x the stable step
@@ -425,18 +426,16 @@ IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const I
   long explicit_substeps = 0;
   for (int k = 0; k < ip.substeps; ++k) {
     IntegrateStatus st;
-    if (ip.method == "explicit") {
-      st = explicit_step(topo, fs, ip, hs, u, x, v, s, stats, work, t);
-      explicit_substeps += stats.substeps;
-    } else if (ip.method == "implicit") {
-      st = implicit_step(topo, fs, ip, hs, u, x, v, s, stats, E, work, t);
-    } else {
-      throw std::logic_error("integrate: unknown method '" + ip.method +
-                             "' (validate() lets none through)");
+    switch (ip.method) {
+      case Method::kExplicit:
+        st = explicit_step(topo, fs, ip, hs, u, x, v, s, stats, work, t);
+        explicit_substeps += stats.substeps;
+        break;
+      case Method::kImplicit: st = implicit_step(topo, fs, ip, hs, u, x, v, s, stats, E, work, t);
     }
     if (st != IntegrateStatus::kOk) return st;
   }
-  if (ip.method == "explicit") {
+  if (ip.method == Method::kExplicit) {
     stats.substeps = explicit_substeps;
     E = timed_energy(topo, fs, x, v, s, t);
     work.remainder = E - stats.energy_before - work.booked();

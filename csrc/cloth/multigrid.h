@@ -48,9 +48,9 @@ inline double dot(const MatX3& a, const MatX3& b) { return (a.array() * b.array(
 /// 3x3 identity blocks) couples each vertex to its 8 neighbours at most.
 struct MultigridLevel {
   int rows = 0, cols = 0;
-  std::vector<Mat3> A;  ///< (9 rows cols + 1): A[9 v + 3 (dr + 1) + dc + 1] couples v, v + (dr,
-                        ///< dc); the last block is padding (zero) for the vector loads
-  std::vector<Mat3> Dinv;       ///< (rows cols) inverse diagonal blocks (identity if inactive)
+  std::vector<Mat3> A;     ///< (9 rows cols + 1): A[9 v + 3 (dr + 1) + dc + 1] couples v, v + (dr,
+                           ///< dc); the last block is padding (zero) for the vector loads
+  std::vector<Mat3> Dinv;  ///< (rows cols) inverse diagonal blocks (identity if inactive)
   std::vector<uint8_t> active;  ///< (rows cols) 1 if it aggregates at least one free vertex
   MatX3 x, b, r;                ///< (rows cols x 3) solution, right-hand side, residual
   MatX3 x_sum, b_in, v1;        ///< (rows cols x 3) K-cycle: first pass's x, the level's b, A x

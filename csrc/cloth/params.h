@@ -3,9 +3,36 @@
 #include <string>
 #include <vector>
 
+#include "common/enums.h"
 #include "common/types.h"
 
 namespace flagsim {
+
+/// Which vertices `pin` holds: the pole-side column, its two corners, the top row, none.
+enum class Pin { kPole, kGrommets, kTop, kNone };
+template <>
+struct EnumNames<Pin> {
+  static constexpr std::array<const char*, 4> names{"pole", "grommets", "top", "none"};
+};
+
+enum class DragModel { kPaper, kRelative, kTriangle };
+template <>
+struct EnumNames<DragModel> {
+  static constexpr std::array<const char*, 3> names{"paper", "relative", "triangle"};
+};
+
+/// Symplectic Euler (explicit) or backward Euler as Baraff-Witkin (implicit).
+enum class Method { kExplicit, kImplicit };
+template <>
+struct EnumNames<Method> {
+  static constexpr std::array<const char*, 2> names{"explicit", "implicit"};
+};
+
+enum class Preconditioner { kAuto, kJacobi, kMultigrid };
+template <>
+struct EnumNames<Preconditioner> {
+  static constexpr std::array<const char*, 3> names{"auto", "jacobi", "multigrid"};
+};
 
 /// A rows x cols grid of masses over a width x height rectangle (paper: 8 x 11 masses).
 /// Vertex i = r * cols + c; r = 0 is the top row, c = 0 the pole-side column. The rest flag
@@ -21,7 +48,7 @@ struct FlagParams {
   double shear_stiffness = 20.0;     ///< N/m, diagonal springs
   double bend_stiffness = 5.0;       ///< N/m, skip-one springs
   double damping = 0.02;             ///< N s/m, k_d of eq. 4, every spring
-  std::string pin = "pole";          ///< "pole" | "grommets" | "top" | "none"
+  Pin pin = Pin::kPole;
   std::vector<int> pinned_vertices;  ///< explicit pins; when non-empty, replaces `pin`
   void validate(const std::string& prefix = "flag") const;
 };
@@ -31,7 +58,7 @@ struct FlagParams {
 /// pressure C_D on the normal part and skin friction C_T on the tangential part of the relative
 /// velocity, two-sided (the normal force's component across the flow is the lift).
 struct DragParams {
-  std::string model = "paper";           ///< "paper" | "relative" | "triangle"
+  DragModel model = DragModel::kPaper;
   double coefficient = 1.0;              ///< C_D
   double tangential_coefficient = 0.05;  ///< C_T, "triangle" only
   void validate(const std::string& prefix = "drag") const;
@@ -42,29 +69,29 @@ struct DragParams {
 constexpr double kStrainLimitSlack = 0.02;
 
 struct IntegratorParams {
-  std::string method = "implicit";  ///< "explicit" (symplectic Euler) | "implicit" (Baraff-Witkin)
-  int substeps = 1;                 ///< fixed substeps per step (each of dt / substeps)
-  bool adaptive = true;             ///< explicit: substep below the stable step estimate
-  double safety = 0.9;              ///< fraction of the stable step used when substepping
-  int max_substeps = 1000000;       ///< explicit: per step; more is a DivergenceError
-  double cg_tolerance = 1e-4;       ///< implicit: relative residual of the CG solve (1e-4 moves
-                                    ///< the paper flag by 4e-8 m after 1 s vs 1e-10: far below
-                                    ///< backward Euler's own error of ~3 mm; docs/design.md)
-  std::string preconditioner = "auto";  ///< implicit CG: "jacobi" (3x3 block Jacobi) |
-                                        ///< "multigrid" (aggregation K-cycle, grid flags) | "auto"
-                                        ///< (multigrid from 200 masses up; docs/design.md)
-  int cg_max_iterations = 1000;         ///< implicit: per solve; on failure the step is halved
-  int max_halvings = 10;                ///< implicit: step halvings before DivergenceError("cg")
-  double max_strain = 10.0;             ///< a spring stretched beyond (1 + max_strain) x rest
-                                        ///< length raises DivergenceError("strain")
-  double strain_limit = 0.1;            ///< > 0: Provot 1995 strain limiting of structural and
-                                        ///< shear springs to (1 + strain_limit) x rest; 0 = off
-  int strain_limit_iterations = 50;     ///< Gauss-Seidel sweeps at most (stops when satisfied)
-  double energy_tolerance = 0.1;        ///< energy a step may make beyond what its stages' work
-                                        ///< explains, as a fraction of the flag's energy scale
-                                        ///< m |g| H + m U^2 / 2; more raises DivergenceError
-                                        ///< ("energy"), and an implicit step is first halved;
-                                        ///< 0 = off (docs/energy.md)
+  Method method = Method::kImplicit;
+  int substeps = 1;            ///< fixed substeps per step (each of dt / substeps)
+  bool adaptive = true;        ///< explicit: substep below the stable step estimate
+  double safety = 0.9;         ///< fraction of the stable step used when substepping
+  int max_substeps = 1000000;  ///< explicit: per step; more is a DivergenceError
+  double cg_tolerance = 1e-4;  ///< implicit: relative residual of the CG solve (1e-4 moves
+                               ///< the paper flag by 4e-8 m after 1 s vs 1e-10: far below
+                               ///< backward Euler's own error of ~3 mm; docs/design.md)
+  /// implicit CG: jacobi (3x3 block Jacobi) | multigrid (aggregation K-cycle, grid flags) |
+  /// auto (multigrid from 200 masses up; docs/design.md)
+  Preconditioner preconditioner = Preconditioner::kAuto;
+  int cg_max_iterations = 1000;      ///< implicit: per solve; on failure the step is halved
+  int max_halvings = 10;             ///< implicit: step halvings before DivergenceError("cg")
+  double max_strain = 10.0;          ///< a spring stretched beyond (1 + max_strain) x rest
+                                     ///< length raises DivergenceError("strain")
+  double strain_limit = 0.1;         ///< > 0: Provot 1995 strain limiting of structural and
+                                     ///< shear springs to (1 + strain_limit) x rest; 0 = off
+  int strain_limit_iterations = 50;  ///< Gauss-Seidel sweeps at most (stops when satisfied)
+  double energy_tolerance = 0.1;     ///< energy a step may make beyond what its stages' work
+                                     ///< explains, as a fraction of the flag's energy scale
+                                     ///< m |g| H + m U^2 / 2; more raises DivergenceError
+                                     ///< ("energy"), and an implicit step is first halved;
+                                     ///< 0 = off (docs/energy.md)
   void validate(const std::string& prefix = "integrator") const;
 };
 

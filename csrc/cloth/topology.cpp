@@ -160,12 +160,12 @@ ClothTopology build_flag_topology(const FlagParams& p) {
   t.inv_mass = t.mass.cwiseInverse();
   if (!p.pinned_vertices.empty()) {
     for (int i : p.pinned_vertices) t.inv_mass[i] = 0.0;
-  } else if (p.pin == "pole") {
+  } else if (p.pin == Pin::kPole) {
     for (int r = 0; r < R; ++r) t.inv_mass[id(r, 0)] = 0.0;
-  } else if (p.pin == "grommets") {
+  } else if (p.pin == Pin::kGrommets) {
     t.inv_mass[id(0, 0)] = 0.0;
     t.inv_mass[id(R - 1, 0)] = 0.0;
-  } else if (p.pin == "top") {
+  } else if (p.pin == Pin::kTop) {
     for (int c = 0; c < C; ++c) t.inv_mass[id(0, c)] = 0.0;
   }
 

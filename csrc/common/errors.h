@@ -71,14 +71,18 @@ inline void check_range(const std::string& name, double v, double lo, double hi)
   if (!(std::isfinite(v) && v >= lo && v <= hi))
     fail_param(name, "in [" + detail::to_text(lo) + ", " + detail::to_text(hi) + "]", v);
 }
+/// "(a, b, c)" with each component in its shortest exact form.
+template <class V>
+std::string vec_text(const V& v) {
+  std::string s = "(";
+  for (Eigen::Index i = 0; i < v.size(); ++i) s += (i ? ", " : "") + detail::to_text(double(v[i]));
+  return s + ")";
+}
+
 template <class V>
 void check_finite_vec(const std::string& name, const V& v) {
   for (Eigen::Index i = 0; i < v.size(); ++i)
-    if (!std::isfinite(v[i])) {
-      std::ostringstream s;
-      s << "(" << v.transpose() << ")";
-      fail_param(name, "finite", s.str());
-    }
+    if (!std::isfinite(v[i])) fail_param(name, "finite", vec_text(v));
 }
 
 /// Positions and lengths in a scene, m: a 2,000 km cube about the origin. Far beyond any flag,

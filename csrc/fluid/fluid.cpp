@@ -56,7 +56,7 @@ struct TypedSolver final : Fluid::Solver {
     geo.nz = p.resolution[2];
     geo.h = p.cell_size;
     geo.origin = p.origin;
-    geo.periodic = p.boundary == "periodic";
+    geo.periodic = p.boundary == Boundary::kPeriodic;
     u = MacGrid<T>(geo);
     hat = MacGrid<T>(geo);
     if (geo.periodic)
@@ -67,8 +67,8 @@ struct TypedSolver final : Fluid::Solver {
     phi.assign(cells, T(0));
     div.assign(cells, T(0));
     div_out.assign(cells, T(0));
-    maccormack = p.advection == "maccormack";
-    use_fft = p.pressure == "fft";
+    maccormack = p.advection == Advection::kMacCormack;
+    use_fft = p.pressure == Pressure::kFft;
     // float cannot reach residuals near its epsilon: floor the relative tolerance there.
     tol = std::max(p.pcg_tolerance, 50.0 * double(std::numeric_limits<T>::epsilon()));
     pressure_op = pressure_operator(geo);
@@ -230,11 +230,11 @@ Fluid::Fluid(const FluidParams& params, const std::string& prefix) {
   params.validate_combination(prefix);
   const double cells = double(params.resolution[0]) * params.resolution[1] * params.resolution[2];
   check_memory("a grid of " + detail::to_text(cells) + " cells",
-               cells * kValuesPerCell * (params.precision == "float" ? 4 : 8),
+               cells * kValuesPerCell * (params.precision == Precision::kFloat ? 4 : 8),
                "use a coarser " +
                    (prefix.empty() ? std::string("resolution") : prefix + ".resolution") +
                    " or precision 'float'");
-  if (params.precision == "float")
+  if (params.precision == Precision::kFloat)
     s_ = std::make_unique<TypedSolver<float>>(params);
   else
     s_ = std::make_unique<TypedSolver<double>>(params);
@@ -264,7 +264,7 @@ void Fluid::step(double dt) {
 double Fluid::time() const { return s_->time; }
 const FluidParams& Fluid::params() const { return s_->params; }
 const GridGeometry& Fluid::geometry() const { return s_->geo; }
-bool Fluid::is_double() const { return s_->params.precision == "double"; }
+bool Fluid::is_double() const { return s_->params.precision == Precision::kDouble; }
 const FluidStats& Fluid::stats() const { return s_->stats; }
 Shape3 Fluid::component_shape(int c) const { return s_->geo.face_shape(c); }
 void* Fluid::component_data(int c) { return s_->data(c); }

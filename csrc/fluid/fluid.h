@@ -44,7 +44,7 @@ class Fluid {
   double time() const;  ///< s
   const FluidParams& params() const;
   const GridGeometry& geometry() const;
-  bool is_double() const;  ///< params.precision == "double"
+  bool is_double() const;  ///< params.precision == Precision::kDouble
   const FluidStats& stats() const;
 
   /// Shape of component c (0 = u, 1 = v, 2 = w), see grid.h.

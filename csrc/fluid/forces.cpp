@@ -21,7 +21,7 @@ std::vector<FanStencil<T>> build_fan_stencils(const GridGeometry& geo,
         for (int j = 0; j < sh.n[1]; ++j)
           for (int k = 0; k < sh.n[2]; ++k) {
             const Vec3 d = geo.face_position(c, i, j, k) - f.center;
-            const bool inside = f.shape == "sphere"
+            const bool inside = f.shape == FanShape::kSphere
                                     ? d.squaredNorm() <= f.radius * f.radius
                                     : (d.array().abs() <= f.half_size.array()).all();
             if (inside) s.faces[c].emplace_back(uint32_t(sh.index(i, j, k)), T(acc[c]));

@@ -5,14 +5,46 @@
 #include <string>
 #include <vector>
 
+#include "common/enums.h"
 #include "common/keyframes.h"
 #include "common/types.h"
 
 namespace flagsim {
 
+enum class FanShape { kBox, kSphere };
+template <>
+struct EnumNames<FanShape> {
+  static constexpr std::array<const char*, 2> names{"box", "sphere"};
+};
+
+enum class Boundary { kPeriodic, kTunnel };
+template <>
+struct EnumNames<Boundary> {
+  static constexpr std::array<const char*, 2> names{"periodic", "tunnel"};
+};
+
+enum class Advection { kSemiLagrangian, kMacCormack };
+template <>
+struct EnumNames<Advection> {
+  static constexpr std::array<const char*, 2> names{"semi_lagrangian", "maccormack"};
+};
+
+/// FFT (periodic only, FFTW) or MIC(0)-preconditioned CG.
+enum class Pressure { kFft, kPcg };
+template <>
+struct EnumNames<Pressure> {
+  static constexpr std::array<const char*, 2> names{"fft", "pcg"};
+};
+
+enum class Precision { kDouble, kFloat };
+template <>
+struct EnumNames<Precision> {
+  static constexpr std::array<const char*, 2> names{"double", "float"};
+};
+
 /// A region that pushes the air: force density f (N/m^3) along `direction` inside a box or sphere.
 struct FanParams {
-  std::string shape = "box";         ///< "box" | "sphere"
+  FanShape shape = FanShape::kBox;
   Vec3 center{0, 0, 0};              ///< m
   Vec3 half_size{0.25, 0.25, 0.25};  ///< m, box half extents (shape "box")
   double radius = 0.25;              ///< m (shape "sphere")
@@ -38,19 +70,19 @@ struct FluidParams {
   std::array<int, 3> resolution{16, 16, 16};  ///< cells nx, ny, nz
   double cell_size = 0.125;                   ///< m
   Vec3 origin{-0.5, -1.0, -1.0};              ///< m, min corner of the domain
-  std::string boundary = "periodic";          ///< "periodic" | "tunnel"
-  std::string advection = "semi_lagrangian";  ///< "semi_lagrangian" | "maccormack"
+  Boundary boundary = Boundary::kPeriodic;    ///< tunnel: inflow through x-min, outflow x-max
+  Advection advection = Advection::kSemiLagrangian;
 #ifdef FLAGSIM_HAVE_FFTW
-  std::string pressure = "fft";  ///< "fft" (periodic only, FFTW) | "pcg"
+  Pressure pressure = Pressure::kFft;  ///< fft needs a periodic boundary
 #else
-  std::string pressure = "pcg";  ///< "fft" (periodic only, FFTW: not in this build) | "pcg"
+  Pressure pressure = Pressure::kPcg;  ///< fft is not in this build (no FFTW)
 #endif
-  std::string precision = "double";  ///< "double" | "float"
-  double viscosity = 1.5e-5;         ///< m^2/s, kinematic; 0 = no diffusion stage
-  double density = 1.2;              ///< kg/m^3
-  double pcg_tolerance = 1e-8;       ///< relative residual
-  int pcg_max_iterations = 500;      ///< per solve (pressure and each diffusion solve)
-  WindSchedule wind;                 ///< periodic: mean flow (k = 0 mode); tunnel: inflow velocity
+  Precision precision = Precision::kDouble;
+  double viscosity = 1.5e-5;     ///< m^2/s, kinematic; 0 = no diffusion stage
+  double density = 1.2;          ///< kg/m^3
+  double pcg_tolerance = 1e-8;   ///< relative residual
+  int pcg_max_iterations = 500;  ///< per solve (pressure and each diffusion solve)
+  WindSchedule wind;             ///< periodic: mean flow (k = 0 mode); tunnel: inflow velocity
   std::vector<FanParams> fans;
   /// Each field on its own: throws InvalidArgument naming "<prefix>.<field>" ("resolution" when
   /// prefix is empty). Field setters run this, so fields can be set in any order.

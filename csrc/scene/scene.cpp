@@ -7,17 +7,15 @@
 namespace flagsim {
 
 void AirParams::validate(const std::string& p) const {
-  if (model != "none" && model != "uniform" && model != "grid")
-    fail_param(p + ".model", "one of 'none', 'uniform', 'grid'", "'" + model + "'");
   wind.validate(p + ".wind");
   check_nonnegative(p + ".density", density);
-  if (model == "grid") FluidParams::validate(p);
+  if (model == AirModel::kGrid) FluidParams::validate(p);
 }
 
 void Scene::validate() const {
   flag.validate("flag");
   air.validate("air");
-  if (air.model == "grid") air.validate_combination("air");
+  if (air.model == AirModel::kGrid) air.validate_combination("air");
   drag.validate("drag");
   integrator.validate("integrator");
   // A strain beyond max_strain raises: at or below the strain limit's promise, so could a step
@@ -59,19 +57,19 @@ Scene Scene::paper() {
   // around the flag (x in [0.055, 0.865], y in [-0.54, 0], z = 0). A periodic mean flow of
   // 1.5 m/s along +x plus a household fan (§4.1) upstream at mid-height blowing up to 2.5 m/s:
   // about 2 m/s at the flag, faster mid-height than at the edges, so the grid is needed.
-  s.air.model = "grid";
+  s.air.model = AirModel::kGrid;
   s.air.wind = WindSchedule(Vec3(1.5, 0.0, 0.0));
   s.air.resolution = {16, 16, 16};
   s.air.cell_size = 0.125;
   s.air.origin = Vec3(-0.5, -1.0, -1.0);
-  s.air.boundary = "periodic";
+  s.air.boundary = Boundary::kPeriodic;
 #ifdef FLAGSIM_HAVE_FFTW
-  s.air.pressure = "fft";
+  s.air.pressure = Pressure::kFft;
 #else
-  s.air.pressure = "pcg";
+  s.air.pressure = Pressure::kPcg;
 #endif
   FanParams fan;
-  fan.shape = "sphere";
+  fan.shape = FanShape::kSphere;
   fan.center = Vec3(-0.3, -0.27, 0.0);
   fan.radius = 0.3;
   fan.direction = Vec3(1.0, 0.0, 0.0);
@@ -80,7 +78,7 @@ Scene Scene::paper() {
   s.air.fans = {fan};
   // Paper §4.2: one-way coupling cannot make the flag flap, so eq. 5 displaces it along its
   // normals; 0.03 m per m/s of air at the pole gives waves of a few cm at the paper's 2 m/s.
-  s.flapping.mode = "displace";
+  s.flapping.mode = FlapMode::kDisplace;
   s.flapping.amplitude = 0.03;
   return s;
 }
@@ -93,7 +91,7 @@ Scene Scene::banner() {
   s.flag.width = 0.5;
   s.flag.height = 0.7;
   s.flag.origin = Vec3(-0.25, 0.0, 0.0);
-  s.flag.pin = "top";
+  s.flag.pin = Pin::kTop;
   s.pole.enabled = false;
   s.air.wind = WindSchedule(Vec3(0.0, 0.0, 3.0));
   return s;
@@ -104,11 +102,11 @@ Scene Scene::flapping_demo() {
   s.name = "flapping_demo";
   s.flag.rows = 16;
   s.flag.cols = 24;
-  s.air.model = "uniform";
+  s.air.model = AirModel::kUniform;
   s.air.wind = WindSchedule(Vec3(2.0, 0.0, 0.0));
   s.air.density = 0.0;               // no drag stage: the wind only sets u_p of eq. 5
   s.gravity = Vec3(9.81, 0.0, 0.0);  // every mass pulled along +x
-  s.flapping.mode = "displace";
+  s.flapping.mode = FlapMode::kDisplace;
   s.flapping.amplitude = 0.01;
   s.flapping.l_max = 0.2;
   s.flapping.speed = 1.0;

@@ -11,11 +11,17 @@
 
 namespace flagsim {
 
+enum class AirModel { kNone, kUniform, kGrid };
+template <>
+struct EnumNames<AirModel> {
+  static constexpr std::array<const char*, 3> names{"none", "uniform", "grid"};
+};
+
 /// The air the flag feels. model "none": no air at all (no drag stage); "uniform": the wind
 /// schedule everywhere, analytic (no grid is built); "grid": Stable Fluids on the grid described
 /// by the FluidParams fields, with `wind` as its mean flow (periodic) or inflow (tunnel).
 struct AirParams : FluidParams {
-  std::string model = "uniform";  ///< "none" | "uniform" | "grid"
+  AirModel model = AirModel::kUniform;
   AirParams() { wind = WindSchedule(Vec3(2.0, 0.0, 0.0)); }
   void validate(const std::string& prefix = "air") const;
 };

@@ -49,10 +49,10 @@ Scene validated(const Scene& s) {
   s.validate();
   const double vertices = double(s.flag.rows) * double(s.flag.cols);
   double cells = 0;
-  if (s.air.model == "grid")
+  if (s.air.model == AirModel::kGrid)
     cells = double(s.air.resolution[0]) * s.air.resolution[1] * s.air.resolution[2];
-  const double bytes =
-      vertices * kBytesPerVertex + cells * kValuesPerCell * (s.air.precision == "float" ? 4 : 8);
+  const double bytes = vertices * kBytesPerVertex +
+                       cells * kValuesPerCell * (s.air.precision == Precision::kFloat ? 4 : 8);
   check_memory("this scene (a " + std::to_string(s.flag.rows) + " x " +
                    std::to_string(s.flag.cols) + " flag" +
                    (cells > 0 ? ", " + detail::to_text(cells) + " air cells" : std::string()) + ")",
@@ -71,25 +71,26 @@ Simulation::Simulation(const Scene& scene)
   v_start_ = v_;
 
   // Build only what the scene needs: a stage left out is never called and costs nothing.
-  const bool air = scene_.air.model != "none" && scene_.air.density > 0;
+  const bool air = scene_.air.model != AirModel::kNone && scene_.air.density > 0;
   forces_.gravity = scene_.gravity.squaredNorm() > 0;
-  forces_.drag = air && (scene_.drag.coefficient > 0 || (scene_.drag.model == "triangle" &&
-                                                         scene_.drag.tangential_coefficient > 0));
+  forces_.drag =
+      air && (scene_.drag.coefficient > 0 || (scene_.drag.model == DragModel::kTriangle &&
+                                              scene_.drag.tangential_coefficient > 0));
   forces_.springs = topo_.stiffness.maxCoeff() > 0 || topo_.damping.maxCoeff() > 0;
   forces_.g = scene_.gravity;
   forces_.drag_params = scene_.drag;
   forces_.rho = scene_.air.density;
-  built_[kWind] = forces_.drag && scene_.air.model == "uniform";
-  built_[kFluid] = forces_.drag && scene_.air.model == "grid";
+  built_[kWind] = forces_.drag && scene_.air.model == AirModel::kUniform;
+  built_[kFluid] = forces_.drag && scene_.air.model == AirModel::kGrid;
   if (built_[kFluid]) build_fluid();
   built_[kGravity] = forces_.gravity;
   built_[kDrag] = forces_.drag;
   built_[kSprings] = forces_.springs;
   built_[kIntegrate] = true;
   built_[kStrainLimit] = scene_.integrator.strain_limit > 0;
-  const std::string& flap = scene_.flapping.mode;
-  built_[kFlap] = flap == "displace" || flap == "force";
-  built_[kFlapVisual] = flap == "visual";
+  const FlapMode flap = scene_.flapping.mode;
+  built_[kFlap] = flap == FlapMode::kDisplace || flap == FlapMode::kForce;
+  built_[kFlapVisual] = flap == FlapMode::kVisual;
   built_[kPole] = scene_.pole.enabled;
   built_[kSelfCollision] = scene_.self_collision.enabled;
   built_[kCheck] = true;
@@ -116,7 +117,7 @@ Simulation::Simulation(const Scene& scene)
 // the estimate for the scene at rest, no step can run: say so now, naming the fix.
 void Simulation::check_explicit_step() const {
   const IntegratorParams& ip = scene_.integrator;
-  if (ip.method != "explicit" || ip.adaptive) return;
+  if (ip.method != Method::kExplicit || ip.adaptive) return;
   MatX3 u0;
   air_velocity(x_, u0);
   const double stable =
@@ -134,8 +135,8 @@ void Simulation::check_explicit_step() const {
 // piece's start positions at construction.
 void Simulation::setup_energy() {
   const FlagParams& f = scene_.flag;
-  double U = scene_.air.model == "none" ? 0.0 : scene_.air.wind.max_speed();
-  if (scene_.air.model == "grid")
+  double U = scene_.air.model == AirModel::kNone ? 0.0 : scene_.air.wind.max_speed();
+  if (scene_.air.model == AirModel::kGrid)
     for (const FanParams& fan : scene_.air.fans) U = std::max(U, fan.max_speed);
   const double m = topo_.mass.sum(), H = std::max(f.width, f.height);
   energy_scale_ = m * scene_.gravity.norm() * H + 0.5 * m * U * U;
@@ -168,10 +169,10 @@ void Simulation::setup_flapping() {
   flap_after_.setZero(N);
   // The integrator carries the stage: "displace" as a drift of the positions, "force" as an
   // external force, each held over a piece.
-  if (fp.mode == "displace") {
+  if (fp.mode == FlapMode::kDisplace) {
     flap_drift_.setZero(N, 3);
     forces_.drift = &flap_drift_;
-  } else if (fp.mode == "force") {
+  } else if (fp.mode == FlapMode::kForce) {
     flap_force_.setZero(N, 3);
     forces_.external = &flap_force_;
   }
@@ -267,7 +268,7 @@ void Simulation::step_once() {
 // One piece of h_ from t_piece_: an empty cause when it passed its checks.
 Simulation::Implausible Simulation::step_piece() {
   x_piece_ = x_;
-  const bool displace = built_[kFlap] && scene_.flapping.mode == "displace";
+  const bool displace = built_[kFlap] && scene_.flapping.mode == FlapMode::kDisplace;
   stage_air();
   if (displace) stage_flap_drift();                    // a drift of the positions, or
   if (built_[kFlap] && !displace) stage_flap_force();  // a force, held over the piece
@@ -531,7 +532,7 @@ void Simulation::diverge(const std::string& cause, long vertex, const std::strin
   if (vertex >= 0) s << ", vertex " << vertex;
   s << ": " << detail << "; the state was restored to the start of that step. Try ";
   const IntegratorParams& ip = scene_.integrator;
-  if (ip.method == "explicit")
+  if (ip.method == Method::kExplicit)
     s << (ip.adaptive ? "" : "integrator.adaptive = true, ") << "integrator.method = 'implicit', ";
   if (cause == "energy")
     s << "a smaller dt, stiffness closer to the shear and bend springs', or a larger "
@@ -558,7 +559,7 @@ EnergyLedger Simulation::energy_ledger() const {
 
 void Simulation::air_velocity(const MatX3& points, MatX3& out) const {
   out.resize(points.rows(), 3);
-  if (scene_.air.model == "none") {
+  if (scene_.air.model == AirModel::kNone) {
     out.setZero();
     return;
   }

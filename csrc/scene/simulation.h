@@ -189,7 +189,7 @@ class Simulation {
   std::vector<std::string> stage_names_;
   std::unique_ptr<Fluid> fluid_;  // the air grid, when the scene needs one
 
-  // Flapping (paper eq. 5), set up only when flapping.mode != "off".
+  // Flapping (paper eq. 5), set up only when flapping.mode != FlapMode::kOff.
   Perlin1D noise_{0};
   MatX2 flap_xy_;                  // (N x 2) eq. 5's normalised (x, y): the rest uv
   VecX flap_L_;                    // (N) m, rest distance to the nearest pinned vertex

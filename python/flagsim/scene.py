@@ -128,6 +128,7 @@ def from_dict(data: dict[str, Any], source: str = "scene") -> Scene:
     scene = named(base) if base else Scene()
     try:
         apply_dict(scene, data, "")
+        scene.validate()  # the rules that span fields (a file names its error here, not later)
     except ValueError as e:
         raise ValueError(f"{source}: {e}") from None
     return scene

@@ -22,10 +22,10 @@ inline Scene spring_pair_scene(const std::string& method, double k, double dt) {
   s.flag.bend_stiffness = 0;
   s.flag.damping = 0;
   s.flag.pinned_vertices = {0, 1, 2};
-  s.air.model = "none";
+  s.air.model = AirModel::kNone;
   s.gravity = Vec3::Zero();
   s.pole.enabled = false;
-  s.integrator.method = method;
+  s.integrator.method = parse_enum<Method>("method", method);
   s.integrator.adaptive = false;
   s.integrator.cg_tolerance = 1e-12;
   s.dt = dt;

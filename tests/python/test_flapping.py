@@ -94,8 +94,8 @@ def test_flapping_params_validation():
         p.l_max = -1.0
     with pytest.raises(
         ValueError,
-        match=r"flapping\.mode should be one of 'displace', 'force', "
-        r"'visual', 'off', got 'flap'",
+        match=r'flapping\.mode should be one of "displace", "force", '
+        r'"visual", "off", got "flap"',
     ):
         p.mode = "flap"
     with pytest.raises(ValueError, match=r"flapping\.frequency should be finite and > 0, got inf"):

@@ -496,12 +496,16 @@ def test_set_velocity_evaluates_at_the_face_positions():
             dict(wind=[(1.0, (1, 0, 0)), (0.5, (2, 0, 0))]),
             r"wind\[1\].time should be > the previous key's time",
         ),
-        (dict(wind="east"), r"wind should be None, a 3-vector"),
     ],
 )
 def test_invalid_parameters_raise_value_error_naming_the_parameter(kwargs, match):
     with pytest.raises(ValueError, match=match):
         flagsim.Fluid(**kwargs)
+
+
+def test_a_wind_of_the_wrong_type_is_a_type_error_naming_it():
+    with pytest.raises(TypeError, match=r"wind should be None, a 3-vector"):
+        flagsim.Fluid(wind="east")
 
 
 def test_invalid_fan_and_step_arguments():

@@ -2,6 +2,7 @@
 
 import gc
 import math
+import time
 import weakref
 
 import flagsim
@@ -192,15 +193,19 @@ def test_a_second_thread_stepping_the_same_simulation_is_refused():
     s.air.model = "uniform"
     s.flag.rows = s.flag.cols = 48  # long enough steps for the calls to overlap
     sim = flagsim.Simulation(s)
-    started, errors = threading.Event(), []
+    errors, worker_errors = [], []
 
     def long_run():
-        started.set()
-        sim.step(60)
+        try:
+            sim.step(60)
+        except RuntimeError as e:  # refused: this thread's call came second after all
+            worker_errors.append(e)
 
     t = threading.Thread(target=long_run)
     t.start()
-    started.wait()
+    while sim.step_count == 0 and t.is_alive():  # until the long call is under way
+        time.sleep(0.0005)
+    assert not worker_errors
     done = 0  # steps this thread got in before the other call began
     while t.is_alive():
         try:

@@ -48,6 +48,7 @@ def configure(p):
 
 def run(args):
     from .. import study
+
     if args.jobs < 1:  # a ValueError: the CLI's one error funnel prints it and exits 2
         raise ValueError(f"--jobs should be >= 1, got {args.jobs}")
     report = os.path.join(args.docs, f"{args.study}.md") if args.docs else None

@@ -82,7 +82,7 @@ TEST_P(DragJacobian, VelocityJacobianMatchesCentralDifferences) {
   const ClothTopology t = small_flag();
   const Index n = t.num_vertices();
   DragParams drag;
-  drag.model = GetParam();
+  drag.model = parse_enum<DragModel>("drag.model", GetParam());
   drag.tangential_coefficient = 0.3;
   const double rho = 1.2;
   const MatX3 x = t.rest_positions + random_rows(n, 0.03, 5);
@@ -93,9 +93,9 @@ TEST_P(DragJacobian, VelocityJacobianMatchesCentralDifferences) {
   std::vector<Mat3> Dv, Jw;
   // "paper" adds a stabilising c S |u| I to its Jacobian; with u = 0 it is the exact one (and
   // eq. 3's force depends on u only through the v-independent |u| u).
-  const MatX3 u_jac = drag.model == "paper" ? MatX3::Zero(n, 3) : u;
+  const MatX3 u_jac = drag.model == DragModel::kPaper ? MatX3::Zero(n, 3) : u;
   drag_velocity_jacobians(t, drag, rho, x, v, u_jac, Dv, Jw);
-  if (drag.model == "paper") {
+  if (drag.model == DragModel::kPaper) {
     std::vector<Mat3> Ds, Jws;
     drag_velocity_jacobians(t, drag, rho, x, v, u, Ds, Jws);
     for (Index i = 0; i < n; ++i) {
@@ -114,7 +114,7 @@ TEST_P(DragJacobian, VelocityJacobianMatchesCentralDifferences) {
   };
   const double eps = 1e-6;
   const MatX3 fd = (forces(v + eps * p) - forces(v - eps * p)) / (2 * eps);
-  EXPECT_LT((fd - jp).norm() / fd.norm(), 1e-7) << drag.model;
+  EXPECT_LT((fd - jp).norm() / fd.norm(), 1e-7) << name_of(drag.model);
 }
 
 INSTANTIATE_TEST_SUITE_P(Models, DragJacobian, ::testing::Values("paper", "relative", "triangle"));
@@ -139,7 +139,7 @@ TEST(Forces, TriangleDragIsTwoSidedAndVanishesEdgeOn) {
   const ClothTopology t = small_flag();
   const Index n = t.num_vertices();
   DragParams drag;
-  drag.model = "triangle";
+  drag.model = DragModel::kTriangle;
   drag.tangential_coefficient = 0.0;
   const MatX3 v = MatX3::Zero(n, 3);
   MatX3 u(n, 3);

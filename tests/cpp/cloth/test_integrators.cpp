@@ -74,9 +74,9 @@ TEST(Explicit, UndampedClothEnergyStaysBoundedOver1e4Steps) {
   s.flag.rows = 6;
   s.flag.cols = 6;
   s.flag.damping = 0;
-  s.air.model = "none";
+  s.air.model = AirModel::kNone;
   s.gravity = Vec3::Zero();
-  s.integrator.method = "explicit";
+  s.integrator.method = Method::kExplicit;
   s.integrator.adaptive = false;
   s.integrator.strain_limit =
       0;               // the bare integrator: strain limiting is a dissipative projection
@@ -113,9 +113,10 @@ Scene stiff_paper(const std::string& method, bool adaptive) {
   s.flag.stretch_stiffness = 1e6;  // k_s for every spring: strain is then bounded everywhere
   s.flag.shear_stiffness = 1e6;
   s.flag.bend_stiffness = 1e6;
-  s.integrator.method = method;
+  s.integrator.method = parse_enum<Method>("method", method);
   s.integrator.adaptive = adaptive;
-  s.flapping.mode = "off";  // eq. 5 displaces positions directly: the integrator is under test
+  s.flapping.mode =
+      FlapMode::kOff;  // eq. 5 displaces positions directly: the integrator is under test
   s.dt = 0.01;
   return s;
 }
@@ -166,11 +167,11 @@ TEST(Stiff, ExplicitWithoutSubstepsUnstableAtRestIsRejectedUpFront) {
 // the step where it happens raises DivergenceError("unstable_step") and restores its start.
 TEST(Stiff, ExplicitStepThatBecomesUnstableRaisesDivergenceAndRestoresTheState) {
   Scene s = Scene::paper();
-  s.air.model = "uniform";
+  s.air.model = AirModel::kUniform;
   s.air.wind = WindSchedule{};
   s.air.wind.keys = {{0.0, Vec3(2, 0, 0)}, {0.02, Vec3(2, 0, 0)}, {0.1, Vec3(1000, 0, 0)}};
-  s.flapping.mode = "off";
-  s.integrator.method = "explicit";
+  s.flapping.mode = FlapMode::kOff;
+  s.integrator.method = Method::kExplicit;
   s.integrator.adaptive = false;
   s.integrator.energy_tolerance = 0;  // the mechanism under test is the stable-step refusal
   s.dt = 5e-4;                        // the stable step at rest is 0.95 ms

@@ -16,13 +16,13 @@ namespace {
 // The paper flag meshed rows x rows, in its 2 m/s wind, alone (no pole collision changes).
 Scene grid_flag(int rows, const std::string& preconditioner, const std::string& drag = "paper") {
   Scene s = Scene::paper();
-  s.air.model = "uniform";
+  s.air.model = AirModel::kUniform;
   s.self_collision.enabled = false;
-  s.flapping.mode = "off";
+  s.flapping.mode = FlapMode::kOff;
   s.flag.rows = s.flag.cols = rows;
-  s.drag.model = drag;
-  s.integrator.method = "implicit";
-  s.integrator.preconditioner = preconditioner;
+  s.drag.model = parse_enum<DragModel>("drag.model", drag);
+  s.integrator.method = Method::kImplicit;
+  s.integrator.preconditioner = parse_enum<Preconditioner>("preconditioner", preconditioner);
   return s;
 }
 
@@ -145,7 +145,7 @@ TEST_P(Multigrid32, SameMotionAsBlockJacobiToTheCgTolerance) {
   Scene tight = grid_flag(32, "multigrid", GetParam());
   tight.integrator.cg_tolerance = 1e-9;
   Scene tight_j = tight;
-  tight_j.integrator.preconditioner = "jacobi";
+  tight_j.integrator.preconditioner = Preconditioner::kJacobi;
   Simulation c(tight), d(tight_j);
   c.step(30);
   d.step(30);

@@ -11,7 +11,7 @@ namespace {
 
 FlappingParams demo_params() {
   FlappingParams p;
-  p.mode = "displace";
+  p.mode = FlapMode::kDisplace;
   p.amplitude = 0.02;
   p.l_max = 0.3;
   p.speed = 0.8;
@@ -148,10 +148,15 @@ TEST(FlappingParams, ValidateNamesTheParameter) {
   };
   p.l_max = 0;
   EXPECT_EQ(message(p), "flapping.l_max should be finite and > 0, got 0");
-  p = FlappingParams{};
-  p.mode = "wobble";
-  EXPECT_EQ(message(p),
-            "flapping.mode should be one of 'displace', 'force', 'visual', 'off', got 'wobble'");
+  // a mode is an enum: an unknown name is refused where text becomes one (TOML, Python)
+  try {
+    parse_enum<FlapMode>("flapping.mode", "wobble");
+    ADD_FAILURE() << "no error";
+  } catch (const InvalidArgument& e) {
+    EXPECT_STREQ(e.what(),
+                 "flapping.mode should be one of \"displace\", \"force\", \"visual\", "
+                 "\"off\", got \"wobble\"");
+  }
   p = FlappingParams{};
   p.amplitude = -1;
   EXPECT_EQ(message(p), "flapping.amplitude should be finite and >= 0, got -1");
@@ -169,7 +174,7 @@ TEST(FlappingParams, ValidateNamesTheParameter) {
   EXPECT_EQ(message(p), "flapping.parabola should be a finite number, got inf");
   for (const char* mode : {"displace", "force", "visual", "off"}) {
     p = FlappingParams{};
-    p.mode = mode;
+    p.mode = parse_enum<FlapMode>("flapping.mode", mode);
     EXPECT_NO_THROW(p.validate("flapping"));
   }
 }

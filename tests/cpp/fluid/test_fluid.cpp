@@ -20,8 +20,8 @@ FluidParams small(const std::string& pressure, const std::string& advection) {
   p.resolution = {12, 10, 8};
   p.cell_size = 0.1;
   p.origin = Vec3::Zero();
-  p.pressure = pressure;
-  p.advection = advection;
+  p.pressure = parse_enum<Pressure>("pressure", pressure);
+  p.advection = parse_enum<Advection>("advection", advection);
   p.viscosity = 1e-3;
   return p;
 }
@@ -93,7 +93,7 @@ TEST(Fluid, PeriodicStepIsTheSameAtEveryVectorWidth) {
   if (vector_bytes() < 32) GTEST_SKIP() << "this CPU has one vector width only (no AVX)";
   for (const char* precision : {"double", "float"}) {
     FluidParams p = small("fft", "semi_lagrangian");
-    p.precision = precision;
+    p.precision = parse_enum<Precision>("precision", precision);
     auto run = [&](int cap) {
       vector_bytes(cap);
       auto f = std::make_unique<Fluid>(p);
@@ -118,8 +118,8 @@ TEST(Fluid, TunnelStepAllocatesNothingAndBalancesFlux) {
   p.resolution = {16, 8, 8};
   p.cell_size = 0.125;
   p.origin = Vec3::Zero();
-  p.boundary = "tunnel";
-  p.pressure = "pcg";
+  p.boundary = Boundary::kTunnel;
+  p.pressure = Pressure::kPcg;
   p.pcg_tolerance = 1e-10;
   p.wind = WindSchedule(Vec3(2, 0, 0));
   p.fans.emplace_back();
@@ -148,7 +148,7 @@ TEST(Fluid, TunnelStepAllocatesNothingAndBalancesFlux) {
 
 TEST(Fluid, FloatPrecisionStoresFloats) {
   FluidParams p = small("pcg", "semi_lagrangian");
-  p.precision = "float";
+  p.precision = Precision::kFloat;
   Fluid f(p);
   EXPECT_FALSE(f.is_double());
   randomise(f, 3);

@@ -28,16 +28,21 @@ TEST(FluidParams, ErrorsNameTheParameter) {
   p.cell_size = -0.1;
   EXPECT_NE(error_of(p).find("air.cell_size should be in [1e-06, 10000], got -0.1"),
             std::string::npos);
+  EXPECT_THROW(
+      {
+        try {
+          parse_enum<Advection>("air.advection", "upwind");
+        } catch (const InvalidArgument& e) {
+          EXPECT_STREQ(e.what(),
+                       "air.advection should be one of \"semi_lagrangian\", \"maccormack\", "
+                       "got \"upwind\"");
+          throw;
+        }
+      },
+      InvalidArgument);
   p = FluidParams();
-  p.advection = "upwind";
-  EXPECT_NE(
-      error_of(p).find(
-          "air.advection should be one of \"semi_lagrangian\", \"maccormack\", got \"upwind\""),
-      std::string::npos)
-      << error_of(p);
-  p = FluidParams();
-  p.pressure = "fft";
-  p.boundary = "tunnel";
+  p.pressure = Pressure::kFft;
+  p.boundary = Boundary::kTunnel;
   EXPECT_NE(error_of(p).find("air.pressure should be \"pcg\" with boundary \"tunnel\""),
             std::string::npos)
       << error_of(p);
@@ -51,14 +56,13 @@ TEST(FluidParams, ErrorsNameTheParameter) {
   p.fans[0] = FanParams();
   p.fans[0].direction = Vec3::Zero();
   EXPECT_NE(error_of(p).find("air.fans[0].direction"), std::string::npos);
-  p = FluidParams();
-  p.precision = "half";
-  EXPECT_NE(error_of(p, "").find("precision should be"), std::string::npos);
+  EXPECT_THROW(parse_enum<Precision>("precision", "half"), InvalidArgument);
+  EXPECT_STREQ(name_of(Precision::kFloat), "float");
 }
 
 TEST(FluidParams, FftWithoutFftwIsAMissingFeature) {
   FluidParams p;
-  p.pressure = "fft";
+  p.pressure = Pressure::kFft;
   EXPECT_NO_THROW(p.validate("air"));  // each field is fine on its own
 #ifdef FLAGSIM_HAVE_FFTW
   EXPECT_NO_THROW(p.validate_combination("air"));

@@ -32,12 +32,12 @@ double total(const Simulation& sim) {
 // strain limiting, no pole, no flapping. Only gravity and the springs act.
 Scene conservative(const std::string& method) {
   Scene s = Scene::paper();
-  s.air.model = "none";
+  s.air.model = AirModel::kNone;
   s.flag.damping = 0;
-  s.integrator.method = method;
+  s.integrator.method = parse_enum<Method>("method", method);
   s.integrator.strain_limit = 0;
   s.pole.enabled = false;
-  s.flapping.mode = "off";
+  s.flapping.mode = FlapMode::kOff;
   return s;
 }
 
@@ -107,7 +107,7 @@ TEST_P(LinearSpring, RemainderIsWhatTheIntegratorsTheorySays) {
     sim.step();
     const double dx = sim.positions()(3, 1) - y0, dv = sim.velocities()(3, 1) - v0;
     const double kinetic = 0.5 * m * dv * dv, elastic = 0.5 * k * dx * dx;
-    const double expected = -kinetic + (method == "implicit" ? -elastic : elastic);
+    const double expected = -kinetic + (method == std::string("implicit") ? -elastic : elastic);
     const double remainder = sim.energy_ledger().integrator - r0;
     // the horizontal spring to vertex 2 stretches at second order in y, (1e-4 / 0.1)^2 = 1e-6
     // of these terms (1e-20 J: round-off of energies of ~5e-7 J); a wrong sign of either term
@@ -134,7 +134,7 @@ TEST(EnergyLedger, EditsBetweenStepsAreBookedAsEdits) {
 TEST(EnergyLedger, EveryStageOfThePaperSceneIsBookedAndTheSumBalances) {
   Scene s = Scene::paper();
   s.self_collision.enabled = true;
-  s.flapping.mode = "displace";
+  s.flapping.mode = FlapMode::kDisplace;
   Simulation sim(s);
   const double E0 = total(sim);
   for (int i = 0; i < 300; ++i) {
@@ -157,7 +157,7 @@ TEST(EnergyLedger, ImplausibleStepRaisesEnergyAndRestoresTheState) {
   s.flag.areal_density = 10;
   s.flag.stretch_stiffness = 1e7;
   s.dt = 0.05;
-  s.flapping.mode = "off";
+  s.flapping.mode = FlapMode::kOff;
   s.integrator.max_halvings = 0;
   Simulation sim(s);
   MatX3 x, v;

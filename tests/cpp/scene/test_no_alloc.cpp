@@ -58,7 +58,7 @@ long allocations_in_steps(Simulation& sim, long steps) {
 Scene paper_full() {
   Scene s = Scene::paper();
   s.self_collision.enabled = true;
-  s.flapping.mode = "displace";
+  s.flapping.mode = FlapMode::kDisplace;
   return s;
 }
 
@@ -67,7 +67,7 @@ TEST(NoAlloc, PaperSceneStepsWithoutHeapAllocation) {
   SKIP_WITHOUT_COUNTING();
   for (const char* method : {"implicit", "explicit"}) {
     Scene s = Scene::paper();
-    s.integrator.method = method;
+    s.integrator.method = parse_enum<Method>("method", method);
     Simulation sim(s);
     EXPECT_EQ(allocations_in_steps(sim, 100), 0) << method;
     EXPECT_EQ(sim.step_count(), 103);
@@ -79,8 +79,8 @@ TEST(NoAlloc, PaperFlagInUniformWindStepsWithoutHeapAllocation) {
   SKIP_WITHOUT_COUNTING();
   for (const char* method : {"implicit", "explicit"}) {
     Scene s = Scene::paper();
-    s.air.model = "uniform";
-    s.integrator.method = method;
+    s.air.model = AirModel::kUniform;
+    s.integrator.method = parse_enum<Method>("method", method);
     Simulation sim(s);
     EXPECT_EQ(allocations_in_steps(sim, 100), 0) << method;
   }
@@ -105,10 +105,10 @@ TEST(NoAlloc, LargeFlagOnOneAndTwoThreadsStepsWithoutHeapAllocation) {
     set_num_threads(threads);
     for (const char* method : {"implicit", "explicit"}) {
       Scene s = Scene::paper();
-      s.air.model = "uniform";
+      s.air.model = AirModel::kUniform;
       s.flag.rows = s.flag.cols = 66;  // 4356 vertices
       s.flag.areal_density = 50.0;
-      s.integrator.method = method;
+      s.integrator.method = parse_enum<Method>("method", method);
       Simulation sim(s);
       EXPECT_EQ(allocations_in_steps(sim, 2), 0) << method << ", " << threads << " threads";
     }
@@ -126,8 +126,8 @@ TEST(NoAlloc, AirOnly64CubedStepsWithoutHeapAllocation) {
     FluidParams p;
     p.resolution = {64, 64, 64};
     p.cell_size = 2.0 / 64;
-    p.boundary = "periodic";
-    p.pressure = "fft";
+    p.boundary = Boundary::kPeriodic;
+    p.pressure = Pressure::kFft;
     Fluid air(p);
     air.step(0.01);
     air.step(0.01);

@@ -26,9 +26,9 @@ TEST(SimulationAir, UniformWindThroughTheGridMatchesTheAnalyticAir) {
   Scene s = Scene::paper();
   s.air.fans.clear();
   s.air.wind.keys = {{0.0, Vec3(1, 0, 0.5)}, {1.0, Vec3(3, 0, -1)}};
-  s.air.model = "uniform";
+  s.air.model = AirModel::kUniform;
   Simulation analytic(s);
-  s.air.model = "grid";
+  s.air.model = AirModel::kGrid;
   Simulation grid(s);
   EXPECT_EQ(analytic.fluid(), nullptr);
   analytic.step(120);
