@@ -78,9 +78,16 @@ demo: build
 bench-deps: $(VENV)/.deps
 	$(PY) -m pip install -q -r <($(PY) tools/requirements.py bench) || echo "some peers did not install: the benchmark skips them"
 
-# Regenerates docs/performance.md (run it on a quiet machine: other processes skew the figures).
+# Regenerates docs/reports/performance.md (run it on a quiet machine: other processes skew the figures).
 bench: build bench-deps
-	$(PY) -m benchmarks --peers --out out/bench --docs docs/performance.md
+	$(PY) -m benchmarks --peers --out out/bench --docs docs/reports/performance.md
+
+# Regenerates docs/reports/accuracy.md (with docs/reports/images/accuracy_*.png) and
+# docs/reports/stability.md. Accuracy runs on one worker so its timings are undisturbed; on 2
+# cores each study takes tens of minutes.
+study: build
+	$(VENV)/bin/flagsim study accuracy --out out/accuracy --docs docs/reports --jobs 1
+	$(VENV)/bin/flagsim study stability --out out/stability --docs docs/reports --jobs $(JOBS)
 
 clean:
 	rm -rf $(BUILD) out

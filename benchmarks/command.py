@@ -18,7 +18,7 @@ EXAMPLES = """examples:
   python -m benchmarks --quick --out out/bench            about a minute
   python -m benchmarks --only cloth --sizes 8x11,128x128 --threads 1
   python -m benchmarks --only air --sizes 32,64 --advection semi_lagrangian --pressure fft,pcg
-  python -m benchmarks --peers --docs docs/performance.md  the full run behind the docs
+  python -m benchmarks --peers --docs docs/reports/performance.md  the full run behind the docs
 """
 
 
@@ -87,7 +87,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--docs",
         metavar="PATH",
-        help="also write the report as PATH (e.g. docs/performance.md) with its plot beside",
+        help="also write the report as PATH (docs/reports/performance.md) with its plot beside",
     )
     parser.add_argument("--no-plot", action="store_true", help="no PNG (matplotlib not needed)")
     parser.add_argument(

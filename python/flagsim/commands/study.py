@@ -13,7 +13,7 @@ Timings are most meaningful with --jobs 1 on a quiet machine.
 
 examples:
   flagsim study stability --out out/stability --jobs 2
-  flagsim study accuracy --out out/accuracy --docs docs   # regenerate docs/accuracy.md
+  flagsim study accuracy --out out/accuracy --docs docs/reports   # docs/reports/accuracy.md
 """
 
 from __future__ import annotations

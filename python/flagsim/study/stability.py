@@ -113,7 +113,7 @@ def matrix_cases(axes: dict[str, tuple], duration: float) -> list[dict[str, Any]
 
 def pathological_cases(reduced: bool) -> list[dict[str, Any]]:
     """All pathological cases; the reduced (CI) set leaves out the 128 x 192 flag, whose explicit
-    run alone takes minutes on 2 cores (the full study and docs/stability.md include it)."""
+    run alone takes minutes on 2 cores (the full study and docs/reports/stability.md include it)."""
     cases = []
     for name in PATHOLOGICAL:
         if reduced and name == "fine_128x192":
