@@ -22,22 +22,20 @@ IntegratorScratch::IntegratorScratch(const ClothTopology& topo) {
 }
 
 void compute_forces(const ClothTopology& topo, const ForceSet& fs, const MatX3& x, const MatX3& v,
-                    const MatX3& u, MatX3& f, MatX3& drag, ForceTimings* t) {
-  static thread_local ForceTimings unused;
-  ForceTimings& tm = t ? *t : unused;
+                    const MatX3& u, MatX3& f, MatX3& drag, StageClock* t) {
   f.setZero();
   if (fs.gravity) {
-    ScopedTimer timer(tm.gravity);
+    StageClock::Scope timer(t, Stage::kGravity);
     add_gravity(topo, fs.g, f);
   }
   if (fs.drag) {
-    ScopedTimer timer(tm.drag);
+    StageClock::Scope timer(t, Stage::kDrag);
     drag.setZero();
     add_drag(topo, fs.drag_params, fs.rho, x, v, u, drag);
     f += drag;
   }
   if (fs.springs) {
-    ScopedTimer timer(tm.springs);
+    StageClock::Scope timer(t, Stage::kSprings);
     add_spring_forces(topo, x, v, f);
   }
   if (fs.external) f += *fs.external;
@@ -94,10 +92,10 @@ void book_force_work(const ClothTopology& topo, const ForceSet& fs, const MatX3&
   work.pins += pin_work(topo, s.f, v, h);
 }
 
-// total_energy, timed as the plausibility check's bookkeeping (ForceTimings::energy).
+// total_energy, timed as the plausibility check's bookkeeping (Stage::kCheck).
 double timed_energy(const ClothTopology& topo, const ForceSet& fs, const MatX3& x, const MatX3& v,
-                    IntegratorScratch& s, ForceTimings* t) {
-  ScopedTimer timer(t ? t->energy : s.unused_timer);
+                    IntegratorScratch& s, StageClock* t) {
+  StageClock::Scope timer(t, Stage::kCheck);
   return total_energy(topo, gravity_of(fs), x, v);
 }
 
@@ -139,7 +137,7 @@ bool use_multigrid(const ClothTopology& topo, const IntegratorParams& ip,
 IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
                               const IntegratorParams& ip, double h, const MatX3& u, MatX3& x,
                               MatX3& v, IntegratorScratch& s, IntegratorStats& stats,
-                              StepWork& work, ForceTimings* t) {
+                              StepWork& work, StageClock* t) {
   const Index N = topo.num_vertices();
   double done = 0;
   long n = 0;
@@ -162,12 +160,12 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
     });
     if (fs.drift) x += hs * *fs.drift;
     {
-      ScopedTimer timer(t ? t->energy : s.unused_timer);
+      StageClock::Scope timer(t, Stage::kCheck);
       if (fs.drift) work.drift += drift_work(topo, fs, s.f, s.v0, s.fd, hs);
       book_force_work(topo, fs, s.v0, v, hs, s, work);  // forces at the substep's start
     }
     if (ip.strain_limit > 0) {
-      ScopedTimer timer(t ? t->strain_limit : s.unused_timer);
+      StageClock::Scope timer(t, Stage::kStrainLimit);
       work.strain_limit += limit_strain_work(topo, gravity_of(fs), ip.strain_limit,
                                              ip.strain_limit_iterations, x, v);
     }
@@ -279,7 +277,7 @@ void implicit_drag_applied(const ClothTopology& topo, const ClothSystem& A, doub
 IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
                               const IntegratorParams& ip, double h, const MatX3& u, MatX3& x,
                               MatX3& v, IntegratorScratch& s, IntegratorStats& stats,
-                              StepWork& work, ForceTimings* t) {
+                              StepWork& work, StageClock* t) {
   const Index N = topo.num_vertices();
   ClothSystem& A = s.sys;
   compute_forces(topo, fs, x, v, u, s.f, s.fd, t);
@@ -350,7 +348,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   {
     // The linearised end-of-step forces over the displacement h v'; damping is linear in v, so
     // the applied damping is exactly k_d (v'_j - v'_i).
-    ScopedTimer timer(t ? t->energy : s.unused_timer);
+    StageClock::Scope timer(t, Stage::kCheck);
     if (fs.drag) implicit_drag_applied(topo, A, h, s.dv, s.fd);
     if (fs.drift) {
       for (Index i = 0; i < N; ++i) s.q.row(i) = (topo.mass[i] / h) * s.dv.row(i);  // applied f
@@ -359,7 +357,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     book_force_work(topo, fs, v, v, h, s, work);
   }
   if (ip.strain_limit > 0) {
-    ScopedTimer timer(t ? t->strain_limit : s.unused_timer);
+    StageClock::Scope timer(t, Stage::kStrainLimit);
     work.strain_limit +=
         limit_strain_work(topo, gravity_of(fs), ip.strain_limit, ip.strain_limit_iterations, x, v);
   }
@@ -372,7 +370,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
 IntegrateStatus implicit_step(const ClothTopology& topo, const ForceSet& fs,
                               const IntegratorParams& ip, double h, const MatX3& u, MatX3& x,
                               MatX3& v, IntegratorScratch& s, IntegratorStats& stats, double& E,
-                              StepWork& work, ForceTimings* t) {
+                              StepWork& work, StageClock* t) {
   IntegrateStatus failure = IntegrateStatus::kCgFailed;
   for (int level = 0; level <= ip.max_halvings; ++level) {
     const long pieces = 1L << level;
@@ -418,7 +416,7 @@ IntegrateStatus implicit_step(const ClothTopology& topo, const ForceSet& fs,
 
 IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const IntegratorParams& ip,
                           double h, const MatX3& u, MatX3& x, MatX3& v, IntegratorScratch& s,
-                          IntegratorStats& stats, ForceTimings* t) {
+                          IntegratorStats& stats, StageClock* t) {
   stats = IntegratorStats{};
   double E = stats.energy_before = timed_energy(topo, fs, x, v, s, t);
   StepWork work;

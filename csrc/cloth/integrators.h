@@ -8,6 +8,7 @@
 #include "cloth/multigrid.h"
 #include "cloth/params.h"
 #include "cloth/topology.h"
+#include "common/stage_clock.h"
 
 namespace flagsim {
 
@@ -37,16 +38,11 @@ struct ForceSet {
 };
 
 /// Seconds spent per force stage (accumulated).
-struct ForceTimings {
-  double gravity = 0, drag = 0, springs = 0;
-  double strain_limit = 0;  ///< Provot projection after every substep / implicit piece
-  double energy = 0;        ///< energy bookkeeping (StepWork): the check stage's share
-};
 
 /// f = sum of the built forces at (x, v) with air velocity u (all N x 3); drag (N x 3) gets the
 /// drag alone when it is built (for the energy bookkeeping), and is left as it was otherwise.
 void compute_forces(const ClothTopology& topo, const ForceSet& fs, const MatX3& x, const MatX3& v,
-                    const MatX3& u, MatX3& f, MatX3& drag, ForceTimings* timings = nullptr);
+                    const MatX3& u, MatX3& f, MatX3& drag, StageClock* clock = nullptr);
 
 /// kUnstableStep: explicit without adaptive substeps was asked for a step above the stable-step
 /// estimate. It is refused rather than run, because strain limiting would turn the instability
@@ -105,7 +101,6 @@ struct IntegratorScratch {
   MatX3 dv_prev;    ///< implicit: the solve's dv one step before dv (for the warm start)
   ClothSystem sys;  ///< the implicit system of the current step
   Multigrid mg;     ///< levels built when the topology is a grid (multigrid_applies)
-  double unused_timer = 0;
   explicit IntegratorScratch(const ClothTopology& topo);
 };
 
@@ -119,7 +114,7 @@ void assemble_implicit_system(const ClothTopology& topo, const ForceSet& fs, dou
 /// Advance (x, v) by h. u (N x 3) is the air velocity at the masses, held over the step.
 IntegrateStatus integrate(const ClothTopology& topo, const ForceSet& fs, const IntegratorParams& ip,
                           double h, const MatX3& u, MatX3& x, MatX3& v, IntegratorScratch& s,
-                          IntegratorStats& stats, ForceTimings* timings = nullptr);
+                          IntegratorStats& stats, StageClock* clock = nullptr);
 
 /// Strain limiting: each vertex's distance to its nearest pin is capped at (1 + limit) x its rest
 /// distance (long-range attachments, Kim et al. 2012), then (Provot 1995) structural and shear

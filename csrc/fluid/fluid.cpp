@@ -21,8 +21,8 @@ struct Fluid::Solver {
   mutable FluidStats stats;
   virtual ~Solver() = default;
   virtual void step(double dt) = 0;
-  /// The largest |velocity| on the grid, or infinity when any value is not finite.
-  virtual double max_speed_component() const = 0;
+  /// Every velocity value finite.
+  virtual bool all_finite() const = 0;
   /// Back to the field at the start of the last step (its copy is kept by the step anyway).
   virtual void undo_step(double dt) = 0;
   virtual void* data(int c) = 0;
@@ -138,16 +138,13 @@ struct TypedSolver final : Fluid::Solver {
     ++stats.steps;
   }
 
-  double max_speed_component() const override {
-    double m = 0;
-    for (int c = 0; c < 3; ++c) {
-      const auto& a = u.comp[c];
-      m = std::max(m, parallel_max(a.size(), [&](std::size_t i) {
-                     const double x = std::fabs(double(a[i]));
-                     return std::isfinite(x) ? x : std::numeric_limits<double>::infinity();
-                   }));
-    }
-    return m;
+  // x - x is 0 for a finite x and NaN otherwise, and the sum keeps a NaN: one branch-free,
+  // vectorised pass (a max-abs reduction through parallel_max cost 8 % of the paper step).
+  bool all_finite() const override {
+    T acc = 0;
+    for (int c = 0; c < 3; ++c)
+      for (const T x : u.comp[c]) acc += x - x;
+    return acc == T(0);
   }
 
   // u^n is still held by the step's own copy: the padded source (periodic) or prev (tunnel).
@@ -250,7 +247,7 @@ void Fluid::step(double dt) {
   check_positive("dt", dt);
   const double t0 = s_->time;
   s_->step(dt);
-  if (std::isfinite(s_->max_speed_component())) return;
+  if (s_->all_finite()) return;
   s_->undo_step(dt);
   s_->time = t0;
   std::ostringstream s;

@@ -13,25 +13,6 @@
 
 namespace flagsim {
 
-const char* Simulation::stage_name(Stage s) {
-  switch (s) {
-    case kWind: return "wind";
-    case kFluid: return "fluid";
-    case kGravity: return "gravity";
-    case kDrag: return "drag";
-    case kSprings: return "springs";
-    case kIntegrate: return "integrate";
-    case kStrainLimit: return "strain_limit";
-    case kFlap: return "flap";
-    case kPole: return "pole";
-    case kSelfCollision: return "self_collision";
-    case kCheck: return "check";
-    case kFlapVisual: return "flap";
-    case kNumStages: break;
-  }
-  throw std::logic_error("stage_name: unknown stage");
-}
-
 double EnergyLedger::unexplained_net() const {
   return integrator + strain_limit + pole + self_collision;
 }
@@ -80,21 +61,21 @@ Simulation::Simulation(const Scene& scene)
   forces_.g = scene_.gravity;
   forces_.drag_params = scene_.drag;
   forces_.rho = scene_.air.density;
-  built_[kWind] = forces_.drag && scene_.air.model == AirModel::kUniform;
-  built_[kFluid] = forces_.drag && scene_.air.model == AirModel::kGrid;
-  if (built_[kFluid]) build_fluid();
-  built_[kGravity] = forces_.gravity;
-  built_[kDrag] = forces_.drag;
-  built_[kSprings] = forces_.springs;
-  built_[kIntegrate] = true;
-  built_[kStrainLimit] = scene_.integrator.strain_limit > 0;
+  built(Stage::kWind) = forces_.drag && scene_.air.model == AirModel::kUniform;
+  built(Stage::kFluid) = forces_.drag && scene_.air.model == AirModel::kGrid;
+  if (built(Stage::kFluid)) build_fluid();
+  built(Stage::kGravity) = forces_.gravity;
+  built(Stage::kDrag) = forces_.drag;
+  built(Stage::kSprings) = forces_.springs;
+  built(Stage::kIntegrate) = true;
+  built(Stage::kStrainLimit) = scene_.integrator.strain_limit > 0;
   const FlapMode flap = scene_.flapping.mode;
-  built_[kFlap] = flap == FlapMode::kDisplace || flap == FlapMode::kForce;
-  built_[kFlapVisual] = flap == FlapMode::kVisual;
-  built_[kPole] = scene_.pole.enabled;
-  built_[kSelfCollision] = scene_.self_collision.enabled;
-  built_[kCheck] = true;
-  if (built_[kSelfCollision]) {
+  built(Stage::kFlap) = flap == FlapMode::kDisplace || flap == FlapMode::kForce;
+  built(Stage::kFlapVisual) = flap == FlapMode::kVisual;
+  built(Stage::kPole) = scene_.pole.enabled;
+  built(Stage::kSelfCollision) = scene_.self_collision.enabled;
+  built(Stage::kCheck) = true;
+  if (built(Stage::kSelfCollision)) {
     self_collision_ = std::make_unique<SelfCollision>(topo_.triangles, N, scene_.self_collision);
     // Strain limiting inside the collision sweeps: contacts alone would hold a stretch.
     // Its energy is booked with the self-collision response's (one evaluation around it).
@@ -104,7 +85,7 @@ Simulation::Simulation(const Scene& scene)
     };
   }
   for (int s = 0; s < kNumStages; ++s)
-    if (built_[s]) stage_names_.emplace_back(stage_name(Stage(s)));
+    if (built_[s]) stage_names_.emplace_back(kStageNames[s]);
   n_.resize(N, 3);
   update_normals();
   setup_flapping();
@@ -152,7 +133,7 @@ double Simulation::energy_now() const { return total_energy(topo_, scene_.gravit
 void Simulation::setup_flapping() {
   const Index N = topo_.num_vertices();
   flap_z_.setZero(N);
-  if (!built_[kFlap] && !built_[kFlapVisual]) return;
+  if (!built(Stage::kFlap) && !built(Stage::kFlapVisual)) return;
   const FlappingParams& fp = scene_.flapping;
   noise_ = Perlin1D(fp.seed);
   flap_xy_ = topo_.uv;  // x = u (0 at the pole edge), y = v; y (1 - y) is symmetric
@@ -181,7 +162,7 @@ void Simulation::setup_flapping() {
   for (int r = 0; r < topo_.rows; ++r)
     edge_points_.row(r) = topo_.rest_positions.row(r * topo_.cols);
   edge_air_.resize(topo_.rows, 3);
-  visual_ = built_[kFlapVisual];
+  visual_ = built(Stage::kFlapVisual);
   if (visual_) {
     u_p_ = sample_pole_air_speed();
     flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, time_, fp, flap_z_);
@@ -241,7 +222,7 @@ void Simulation::step_once() {
   v_start_ = v_;
   ledger_start_ = ledger_;
   energy_end_start_ = energy_end_;
-  if (built_[kFlap]) flap_start_ = flap_applied_;
+  if (built(Stage::kFlap)) flap_start_ = flap_applied_;
   int level = 0;
   for (;; ++level) {
     const long pieces = 1L << level;
@@ -262,21 +243,21 @@ void Simulation::step_once() {
   ++step_count_;
   time_ = double(step_count_) * scene_.dt;  // no drift from summing dt
   update_normals();
-  if (built_[kFlapVisual]) stage_flap_visual();
+  if (built(Stage::kFlapVisual)) stage_flap_visual();
 }
 
 // One piece of h_ from t_piece_: an empty cause when it passed its checks.
 Simulation::Implausible Simulation::step_piece() {
   x_piece_ = x_;
-  const bool displace = built_[kFlap] && scene_.flapping.mode == FlapMode::kDisplace;
+  const bool displace = built(Stage::kFlap) && scene_.flapping.mode == FlapMode::kDisplace;
   stage_air();
-  if (displace) stage_flap_drift();                    // a drift of the positions, or
-  if (built_[kFlap] && !displace) stage_flap_force();  // a force, held over the piece
+  if (displace) stage_flap_drift();                          // a drift of the positions, or
+  if (built(Stage::kFlap) && !displace) stage_flap_force();  // a force, held over the piece
   stage_integrate();  // includes strain limiting after every substep, timed as its own stage
   stage_collide();
   Implausible bad = stage_check();
   if (!bad.cause.empty()) return bad;
-  if (built_[kFlap]) flap_applied_ = flap_z_;
+  if (built(Stage::kFlap)) flap_applied_ = flap_z_;
   energy_end_ = energy_run_;
   return bad;
 }
@@ -286,7 +267,7 @@ void Simulation::restore_step_start() {
   v_ = v_start_;
   ledger_ = ledger_start_;
   energy_end_ = energy_end_start_;
-  if (built_[kFlap]) flap_applied_ = flap_start_;
+  if (built(Stage::kFlap)) flap_applied_ = flap_start_;
 }
 
 double Simulation::sample_pole_air_speed() {
@@ -301,7 +282,7 @@ double Simulation::sample_pole_air_speed() {
 // the solve instead stored whatever the wave stretched in the springs: at k_s = 1e6 N/m that
 // was 5e4 J in a 66 g flag (docs/energy.md). Pinned vertices stay put.
 void Simulation::stage_flap_drift() {
-  ScopedTimer t(seconds_[kFlap]);
+  StageClock::Scope t(&clock_, Stage::kFlap);
   u_p_ = sample_pole_air_speed();
   compute_vertex_normals(topo_, x_, n_);
   flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, t_piece_ + h_, scene_.flapping, flap_z_);
@@ -315,7 +296,7 @@ void Simulation::stage_flap_drift() {
 // central difference over the piece), held over the piece by the integrator as an external
 // force (its work is the ledger's flap entry). Pinned vertices get none.
 void Simulation::stage_flap_force() {
-  ScopedTimer t(seconds_[kFlap]);
+  StageClock::Scope t(&clock_, Stage::kFlap);
   const FlappingParams& fp = scene_.flapping;
   const double h = h_, t1 = t_piece_ + h_;
   u_p_ = sample_pole_air_speed();
@@ -341,37 +322,37 @@ double Simulation::limit_cloth_strain(MatX3& x, MatX3& v) {
 // projections together either way).
 void Simulation::stage_collide() {
   constexpr int kPoleStrainRounds = 10;
-  if (built_[kPole]) {
+  if (built(Stage::kPole)) {
     const double strain_before = ledger_.strain_limit;
     Index moved;
     {
-      ScopedTimer t(seconds_[kPole]);
+      StageClock::Scope t(&clock_, Stage::kPole);
       moved = collide_pole(scene_.pole, x_piece_, x_, v_, topo_.inv_mass);
     }
     const bool changed = moved > 0;  // a vertex left alone keeps its position and velocity
-    for (int k = 0; k < kPoleStrainRounds && moved > 0 && built_[kStrainLimit]; ++k) {
+    for (int k = 0; k < kPoleStrainRounds && moved > 0 && built(Stage::kStrainLimit); ++k) {
       {
-        ScopedTimer t(seconds_[kStrainLimit]);
+        StageClock::Scope t(&clock_, Stage::kStrainLimit);
         ledger_.strain_limit += limit_cloth_strain(x_, v_);
       }
-      ScopedTimer t(seconds_[kPole]);
+      StageClock::Scope t(&clock_, Stage::kPole);
       moved = collide_pole(scene_.pole, x_piece_, x_, v_, topo_.inv_mass);
     }
     if (changed) {
-      ScopedTimer t(seconds_[kCheck]);
+      StageClock::Scope t(&clock_, Stage::kCheck);
       const double e = energy_now();
       ledger_.pole += e - energy_run_ - (ledger_.strain_limit - strain_before);
       energy_run_ = e;
     }
   }
-  if (built_[kSelfCollision]) {
+  if (built(Stage::kSelfCollision)) {
     {
-      ScopedTimer t(seconds_[kSelfCollision]);
+      StageClock::Scope t(&clock_, Stage::kSelfCollision);
       self_collision_->resolve(x_piece_, x_, v_, topo_.inv_mass,
-                               built_[kPole] ? &scene_.pole : nullptr,
-                               built_[kStrainLimit] ? &strain_projector_ : nullptr);
+                               built(Stage::kPole) ? &scene_.pole : nullptr,
+                               built(Stage::kStrainLimit) ? &strain_projector_ : nullptr);
     }
-    ScopedTimer t(seconds_[kCheck]);
+    StageClock::Scope t(&clock_, Stage::kCheck);
     const double e = energy_now();
     ledger_.self_collision += e - energy_run_;
     energy_run_ = e;
@@ -380,7 +361,7 @@ void Simulation::stage_collide() {
 
 // "visual": the exported geometry is the positions displaced by eq. 5; physics is untouched.
 void Simulation::stage_flap_visual() {
-  ScopedTimer t(seconds_[kFlapVisual]);
+  StageClock::Scope t(&clock_, Stage::kFlapVisual);
   u_p_ = sample_pole_air_speed();
   flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, time_, scene_.flapping, flap_z_);
   for (Index i = 0; i < topo_.num_vertices(); ++i)
@@ -391,13 +372,13 @@ void Simulation::stage_flap_visual() {
 // Air at every mass for this step's start time: the wind schedule (analytic), or the grid
 // sampled trilinearly (the grid then advances in advance_fluid). The flag never pushes the air.
 void Simulation::stage_air() {
-  if (built_[kWind]) {
-    ScopedTimer t(seconds_[kWind]);
+  if (built(Stage::kWind)) {
+    StageClock::Scope t(&clock_, Stage::kWind);
     const Vec3 w = scene_.air.wind.at(t_piece_);
     u_.rowwise() = w.transpose();
   }
-  if (built_[kFluid]) {
-    ScopedTimer t(seconds_[kFluid]);
+  if (built(Stage::kFluid)) {
+    StageClock::Scope t(&clock_, Stage::kFluid);
     air_outside_last_ = fluid_->sample(x_, u_);
     air_outside_total_ += air_outside_last_;
   }
@@ -406,8 +387,8 @@ void Simulation::stage_air() {
 // The air restores itself when its step fails; the cloth's step is then undone too, so the
 // whole Simulation is as it was at the start of the step.
 void Simulation::advance_fluid() {
-  if (!built_[kFluid]) return;
-  ScopedTimer t(seconds_[kFluid]);
+  if (!built(Stage::kFluid)) return;
+  StageClock::Scope t(&clock_, Stage::kFluid);
   try {
     fluid_->step(scene_.dt);
   } catch (const DivergenceError& e) {
@@ -419,20 +400,13 @@ void Simulation::advance_fluid() {
 }
 
 void Simulation::stage_integrate() {
-  const ForceTimings before = force_seconds_;
-  double total = 0;
   IntegrateStatus status;
   {
-    ScopedTimer t(total);
-    status = integrate(topo_, forces_, scene_.integrator, h_, u_, x_, v_, scratch_, stats_,
-                       &force_seconds_);
+    // The force kernels, strain limiting and energy bookkeeping it calls time themselves.
+    StageClock::Scope t(&clock_, Stage::kIntegrate);
+    status =
+        integrate(topo_, forces_, scene_.integrator, h_, u_, x_, v_, scratch_, stats_, &clock_);
   }
-  // The integrate stage's own cost excludes the force kernels it called (timed separately).
-  seconds_[kGravity] += force_seconds_.gravity - before.gravity;
-  seconds_[kDrag] += force_seconds_.drag - before.drag;
-  seconds_[kSprings] += force_seconds_.springs - before.springs;
-  seconds_[kStrainLimit] += force_seconds_.strain_limit - before.strain_limit;
-  seconds_[kCheck] += force_seconds_.energy - before.energy;  // the check's bookkeeping
   const StepWork& w = stats_.work;
   ledger_.edits += stats_.energy_before - energy_end_;  // the state written between steps
   ledger_.drag += w.drag;
@@ -442,10 +416,6 @@ void Simulation::stage_integrate() {
   ledger_.strain_limit += w.strain_limit;
   ledger_.integrator += w.remainder;
   energy_run_ = stats_.energy_after;
-  seconds_[kIntegrate] +=
-      total - (force_seconds_.gravity - before.gravity) - (force_seconds_.drag - before.drag) -
-      (force_seconds_.springs - before.springs) -
-      (force_seconds_.strain_limit - before.strain_limit) - (force_seconds_.energy - before.energy);
   if (status == IntegrateStatus::kTooManySubsteps) {
     std::ostringstream s;
     s << "the stable step estimate " << stats_.stable_step << " s needs more than "
@@ -480,7 +450,7 @@ void Simulation::stage_integrate() {
 // pieces) has made no more energy than the tolerance allows beyond what the stages' work
 // explains; a piece that fails either is returned, and the step is redone in shorter pieces.
 Simulation::Implausible Simulation::stage_check() {
-  ScopedTimer t(seconds_[kCheck]);
+  StageClock::Scope t(&clock_, Stage::kCheck);
   const Index N = topo_.num_vertices();
   for (Index i = 0; i < N; ++i)
     if (!x_.row(i).allFinite() || !v_.row(i).allFinite())
@@ -545,7 +515,7 @@ void Simulation::diverge(const std::string& cause, long vertex, const std::strin
 std::vector<std::pair<std::string, double>> Simulation::timings() const {
   std::vector<std::pair<std::string, double>> out;
   for (int s = 0; s < kNumStages; ++s)
-    if (built_[s]) out.emplace_back(stage_name(Stage(s)), seconds_[s]);
+    if (built_[s]) out.emplace_back(kStageNames[s], clock_.seconds(Stage(s)));
   return out;
 }
 

@@ -130,22 +130,7 @@ class Simulation {
   void update_normals();
 
  private:
-  enum Stage {
-    kWind,
-    kFluid,
-    kFlap,  // "displace" / "force": a drift or force the integrator carries
-    kGravity,
-    kDrag,
-    kSprings,
-    kIntegrate,
-    kStrainLimit,
-    kPole,
-    kSelfCollision,
-    kCheck,
-    kFlapVisual,  // "visual": after the step, on the exported geometry only
-    kNumStages
-  };
-  static const char* stage_name(Stage s);
+  static constexpr int kNumStages = int(Stage::kCount);
 
   void step_once();
   struct Implausible {  // a piece that failed a plausibility test; empty cause: it passed
@@ -183,9 +168,10 @@ class Simulation {
   double h_ = 0, t_piece_ = 0;  // s, length and start time of the piece being stepped
   double time_ = 0;
   long step_count_ = 0;
-  std::array<bool, kNumStages> built_{};
-  std::array<double, kNumStages> seconds_{};
-  ForceTimings force_seconds_;
+  std::array<bool, kNumStages> built_{};  // the stages this scene runs
+  bool& built(Stage s) { return built_[std::size_t(s)]; }
+  bool built(Stage s) const { return built_[std::size_t(s)]; }
+  StageClock clock_;  // seconds per stage (Simulation.timings)
   std::vector<std::string> stage_names_;
   std::unique_ptr<Fluid> fluid_;  // the air grid, when the scene needs one
 
