@@ -8,6 +8,12 @@ namespace flagsim {
 /// Loops over fewer items than this run on one thread: below it, waking a thread team costs
 /// more than the loop (and a loaded machine makes spinning threads far worse).
 constexpr Index kParallelGrain = 4096;
+/// Grid loops over cells (advection rows, Poisson sweeps, projections) enter a team from this many
+/// cells: a cell costs a few loads and flops, less than a cloth vertex's forces.
+constexpr Index kGridParallelGrain = 4 * kParallelGrain;
+/// Loops that only copy or compare each item (ghost fills, max reductions) enter a team from this
+/// many items: memory-bound, they gain least from more threads.
+constexpr Index kCopyParallelGrain = 8 * kParallelGrain;
 
 /// Number of threads flagsim's loops use (default: OpenMP's default, usually all cores).
 int num_threads();
@@ -38,6 +44,12 @@ inline void parallel_for_if(bool parallel, Index n, const Body& body) {
 template <class Body>
 inline void parallel_for(Index n, const Body& body) {
   parallel_for_if(n >= kParallelGrain, n, body);
+}
+
+/// parallel_for_if(n > kGridParallelGrain, n, body): an elementwise loop over n grid cells.
+template <class Body>
+inline void parallel_for_cells(Index n, const Body& body) {
+  parallel_for_if(n > kGridParallelGrain, n, body);
 }
 
 /// Set the thread count for flagsim's loops; n >= 1. Throws InvalidArgument otherwise.

@@ -194,7 +194,7 @@ void for_each_row(const MacGrid<T>& g, F&& row) {
   for (int c = 0; c < 3; ++c) {
     const Shape3 sh = g.shape[c];
     const long rows = long(sh.n[0]) * sh.n[1];
-    parallel_for_if(sh.size() > 16384, rows, [&](Index r) {
+    parallel_for_if(Index(sh.size()) > kGridParallelGrain, rows, [&](Index r) {
       row(c, int(r / sh.n[1]), int(r % sh.n[1]), std::size_t(r) * sh.n[2]);
     });
   }
@@ -230,7 +230,8 @@ long sample_velocity(const MacGrid<T>& g, const double* points, long m, double* 
     return out_of_box;
   };
   long outside = 0;
-  if (use_team(m > 4096)) {  // no `if` clause: libgomp allocates one-thread teams (see use_team)
+  // No `if` clause: libgomp allocates one-thread teams (see use_team).
+  if (use_team(m > kParallelGrain)) {
 #pragma omp parallel for schedule(static) reduction(+ : outside)
     for (long r = 0; r < m; ++r) outside += one(r);
   } else {
@@ -311,7 +312,7 @@ void PaddedComponent<T>::fill(const T* src) {
   auto wrap = [](int i, int n) {
     return n >= G ? (i < 0 ? i + n : i >= n ? i - n : i) : ((i % n) + n) % n;
   };
-  parallel_for_if(data.size() > 32768, n0 + 2 * G, [&](Index plane) {
+  parallel_for_if(Index(data.size()) > kCopyParallelGrain, n0 + 2 * G, [&](Index plane) {
     const int a = int(plane) - G;
     const T* s_plane = src + std::size_t(wrap(a, n0)) * n1 * n2;
     T* d = data.data() + index(a, -G, -G);
@@ -607,7 +608,7 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
   if (vector_bytes() == 32) plane_fn = &sl_plane_32<C, T>;
 #endif
-  parallel_for_if(long(geo.nx) * n1 * n2 > 16384, geo.nx, [&](Index plane) {
+  parallel_for_if(long(geo.nx) * n1 * n2 > kGridParallelGrain, geo.nx, [&](Index plane) {
     const int i = int(plane);
     const std::size_t idx0 = p.index(i, 0, 0);
     SlRow<T> w;
@@ -650,7 +651,7 @@ void padded_mc(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
   constexpr double o0 = C == 0 ? 0.0 : 0.5, o1 = C == 1 ? 0.0 : 0.5, o2 = C == 2 ? 0.0 : 0.5;
   const int n1 = geo.ny, n2 = geo.nz;
   const long rows = long(geo.nx) * n1;
-  parallel_for_if(rows * n2 > 16384, rows, [&](Index r) {
+  parallel_for_if(rows * n2 > kGridParallelGrain, rows, [&](Index r) {
     const int i = int(r / n1), j = int(r % n1);
     std::size_t idx = p.index(i, j, 0);
     const std::size_t row = std::size_t(r) * n2;

@@ -145,7 +145,8 @@ double parallel_max(std::size_t n, F&& f) {
     return (v <= m) ? m : ((v == v) ? v : HUGE_VAL);  // a NaN reports as +inf
   };
   double m = 0;
-  if (use_team(n > 32768)) {  // no `if` clause: libgomp allocates one-thread teams (see use_team)
+  // No `if` clause: libgomp allocates one-thread teams (see use_team).
+  if (use_team(Index(n) > kCopyParallelGrain)) {
 #pragma omp parallel for schedule(static) reduction(max : m)
     for (long i = 0; i < long(n); ++i) m = fold(m, i);
   } else {

@@ -80,7 +80,7 @@ void apply_laplace7(const Laplace7& op, double alpha, double beta, const T* x, T
   const long rows = long(n0) * n1;
   const double ghost_lo2 = op.lo[2] == Side::kGhostZero ? 1.0 : 0.0;
   const double ghost_hi2 = op.hi[2] == Side::kGhostZero ? 1.0 : 0.0;
-  parallel_for_if(sh.size() > 16384, rows, [&](Index r) {
+  parallel_for_if(Index(sh.size()) > kGridParallelGrain, rows, [&](Index r) {
     const int i = int(r / n1), j = int(r % n1);
     T* yr = y + std::size_t(r) * n2;
     if (op.fixed(0, i) || op.fixed(1, j)) {
@@ -221,7 +221,7 @@ CgResult solve_cg(const Laplace7& op, double alpha, double beta, const T* b, T* 
 
   // r = b - A x on unknown nodes (fixed nodes of x couple in through A x), 0 on fixed ones.
   apply_laplace7(op, alpha, beta, x, q);
-  parallel_for_if(n > 16384, long(n), [&](Index i) { r[i] = T(double(b[i]) - double(q[i])); });
+  parallel_for_cells(long(n), [&](Index i) { r[i] = T(double(b[i]) - double(q[i])); });
   zero_fixed(op, r);
   double b_max = 0;
   if (singular) {
@@ -229,7 +229,7 @@ CgResult solve_cg(const Laplace7& op, double alpha, double beta, const T* b, T* 
     // exact arithmetic; remove what round-off left). max|b| is measured on b - mean(b).
     const double mr = deterministic_sum(n, [&](std::size_t i) { return double(r[i]); }) / double(n);
     const double mb = deterministic_sum(n, [&](std::size_t i) { return double(b[i]); }) / double(n);
-    parallel_for_if(n > 16384, long(n), [&](Index i) { r[i] = T(r[i] - mr); });
+    parallel_for_cells(long(n), [&](Index i) { r[i] = T(r[i] - mr); });
     b_max = parallel_max(n, [&](std::size_t i) { return std::fabs(double(b[i]) - mb); });
   } else {
     // b on fixed nodes is not part of the system.
@@ -248,7 +248,7 @@ CgResult solve_cg(const Laplace7& op, double alpha, double beta, const T* b, T* 
       mic->apply(in, out);
     } else {
       const int n1 = sh.n[1], n2 = sh.n[2];
-      parallel_for_if(n > 16384, long(n), [&](Index idx) {
+      parallel_for_cells(long(n), [&](Index idx) {
         const int ijk[3] = {int(idx / (long(n1) * n2)), int((idx / n2) % n1), int(idx % n2)};
         out[idx] = T(double(in[idx]) / (alpha + beta * diag_k(op, ijk)));
       });
@@ -257,7 +257,7 @@ CgResult solve_cg(const Laplace7& op, double alpha, double beta, const T* b, T* 
     if (singular) {
       const double m =
           deterministic_sum(n, [&](std::size_t i) { return double(out[i]); }) / double(n);
-      parallel_for_if(n > 16384, long(n), [&](Index i) { out[i] = T(out[i] - m); });
+      parallel_for_cells(long(n), [&](Index i) { out[i] = T(out[i] - m); });
     }
   };
 
@@ -272,7 +272,7 @@ CgResult solve_cg(const Laplace7& op, double alpha, double beta, const T* b, T* 
       break;
     }
     const double a = sigma / sq;
-    parallel_for_if(n > 16384, long(n), [&](Index i) {
+    parallel_for_cells(long(n), [&](Index i) {
       x[i] = T(x[i] + a * s[i]);
       r[i] = T(r[i] - a * q[i]);
     });
@@ -283,7 +283,7 @@ CgResult solve_cg(const Laplace7& op, double alpha, double beta, const T* b, T* 
     const double sigma_new = dot(r, z, n);
     const double beta_cg = sigma_new / sigma;
     sigma = sigma_new;
-    parallel_for_if(n > 16384, long(n), [&](Index i) { s[i] = T(z[i] + beta_cg * s[i]); });
+    parallel_for_cells(long(n), [&](Index i) { s[i] = T(z[i] + beta_cg * s[i]); });
   }
   res.residual = r_max / b_max;
   res.converged = r_max <= tol * b_max;

@@ -20,7 +20,7 @@ void divergence(const MacGrid<T>& u, T* div) {
   const double inv_h = 1.0 / g.h;
   const Shape3 su = u.shape[0], sv = u.shape[1], sw = u.shape[2], sc = g.cells();
   const T *U = u.comp[0].data(), *V = u.comp[1].data(), *W = u.comp[2].data();
-  parallel_for_if(sc.size() > 16384, long(nx) * ny, [&](Index r) {
+  parallel_for_if(Index(sc.size()) > kGridParallelGrain, long(nx) * ny, [&](Index r) {
     const int i = int(r / ny), j = int(r % ny);
     const int ip = (per && i + 1 == nx) ? 0 : i + 1;
     const int jp = (per && j + 1 == ny) ? 0 : j + 1;
@@ -75,7 +75,7 @@ void subtract_gradient(const T* phi, MacGrid<T>& u) {
     T* q = u.comp[c].data();
     const long rows = long(sh.n[0]) * sh.n[1];
     const int nc = sc.n[c];
-    parallel_for_if(sh.size() > 16384, rows, [&](Index r) {
+    parallel_for_if(Index(sh.size()) > kGridParallelGrain, rows, [&](Index r) {
       const int i = int(r / sh.n[1]), j = int(r % sh.n[1]);
       T* dst = q + std::size_t(r) * sh.n[2];
       const int ij[2] = {i, j};
@@ -128,7 +128,7 @@ void set_mean_flow(const Vec3& target, MacGrid<T>& u) {
         deterministic_sum(n, [&](std::size_t i) { return double(q[i]); }) / double(n);
     const double shift = target[c] - mean;
     if (shift == 0) continue;
-    parallel_for_if(n > 16384, long(n), [&](Index i) { q[i] = T(q[i] + shift); });
+    parallel_for_cells(long(n), [&](Index i) { q[i] = T(q[i] + shift); });
   }
 }
 
@@ -148,7 +148,8 @@ std::mutex& fftw_planner_mutex() {
 /// saves), else one. Fixed when the plans are made: set_num_threads() before building a Fluid.
 int fft_threads(std::size_t cells) {
 #ifdef FLAGSIM_HAVE_FFTW_OMP
-  return cells >= 32768 ? num_threads() : 1;
+  constexpr std::size_t kThreadedCells = 32 * 32 * 32;
+  return cells >= kThreadedCells ? num_threads() : 1;
 #else
   (void)cells;
   return 1;
@@ -267,7 +268,7 @@ void FftProjector<T>::project(MacGrid<T>& u, T* phi) {
   Impl::F::exec_r2c(m.fwd, m.div.data(), m.fc(0));
   const double scale = 1.0 / double(m.n_real);
   std::complex<T>* d = m.cplx(0);
-  parallel_for_if(m.n_cplx > 16384, long(g.nx) * g.ny, [&](Index r) {
+  parallel_for_if(Index(m.n_cplx) > kGridParallelGrain, long(g.nx) * g.ny, [&](Index r) {
     const int i = int(r / g.ny), j = int(r % g.ny);
     const double lxy = m.lam[0][i] + m.lam[1][j];
     std::complex<T>* row = d + std::size_t(r) * m.nzc;
@@ -406,7 +407,8 @@ void FftProjector<T>::diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
   if (vector_bytes() == 32) plane_fn = &spectral_plane_32<T>;
 #endif
-  parallel_for_if(m.n_cplx > 16384, g.nx, [&](Index i) {  // one call per plane: rows are short
+  // One call per plane: rows are short.
+  parallel_for_if(Index(m.n_cplx) > kGridParallelGrain, g.nx, [&](Index i) {
     const std::size_t base = std::size_t(i) * g.ny * m.nzc;
     SpectralRow<T> w;
     w.p0 = reinterpret_cast<T*>(h0 + base);
