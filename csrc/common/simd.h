@@ -18,6 +18,9 @@ namespace flagsim {
 #pragma GCC diagnostic ignored "-Wpsabi"
 #define FLAGSIM_HAVE_VECTORS 1
 #define FLAGSIM_INLINE inline __attribute__((always_inline))
+// A lambda always inlined into its caller (a lambda does not inherit the caller's target("avx")):
+// [&](int k) FLAGSIM_INLINE_LAMBDA { ... }.
+#define FLAGSIM_INLINE_LAMBDA __attribute__((always_inline))
 #if defined(__x86_64__) || defined(__i386__)
 #define FLAGSIM_HAVE_AVX_DISPATCH 1
 #define FLAGSIM_TARGET_AVX __attribute__((target("avx")))
@@ -35,6 +38,7 @@ struct Lanes32 {
 };
 #else
 #define FLAGSIM_INLINE inline
+#define FLAGSIM_INLINE_LAMBDA
 #endif
 
 /// The narrow lane type a kernel runs on without AVX: 16-byte vectors of T where the compiler has
