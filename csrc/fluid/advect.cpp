@@ -43,6 +43,68 @@ inline T lerp(T a, T b, double f) {
   return a + T(f) * (b - a);  // in T: a float grid interpolates in float, without conversions
 }
 
+/// Trilinear interpolation of the 8 nodes v of a cell, ordered (x, y, z) = 000, 001, 010, 011,
+/// 100, ...: along z, then y, then x. Uses a + f (b - a): a uniform field comes out exactly.
+template <class T>
+FLAGSIM_INLINE T trilinear(const T v[8], double fx, double fy, double fz) {
+  const T c00 = lerp(v[0], v[1], fz), c01 = lerp(v[2], v[3], fz);
+  const T c10 = lerp(v[4], v[5], fz), c11 = lerp(v[6], v[7], fz);
+  return lerp(lerp(c00, c01, fy), lerp(c10, c11, fy), fx);
+}
+
+/// MacCormack's correction (Selle et al. 2008 eq. 9): the predictor hat plus half the error the
+/// reverse step bar = A^R(hat) makes on u.
+template <class T>
+inline T maccormack_correct(T hat, T u, T bar) {
+  return T(hat + 0.5 * (u - bar));
+}
+
+/// MacCormack's limiter (Selle et al. 2008 §4): value clamped to the extrema of the 8 nodes the
+/// backward trace interpolated from.
+template <class T>
+inline T maccormack_clamp(const T nodes[8], T value) {
+  T lo = nodes[0], hi = nodes[0];
+  for (int a = 1; a < 8; ++a) {
+    lo = std::min(lo, nodes[a]);
+    hi = std::max(hi, nodes[a]);
+  }
+  return std::min(hi, std::max(lo, value));
+}
+
+/// A node x (cell units) moved by d = s u, s = dt / h: back = x - d, the semi-Lagrangian departure
+/// point (Stam 1999 §2.2), and fwd = x + d, where MacCormack's reverse step samples.
+struct Trace {
+  double d[3], back[3], fwd[3];
+};
+FLAGSIM_INLINE Trace trace(const double x[3], double s, const double vel[3]) {
+  Trace t;
+  for (int a = 0; a < 3; ++a) {
+    t.d[a] = s * vel[a];
+    t.back[a] = x[a] - t.d[a];
+    t.fwd[a] = x[a] + t.d[a];
+  }
+  return t;
+}
+
+/// The advection kernels' loops run on a team from kGridParallelGrain cells.
+inline bool on_team(const Shape3& sh) { return Index(sh.size()) > kGridParallelGrain; }
+
+/// row(i, j, base) for every row (i, j) of an array of shape sh, base = index of (i, j, 0), one
+/// task per row.
+template <class F>
+void for_each_row(const Shape3& sh, F&& row) {
+  parallel_for_if(on_team(sh), long(sh.n[0]) * sh.n[1], [&](Index r) {
+    row(int(r / sh.n[1]), int(r % sh.n[1]), std::size_t(r) * sh.n[2]);
+  });
+}
+
+/// plane(i) for every plane i of an array of shape sh, one task per plane: for a kernel that is
+/// one call per plane (a call per row costs its prologue every 32 nodes).
+template <class F>
+void for_each_plane(const Shape3& sh, F&& plane) {
+  parallel_for_if(on_team(sh), sh.n[0], [&](Index i) { plane(int(i)); });
+}
+
 /// Trilinear interpolation of one component array (shape sh, staggering offset off) at a point p
 /// in cell units. Uses a + f (b - a) so that a uniform field is reproduced exactly.
 template <class T>
@@ -68,7 +130,7 @@ struct Interpolator {
     double fx, fy, fz;
   };
 
-  inline Corners corners(double px, double py, double pz) const {
+  FLAGSIM_INLINE Corners corners(double px, double py, double pz) const {
     const Axis x = locate(px - o0, n0, periodic);
     const Axis y = locate(py - o1, n1, periodic);
     const Axis z = locate(pz - o2, n2, periodic);
@@ -83,26 +145,19 @@ struct Interpolator {
             z.f};
   }
 
-  inline T operator()(const Corners& c) const {
-    const T c00 = lerp(q[c.r00 + c.k0], q[c.r00 + c.k1], c.fz);
-    const T c01 = lerp(q[c.r01 + c.k0], q[c.r01 + c.k1], c.fz);
-    const T c10 = lerp(q[c.r10 + c.k0], q[c.r10 + c.k1], c.fz);
-    const T c11 = lerp(q[c.r11 + c.k0], q[c.r11 + c.k1], c.fz);
-    return lerp(lerp(c00, c01, c.fy), lerp(c10, c11, c.fy), c.fx);
-  }
-  inline T operator()(double px, double py, double pz) const {
-    return (*this)(corners(px, py, pz));
-  }
-
-  /// Extrema of the 8 nodes of an interpolation (Selle et al. 2008 §4 limiter).
-  inline void extrema(const Corners& c, T& lo, T& hi) const {
-    const T v[8] = {q[c.r00 + c.k0], q[c.r00 + c.k1], q[c.r01 + c.k0], q[c.r01 + c.k1],
+  /// The 8 nodes of an interpolation, in trilinear's order.
+  FLAGSIM_INLINE void nodes(const Corners& c, T v[8]) const {
+    const T w[8] = {q[c.r00 + c.k0], q[c.r00 + c.k1], q[c.r01 + c.k0], q[c.r01 + c.k1],
                     q[c.r10 + c.k0], q[c.r10 + c.k1], q[c.r11 + c.k0], q[c.r11 + c.k1]};
-    lo = hi = v[0];
-    for (int a = 1; a < 8; ++a) {
-      lo = std::min(lo, v[a]);
-      hi = std::max(hi, v[a]);
-    }
+    std::copy(w, w + 8, v);
+  }
+  FLAGSIM_INLINE T operator()(const Corners& c) const {
+    T v[8];
+    nodes(c, v);
+    return trilinear(v, c.fx, c.fy, c.fz);
+  }
+  FLAGSIM_INLINE T operator()(double px, double py, double pz) const {
+    return (*this)(corners(px, py, pz));
   }
 };
 
@@ -184,19 +239,83 @@ struct RowVelocity {
   }
 };
 
-inline bool upstream_of_inflow(const GridGeometry& geo, double px) {
-  return !geo.periodic && px < 0;
+/// Semi-Lagrangian value of node k of a row (Stam 1999 §2.2): the field at the departure point, or
+/// the inflow upstream of a tunnel's inflow face.
+template <class Row>
+FLAGSIM_INLINE auto semi_lagrangian(const Row& w, const Trace& t, int k) {
+  return w.upstream(t.back) ? w.inflow : w.sample(t, k);
 }
 
-/// Runs row(c, i, j, index of (i, j, 0)) over every row of every component, in parallel.
-template <class T, class F>
-void for_each_row(const MacGrid<T>& g, F&& row) {
-  for (int c = 0; c < 3; ++c) {
-    const Shape3 sh = g.shape[c];
-    const long rows = long(sh.n[0]) * sh.n[1];
-    parallel_for_if(Index(sh.size()) > kGridParallelGrain, rows, [&](Index r) {
-      row(c, int(r / sh.n[1]), int(r % sh.n[1]), std::size_t(r) * sh.n[2]);
-    });
+/// MacCormack value of node k of a row from its predictor hat (Selle et al. 2008 eq. 9, §4).
+template <class Row, class T>
+FLAGSIM_INLINE T maccormack(const Row& w, const Trace& t, int k, T hat) {
+  if (w.upstream(t.back)) return hat;  // inflow value: nothing to correct
+  const T bar = w.upstream(t.fwd) ? w.inflow : w.sample_hat(t, k);
+  T v[8];
+  w.nodes(t, k, v);
+  return maccormack_clamp(v, maccormack_correct(hat, w.own(k), bar));
+}
+
+/// The kernels' view of one row (i, j) of component c of a bounded or periodic grid (generic
+/// indexing: wrap or clamp at every sample), of u and of the MacCormack predictor hat.
+template <class T>
+struct GenericRow {
+  Interpolator<T> q, qhat;
+  RowVelocity<T> rv;
+  int c, k_end;
+  double x0, y0;
+  T inflow;
+  bool tunnel;
+  GenericRow(const MacGrid<T>& u, const MacGrid<T>& hat, int c, int i, int j,
+             const SampleBoundary& bc)
+      : q(u, c),
+        qhat(hat, c),
+        rv(u, c, i, j),
+        c(c),
+        k_end(rv.interior_end()),
+        x0(i + q.o0),
+        y0(j + q.o1),
+        inflow(T(bc.inflow[c])),
+        tunnel(!u.geo.periodic) {}
+  void node(int k, double x[3]) const {
+    x[0] = x0;
+    x[1] = y0;
+    x[2] = k + q.o2;
+  }
+  FLAGSIM_INLINE void velocity(int k, double vel[3]) const {
+    vel[c] = rv.own[k];
+    rv.velocity(k, k_end, vel);
+  }
+  T own(int k) const { return rv.own[k]; }
+  bool upstream(const double p[3]) const { return tunnel && p[0] < 0; }
+  FLAGSIM_INLINE T sample(const Trace& t, int) const { return q(t.back[0], t.back[1], t.back[2]); }
+  FLAGSIM_INLINE T sample_hat(const Trace& t, int) const {
+    return qhat(t.fwd[0], t.fwd[1], t.fwd[2]);
+  }
+  FLAGSIM_INLINE void nodes(const Trace& t, int, T v[8]) const {
+    q.nodes(q.corners(t.back[0], t.back[1], t.back[2]), v);
+  }
+};
+
+/// dst[k] = the semi-Lagrangian value of node k, k in [0, n).
+template <class Row, class T>
+void semi_lagrangian_row(const Row& w, double s, int n, T* dst) {
+  for (int k = 0; k < n; ++k) {
+    double x[3], vel[3];
+    w.node(k, x);
+    w.velocity(k, vel);
+    dst[k] = semi_lagrangian(w, trace(x, s, vel), k);
+  }
+}
+
+/// dst[k] = the MacCormack value of node k from hat[k], k in [0, n).
+template <class Row, class T>
+void maccormack_row(const Row& w, double s, int n, const T* hat, T* dst) {
+  for (int k = 0; k < n; ++k) {
+    double x[3], vel[3];
+    w.node(k, x);
+    w.velocity(k, vel);
+    dst[k] = maccormack(w, trace(x, s, vel), k, hat[k]);
   }
 }
 
@@ -244,21 +363,11 @@ template <class T>
 void advect_semi_lagrangian(const MacGrid<T>& u, double dt, const SampleBoundary& bc,
                             MacGrid<T>& out) {
   const double s = dt / u.geo.h;
-  for_each_row(u, [&](int c, int i, int j, std::size_t base) {
-    const Interpolator<T> q(u, c);
-    const RowVelocity<T> rv(u, c, i, j);
-    const double x0 = i + q.o0, y0 = j + q.o1;
-    const T inflow = T(bc.inflow[c]);
-    T* dst = out.comp[c].data() + base;
-    const int k_end = rv.interior_end();
-    for (int k = 0; k < q.n2; ++k) {
-      double vel[3];
-      vel[c] = rv.own[k];
-      rv.velocity(k, k_end, vel);
-      const double px = x0 - s * vel[0], py = y0 - s * vel[1], pz = k + q.o2 - s * vel[2];
-      dst[k] = upstream_of_inflow(u.geo, px) ? inflow : q(px, py, pz);
-    }
-  });
+  for (int c = 0; c < 3; ++c)
+    for_each_row(u.shape[c], [&](int i, int j, std::size_t base) {
+      semi_lagrangian_row(GenericRow<T>(u, u, c, i, j, bc), s, u.shape[c].n[2],
+                          out.comp[c].data() + base);
+    });
 }
 
 template <class T>
@@ -266,32 +375,11 @@ void advect_maccormack(const MacGrid<T>& u, double dt, const SampleBoundary& bc,
                        MacGrid<T>& out) {
   advect_semi_lagrangian(u, dt, bc, hat);
   const double s = dt / u.geo.h;
-  for_each_row(u, [&](int c, int i, int j, std::size_t base) {
-    const Interpolator<T> q(u, c), qhat(hat, c);
-    const RowVelocity<T> rv(u, c, i, j);
-    const double x0 = i + q.o0, y0 = j + q.o1;
-    const T inflow = T(bc.inflow[c]);
-    const T* h = hat.comp[c].data() + base;
-    T* dst = out.comp[c].data() + base;
-    const int k_end = rv.interior_end();
-    for (int k = 0; k < q.n2; ++k) {
-      double vel[3];
-      vel[c] = rv.own[k];
-      rv.velocity(k, k_end, vel);
-      const double z0 = k + q.o2;
-      const double bx = x0 - s * vel[0], by = y0 - s * vel[1], bz = z0 - s * vel[2];
-      if (upstream_of_inflow(u.geo, bx)) {  // inflow value: nothing to correct
-        dst[k] = h[k];
-        continue;
-      }
-      const double fx = x0 + s * vel[0], fy = y0 + s * vel[1], fz = z0 + s * vel[2];
-      const T bar = upstream_of_inflow(u.geo, fx) ? inflow : qhat(fx, fy, fz);
-      const T corrected = T(h[k] + 0.5 * (rv.own[k] - bar));
-      T lo, hi;
-      q.extrema(q.corners(bx, by, bz), lo, hi);
-      dst[k] = std::min(hi, std::max(lo, corrected));
-    }
-  });
+  for (int c = 0; c < 3; ++c)
+    for_each_row(u.shape[c], [&](int i, int j, std::size_t base) {
+      maccormack_row(GenericRow<T>(u, hat, c, i, j, bc), s, u.shape[c].n[2],
+                     hat.comp[c].data() + base, out.comp[c].data() + base);
+    });
 }
 
 // ---- periodic fast path on ghost-padded copies -------------------------------------------------
@@ -408,22 +496,16 @@ struct PaddedSampler {
       return near_corner(node, i, j, k, g0, g1, g2);
     return corner(p, g0, g1, g2);
   }
-  inline T value(const Corner& c) const {
+  /// The 8 nodes of an interpolation, in trilinear's order.
+  inline void nodes(const Corner& c, T v[8]) const {
     const T* b = q + c.base;
-    const T c00 = lerp(b[0], b[1], c.fz);
-    const T c01 = lerp(b[sy], b[sy + 1], c.fz);
-    const T c10 = lerp(b[sx], b[sx + 1], c.fz);
-    const T c11 = lerp(b[sx + sy], b[sx + sy + 1], c.fz);
-    return lerp(lerp(c00, c01, c.fy), lerp(c10, c11, c.fy), c.fx);
+    const T w[8] = {b[0], b[1], b[sy], b[sy + 1], b[sx], b[sx + 1], b[sx + sy], b[sx + sy + 1]};
+    std::copy(w, w + 8, v);
   }
-  inline void extrema(const Corner& c, T& lo, T& hi) const {
-    const T* b = q + c.base;
-    const T v[8] = {b[0], b[1], b[sy], b[sy + 1], b[sx], b[sx + 1], b[sx + sy], b[sx + sy + 1]};
-    lo = hi = v[0];
-    for (int a = 1; a < 8; ++a) {
-      lo = std::min(lo, v[a]);
-      hi = std::max(hi, v[a]);
-    }
+  inline T value(const Corner& c) const {
+    T v[8];
+    nodes(c, v);
+    return trilinear(v, c.fx, c.fy, c.fz);
   }
 };
 
@@ -587,6 +669,44 @@ FLAGSIM_TARGET_AVX bool sl_plane_32(const SlRow<T>& w, int n1, int n2, std::ptrd
 }
 #endif
 
+/// The kernels' view of row (i, j) of component C of a periodic grid from its padded copies (see
+/// GenericRow): departures within a cell of the node sample without wrapping.
+template <int C, class T>
+struct PaddedRow {
+  static constexpr double kO0 = C == 0 ? 0.0 : 0.5, kO1 = C == 1 ? 0.0 : 0.5;
+  static constexpr double kO2 = C == 2 ? 0.0 : 0.5;
+  const PeriodicAdvectScratch<T>& sc;
+  PaddedSampler<T> q, qhat;
+  std::ptrdiff_t stride[3];
+  int i, j;
+  std::size_t idx0;  // padded index of (i, j, 0)
+  T inflow = T(0);   // never taken: a periodic grid has no inflow
+  PaddedRow(const PeriodicAdvectScratch<T>& sc, int i, int j)
+      : sc(sc), q(sc.u[C]), qhat(sc.hat[C]), i(i), j(j), idx0(sc.u[C].index(i, j, 0)) {
+    stride[0] = std::ptrdiff_t(sc.u[C].p1) * sc.u[C].p2;
+    stride[1] = sc.u[C].p2;
+    stride[2] = 1;
+  }
+  void node(int k, double x[3]) const {
+    x[0] = i + kO0;
+    x[1] = j + kO1;
+    x[2] = k + kO2;
+  }
+  void velocity(int k, double vel[3]) const { padded_velocity<C>(sc.u, idx0 + k, stride, vel); }
+  T own(int k) const { return sc.u[C].data[idx0 + k]; }
+  bool upstream(const double*) const { return false; }
+  typename PaddedSampler<T>::Corner corner(const PaddedSampler<T>& s, const PaddedComponent<T>& p,
+                                           const Trace& t, const double g[3], int k) const {
+    return s.any_corner(p, idx0 + k, i, j, k, t.d[0], t.d[1], t.d[2], g[0] - kO0, g[1] - kO1,
+                        g[2] - kO2);
+  }
+  T sample(const Trace& t, int k) const { return q.value(corner(q, sc.u[C], t, t.back, k)); }
+  T sample_hat(const Trace& t, int k) const {
+    return qhat.value(corner(qhat, sc.hat[C], t, t.fwd, k));
+  }
+  void nodes(const Trace& t, int k, T v[8]) const { q.nodes(corner(q, sc.u[C], t, t.back, k), v); }
+};
+
 /// Semi-Lagrangian pass of component C: out (unpadded) from padded u^n.
 ///
 /// Each plane i first takes the fast path, row by row: upwind_sample on vectors (32 bytes with
@@ -595,28 +715,25 @@ FLAGSIM_TARGET_AVX bool sl_plane_32(const SlRow<T>& w, int n1, int n2, std::ptrd
 /// finite, those nodes are then redone by the general sampler (any_corner: floor, wrap). The two
 /// agree to round-off (tests/cpp/fluid/test_advect.cpp).
 template <int C, class T>
-void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, double s, T* out) {
-  const PaddedSampler<T> q(sc.u[C]);
+void padded_sl(const PeriodicAdvectScratch<T>& sc, double s, T* out) {
   const PaddedComponent<T>& p = sc.u[C];
-  const std::ptrdiff_t stride[3] = {std::ptrdiff_t(p.p1) * p.p2, std::ptrdiff_t(p.p2), 1};
-  constexpr double o0 = C == 0 ? 0.0 : 0.5, o1 = C == 1 ? 0.0 : 0.5, o2 = C == 2 ? 0.0 : 0.5;
   constexpr int E1 = C == 0 ? 1 : 0, E2 = C == 2 ? 1 : 2;  // the other two components
-  const std::ptrdiff_t sx = stride[0], sy = stride[1];
+  const std::ptrdiff_t sx = std::ptrdiff_t(p.p1) * p.p2, sy = p.p2;
+  const std::ptrdiff_t stride[3] = {sx, sy, 1};
   const T st = T(s);
-  const int n1 = geo.ny, n2 = geo.nz;
+  const int n1 = p.n[1], n2 = p.n[2];
   bool (*plane_fn)(const SlRow<T>&, int, int, std::ptrdiff_t) = &sl_plane_16<C, T>;
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
   if (vector_bytes() == 32) plane_fn = &sl_plane_32<C, T>;
 #endif
-  parallel_for_if(long(geo.nx) * n1 * n2 > kGridParallelGrain, geo.nx, [&](Index plane) {
-    const int i = int(plane);
+  for_each_plane(Shape3{{p.n[0], n1, n2}}, [&](int i) {
     const std::size_t idx0 = p.index(i, 0, 0);
     SlRow<T> w;
-    w.own = sc.u[C].data.data() + idx0;
+    w.own = p.data.data() + idx0;
     w.e1 = sc.u[E1].data.data() + idx0;
     w.e2 = sc.u[E2].data.data() + idx0;
     for (int a = -1; a <= 1; ++a)
-      for (int b = -1; b <= 1; ++b) w.rows9[3 * (a + 1) + (b + 1)] = q.q + idx0 + a * sx + b * sy;
+      for (int b = -1; b <= 1; ++b) w.rows9[3 * (a + 1) + (b + 1)] = w.own + a * sx + b * sy;
     w.dc = stride[C];
     w.d1s = stride[E1];
     w.d2s = stride[E2];
@@ -625,51 +742,27 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, doub
     if (plane_fn(w, n1, n2, sy)) return;
     // Departures of a cell or more (or not finite): those nodes again, by the general sampler.
     for (int j = 0; j < n1; ++j) {
-      std::size_t idx = p.index(i, j, 0);
+      const PaddedRow<C, T> row(sc, i, j);
       T* dst = w.dst + std::size_t(j) * n2;
-      for (int k = 0; k < n2; ++k, ++idx) {
-        double vel[3];  // each exactly a T: the fast path's velocity, summed in the same order
-        padded_velocity<C>(sc.u, idx, stride, vel);
+      for (int k = 0; k < n2; ++k) {
+        double x[3], vel[3];  // each vel exactly a T: the fast path's velocity, summed in its order
+        row.node(k, x);
+        row.velocity(k, vel);
         if (std::fabs(st * T(vel[0])) < 1 && std::fabs(st * T(vel[1])) < 1 &&
             std::fabs(st * T(vel[2])) < 1)
           continue;  // the fast path's departure (same T arithmetic): its value stands
-        const double e0 = s * vel[0], e1v = s * vel[1], e2v = s * vel[2];
-        const double px = i + o0 - e0, py = j + o1 - e1v, pz = k + o2 - e2v;
-        dst[k] = q.value(q.any_corner(p, idx, i, j, k, e0, e1v, e2v, px - o0, py - o1, pz - o2));
+        dst[k] = semi_lagrangian(row, trace(x, s, vel), k);
       }
     }
   });
 }
 
-/// MacCormack correction and limiter of component C (Selle et al. 2008 eq. 9, §4) into out.
+/// MacCormack correction and limiter of component C into out, h the unpadded predictor.
 template <int C, class T>
-void padded_mc(const PeriodicAdvectScratch<T>& sc, const GridGeometry& geo, double s, const T* h,
-               T* out) {
+void padded_mc(const PeriodicAdvectScratch<T>& sc, double s, const T* h, T* out) {
   const PaddedComponent<T>& p = sc.u[C];
-  const PaddedSampler<T> q(p), qhat(sc.hat[C]);
-  const std::ptrdiff_t stride[3] = {std::ptrdiff_t(p.p1) * p.p2, std::ptrdiff_t(p.p2), 1};
-  constexpr double o0 = C == 0 ? 0.0 : 0.5, o1 = C == 1 ? 0.0 : 0.5, o2 = C == 2 ? 0.0 : 0.5;
-  const int n1 = geo.ny, n2 = geo.nz;
-  const long rows = long(geo.nx) * n1;
-  parallel_for_if(rows * n2 > kGridParallelGrain, rows, [&](Index r) {
-    const int i = int(r / n1), j = int(r % n1);
-    std::size_t idx = p.index(i, j, 0);
-    const std::size_t row = std::size_t(r) * n2;
-    for (int k = 0; k < n2; ++k, ++idx) {
-      double vel[3];
-      padded_velocity<C>(sc.u, idx, stride, vel);
-      const double x0 = i + o0, y0 = j + o1, z0 = k + o2;
-      const double d0 = s * vel[0], d1 = s * vel[1], d2 = s * vel[2];
-      const double bx = x0 - d0, by = y0 - d1, bz = z0 - d2;
-      const double fx = x0 + d0, fy = y0 + d1, fz = z0 + d2;
-      const T bar = qhat.value(
-          qhat.any_corner(sc.hat[C], idx, i, j, k, d0, d1, d2, fx - o0, fy - o1, fz - o2));
-      const T own = p.data[idx];
-      const T corrected = T(h[row + k] + 0.5 * (own - bar));
-      T lo, hi;
-      q.extrema(q.any_corner(p, idx, i, j, k, d0, d1, d2, bx - o0, by - o1, bz - o2), lo, hi);
-      out[row + k] = std::min(hi, std::max(lo, corrected));
-    }
+  for_each_row(Shape3{{p.n[0], p.n[1], p.n[2]}}, [&](int i, int j, std::size_t base) {
+    maccormack_row(PaddedRow<C, T>(sc, i, j), s, p.n[2], h + base, out + base);
   });
 }
 
@@ -682,14 +775,14 @@ void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, PeriodicAdvectSc
   for (int c = 0; c < 3; ++c) scratch.u[c].fill(u.comp[c].data());
   // Semi-Lagrangian (into hat for MacCormack, else straight into u: only padded copies are read).
   MacGrid<T>& sl = maccormack ? hat : u;
-  padded_sl<0>(scratch, u.geo, s, sl.comp[0].data());
-  padded_sl<1>(scratch, u.geo, s, sl.comp[1].data());
-  padded_sl<2>(scratch, u.geo, s, sl.comp[2].data());
+  padded_sl<0>(scratch, s, sl.comp[0].data());
+  padded_sl<1>(scratch, s, sl.comp[1].data());
+  padded_sl<2>(scratch, s, sl.comp[2].data());
   if (!maccormack) return;
   for (int c = 0; c < 3; ++c) scratch.hat[c].fill(hat.comp[c].data());
-  padded_mc<0>(scratch, u.geo, s, hat.comp[0].data(), u.comp[0].data());
-  padded_mc<1>(scratch, u.geo, s, hat.comp[1].data(), u.comp[1].data());
-  padded_mc<2>(scratch, u.geo, s, hat.comp[2].data(), u.comp[2].data());
+  padded_mc<0>(scratch, s, hat.comp[0].data(), u.comp[0].data());
+  padded_mc<1>(scratch, s, hat.comp[1].data(), u.comp[1].data());
+  padded_mc<2>(scratch, s, hat.comp[2].data(), u.comp[2].data());
 }
 
 #define FLAGSIM_INSTANTIATE_ADVECT(T)                                                       \
