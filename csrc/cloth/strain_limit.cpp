@@ -1,0 +1,78 @@
+#include "cloth/strain_limit.h"
+
+#include "cloth/forces.h"
+
+namespace flagsim {
+
+void limit_strain(const ClothTopology& topo, double limit, int iterations, MatX3& x, MatX3& v) {
+  // Velocities: the limited pair loses the relative velocity along it that still stretches it
+  // (an inelastic, momentum-conserving impulse, as Bridson, Fedkiw, Anderson 2002 §7 limit
+  // strain rates), so a correction never adds kinetic energy. Turning the correction itself into
+  // velocity (v += correction / h, PBD-style) did: a violation the step inherited, corrected in
+  // a 1e-5 s substep, became thousands of m/s (docs/energy.md).
+  //
+  // Long-range attachments first: one exact projection per vertex onto the ball of radius
+  // (1 + limit) x rest distance around its nearest pin removes gross stretch in a single pass
+  // (Gauss-Seidel over springs alone needs O(cols^2) sweeps for that).
+  const Index N = topo.num_vertices();
+  for (Index i = 0; i < N; ++i) {
+    const int32_t a = topo.tether_anchor[i];
+    if (a < 0) continue;
+    const Vec3 d = x.row(i) - x.row(a);
+    const double l = d.norm(), lmax = (1.0 + limit) * topo.tether_length[i];
+    if (l <= lmax) continue;
+    x.row(i) += (d * (lmax / l - 1.0)).transpose();
+    const Vec3 n = d / l;
+    const double vr = (v.row(i) - v.row(a)).dot(n.transpose());  // the pin does not move for it
+    if (vr > 0) v.row(i) -= (vr * n).transpose();
+  }
+  // Then Provot's local projection, Gauss-Seidel over springs in index order: deterministic.
+  for (int it = 0; it < iterations; ++it) {
+    bool violated = false;
+    for (Index s = 0; s < topo.num_springs(); ++s) {
+      if (topo.spring_kind[s] == SpringKind::kBend) continue;  // bending is not stretching
+      const int a = topo.springs(s, 0), b = topo.springs(s, 1);
+      const double wa = topo.inv_mass[a], wb = topo.inv_mass[b];
+      if (wa + wb == 0) continue;
+      const Vec3 d = x.row(b) - x.row(a);
+      const double l = d.norm(), lmax = (1.0 + limit) * topo.rest_length[s];
+      if (l <= lmax || l == 0) continue;
+      violated = violated || l > lmax * 1.001;
+      const Vec3 corr = (l - lmax) / l * d / (wa + wb);
+      x.row(a) += wa * corr.transpose();
+      x.row(b) -= wb * corr.transpose();
+      const Vec3 n = d / l;
+      const double vr = (v.row(b) - v.row(a)).dot(n.transpose());
+      if (vr > 0) {
+        const Vec3 j = (vr / (wa + wb)) * n;  // impulse per unit inverse mass
+        v.row(a) += wa * j.transpose();
+        v.row(b) -= wb * j.transpose();
+      }
+    }
+    if (!violated) break;
+  }
+}
+
+bool strain_limit_violated(const ClothTopology& topo, double limit, const MatX3& x) {
+  for (Index i = 0; i < topo.num_vertices(); ++i) {
+    const int32_t a = topo.tether_anchor[i];
+    if (a >= 0 && (x.row(i) - x.row(a)).norm() > (1.0 + limit) * topo.tether_length[i]) return true;
+  }
+  for (Index s = 0; s < topo.num_springs(); ++s) {
+    if (topo.spring_kind[s] == SpringKind::kBend) continue;
+    const int a = topo.springs(s, 0), b = topo.springs(s, 1);
+    if (topo.inv_mass[a] + topo.inv_mass[b] == 0) continue;
+    if ((x.row(b) - x.row(a)).norm() > (1.0 + limit) * topo.rest_length[s]) return true;
+  }
+  return false;
+}
+
+double limit_strain_work(const ClothTopology& topo, const Vec3& g, double limit, int iterations,
+                         MatX3& x, MatX3& v) {
+  if (!strain_limit_violated(topo, limit, x)) return 0.0;
+  const double before = total_energy(topo, g, x, v);
+  limit_strain(topo, limit, iterations, x, v);
+  return total_energy(topo, g, x, v) - before;
+}
+
+}  // namespace flagsim

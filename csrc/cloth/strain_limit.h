@@ -1,0 +1,25 @@
+// Strain limiting (Provot 1995, with long-range attachments): the constraint the integrators
+// apply after every substep or implicit piece, and the collision stages between their sweeps.
+#pragma once
+#include "cloth/topology.h"
+#include "common/types.h"
+
+namespace flagsim {
+
+/// Strain limiting: each vertex's distance to its nearest pin is capped at (1 + limit) x its rest
+/// distance (long-range attachments, Kim et al. 2012), then (Provot 1995) structural and shear
+/// springs longer than (1 + limit) x rest length are shortened by moving their ends
+/// (mass-weighted, pinned ends fixed). Velocities: each limited pair loses the relative velocity
+/// along it that still stretches it (inelastic, momentum-conserving; never adds kinetic energy).
+void limit_strain(const ClothTopology& topo, double limit, int iterations, MatX3& x, MatX3& v);
+
+/// True when limit_strain would move something: a tether or a structural or shear spring longer
+/// than (1 + limit) x its rest length.
+bool strain_limit_violated(const ClothTopology& topo, double limit, const MatX3& x);
+
+/// limit_strain, returning the change of total_energy it made, J: 0, with neither the
+/// projection nor the energy evaluated, when nothing exceeds the limit.
+double limit_strain_work(const ClothTopology& topo, const Vec3& g, double limit, int iterations,
+                         MatX3& x, MatX3& v);
+
+}  // namespace flagsim

@@ -1,0 +1,115 @@
+// Strain limiting (cloth/strain_limit.h): the limit holds afterwards, the velocity update is
+// inelastic (never adds kinetic energy) and momentum-conserving, and the work it reports is the
+// energy change it made.
+#include <gtest/gtest.h>
+
+#include <random>
+
+#include "cloth/forces.h"
+#include "cloth/strain_limit.h"
+#include "cloth/topology.h"
+
+using namespace flagsim;
+
+namespace {
+
+// The paper flag stretched at random: positions scaled up to 1.5x about the origin corner plus
+// noise, random velocities.
+struct Stretched {
+  ClothTopology t;
+  MatX3 x, v;
+  explicit Stretched(Pin pin, unsigned seed = 7) {
+    FlagParams p;
+    p.rows = 12;
+    p.cols = 16;
+    p.pin = pin;
+    t = build_flag_topology(p);
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> u(-1, 1);
+    x = t.rest_positions;
+    v = MatX3::Zero(t.num_vertices(), 3);
+    for (Index i = 0; i < t.num_vertices(); ++i) {
+      if (t.inv_mass[i] == 0) continue;
+      x.row(i) = (t.rest_positions.row(i) * (1.25 + 0.25 * u(rng)) +
+                  0.01 * Vec3(u(rng), u(rng), u(rng)).transpose())
+                     .eval();
+      v.row(i) << u(rng), u(rng), u(rng);
+    }
+  }
+};
+
+double kinetic(const ClothTopology& t, const MatX3& v) {
+  double k = 0;
+  for (Index i = 0; i < t.num_vertices(); ++i) k += 0.5 * t.mass[i] * v.row(i).squaredNorm();
+  return k;
+}
+
+double worst_ratio(const ClothTopology& t, const MatX3& x) {  // largest l / rest, not bending
+  double w = 0;
+  for (Index s = 0; s < t.num_springs(); ++s) {
+    if (t.spring_kind[s] == SpringKind::kBend) continue;
+    const int a = t.springs(s, 0), b = t.springs(s, 1);
+    if (t.inv_mass[a] + t.inv_mass[b] == 0) continue;
+    w = std::max(w, (x.row(b) - x.row(a)).norm() / t.rest_length[s]);
+  }
+  return w;
+}
+
+}  // namespace
+
+TEST(StrainLimit, HoldsTheLimitAndNeverAddsKineticEnergy) {
+  for (Pin pin : {Pin::kPole, Pin::kTop, Pin::kNone}) {
+    Stretched f(pin);
+    const double limit = 0.1;
+    ASSERT_GT(worst_ratio(f.t, f.x), 1.2);
+    ASSERT_TRUE(strain_limit_violated(f.t, limit, f.x));
+    const double k0 = kinetic(f.t, f.v);
+    limit_strain(f.t, limit, 200, f.x, f.v);
+    // Gauss-Seidel: a later correction can stretch an earlier spring a little again; the promise
+    // is the limit plus kStrainLimitSlack (cloth/params.h), which the Simulation checks.
+    EXPECT_LE(worst_ratio(f.t, f.x), 1 + limit + kStrainLimitSlack) << name_of(pin);
+    EXPECT_LE(kinetic(f.t, f.v), k0 * (1 + 1e-12)) << name_of(pin);
+    for (Index i = 0; i < f.t.num_vertices(); ++i) {  // tethers: the same promise
+      const int a = f.t.tether_anchor[i];
+      if (a >= 0)
+        EXPECT_LE((f.x.row(i) - f.x.row(a)).norm(),
+                  (1 + limit + kStrainLimitSlack) * f.t.tether_length[i]);
+    }
+  }
+}
+
+TEST(StrainLimit, ConservesMomentumWithoutPins) {
+  Stretched f(Pin::kNone);
+  Vec3 p0 = Vec3::Zero(), c0 = Vec3::Zero();
+  double m = 0;
+  for (Index i = 0; i < f.t.num_vertices(); ++i) {
+    p0 += f.t.mass[i] * f.v.row(i).transpose();
+    c0 += f.t.mass[i] * f.x.row(i).transpose();
+    m += f.t.mass[i];
+  }
+  limit_strain(f.t, 0.1, 200, f.x, f.v);
+  Vec3 p1 = Vec3::Zero(), c1 = Vec3::Zero();
+  for (Index i = 0; i < f.t.num_vertices(); ++i) {
+    p1 += f.t.mass[i] * f.v.row(i).transpose();
+    c1 += f.t.mass[i] * f.x.row(i).transpose();
+  }
+  EXPECT_LT((p1 - p0).norm(), 1e-12 * (1 + p0.norm()));
+  EXPECT_LT((c1 - c0).norm() / m, 1e-12);  // mass-weighted moves keep the centre of mass
+}
+
+TEST(StrainLimit, WorkIsTheEnergyChangeAndZeroWhenNothingIsViolated) {
+  const Vec3 g(0, -9.81, 0);
+  Stretched f(Pin::kPole);
+  const MatX3 x0 = f.x, v0 = f.v;
+  const double before = total_energy(f.t, g, x0, v0);
+  const double work = limit_strain_work(f.t, g, 0.1, 200, f.x, f.v);
+  EXPECT_NEAR(work, total_energy(f.t, g, f.x, f.v) - before, 1e-12 * std::abs(before));
+  EXPECT_LT(work, 0.0);  // it takes energy out
+  // at rest nothing exceeds the limit: nothing is moved and nothing is booked
+  Stretched rest(Pin::kPole);
+  rest.x = rest.t.rest_positions;
+  const MatX3 x_rest = rest.x, v_rest = rest.v;
+  EXPECT_FALSE(strain_limit_violated(rest.t, 0.1, rest.x));
+  EXPECT_EQ(limit_strain_work(rest.t, g, 0.1, 200, rest.x, rest.v), 0.0);
+  EXPECT_TRUE(rest.x == x_rest && rest.v == v_rest);
+}
