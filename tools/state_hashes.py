@@ -24,6 +24,10 @@ def scenes():
     e.integrator.adaptive = True
     yield "flag32x32-explicit", e
     yield "flapping_demo", flagsim.Scene.flapping_demo()
+    for mode in ("force", "visual"):
+        f = flagsim.Scene.paper()
+        f.flapping.mode = mode
+        yield f"paper-flap-{mode}", f
     yield "banner", flagsim.Scene.banner()
 
 

@@ -132,22 +132,10 @@ double Simulation::energy_now() const { return total_energy(topo_, scene_.gravit
 
 void Simulation::setup_flapping() {
   const Index N = topo_.num_vertices();
-  flap_z_.setZero(N);
+  flap_off_z_.setZero(N);
   if (!built(Stage::kFlap) && !built(Stage::kFlapVisual)) return;
   const FlappingParams& fp = scene_.flapping;
-  noise_ = Perlin1D(fp.seed);
-  flap_xy_ = topo_.uv;  // x = u (0 at the pole edge), y = v; y (1 - y) is symmetric
-  // L: rest distance to the nearest pinned vertex, the topology's tether length (0 at a pin;
-  // infinite, so A = amplitude, without pins).
-  flap_L_.resize(N);
-  for (Index i = 0; i < N; ++i)
-    flap_L_[i] = topo_.pinned(i)               ? 0.0
-                 : topo_.tether_anchor[i] >= 0 ? topo_.tether_length[i]
-                                               : std::numeric_limits<double>::infinity();
-  flap_applied_.setZero(N);
-  flap_start_.setZero(N);
-  flap_before_.setZero(N);
-  flap_after_.setZero(N);
+  flap_ = FlapStage(topo_, fp);
   // The integrator carries the stage: "displace" as a drift of the positions, "force" as an
   // external force, each held over a piece.
   if (fp.mode == FlapMode::kDisplace) {
@@ -157,16 +145,13 @@ void Simulation::setup_flapping() {
     flap_force_.setZero(N, 3);
     forces_.external = &flap_force_;
   }
-  // u_p is sampled along the flag's pole-side edge (column 0, beside the pole), at rest.
-  edge_points_.resize(topo_.rows, 3);
-  for (int r = 0; r < topo_.rows; ++r)
-    edge_points_.row(r) = topo_.rest_positions.row(r * topo_.cols);
+  edge_points_ = FlapStage::pole_edge_points(topo_);  // u_p is sampled there, beside the pole
   edge_air_.resize(topo_.rows, 3);
   visual_ = built(Stage::kFlapVisual);
   if (visual_) {
     u_p_ = sample_pole_air_speed();
-    flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, time_, fp, flap_z_);
-    render_x_ = x_ + flap_z_.asDiagonal() * n_;
+    render_x_.resize(N, 3);
+    flap_.displace(x_, n_, u_p_, time_, render_x_);
     render_n_.resize(N, 3);
     compute_vertex_normals(topo_, render_x_, render_n_);
   }
@@ -222,7 +207,7 @@ void Simulation::step_once() {
   v_start_ = v_;
   ledger_start_ = ledger_;
   energy_end_start_ = energy_end_;
-  if (built(Stage::kFlap)) flap_start_ = flap_applied_;
+  if (built(Stage::kFlap)) flap_.save_step_start();
   int level = 0;
   for (;; ++level) {
     const long pieces = 1L << level;
@@ -257,7 +242,7 @@ Simulation::Implausible Simulation::step_piece() {
   stage_collide();
   Implausible bad = stage_check();
   if (!bad.cause.empty()) return bad;
-  if (built(Stage::kFlap)) flap_applied_ = flap_z_;
+  if (built(Stage::kFlap)) flap_.commit();
   energy_end_ = energy_run_;
   return bad;
 }
@@ -267,7 +252,7 @@ void Simulation::restore_step_start() {
   v_ = v_start_;
   ledger_ = ledger_start_;
   energy_end_ = energy_end_start_;
-  if (built(Stage::kFlap)) flap_applied_ = flap_start_;
+  if (built(Stage::kFlap)) flap_.restore_step_start();
 }
 
 double Simulation::sample_pole_air_speed() {
@@ -275,40 +260,20 @@ double Simulation::sample_pole_air_speed() {
   return edge_air_.rowwise().norm().mean();
 }
 
-// Paper eq. 5 at the end of the piece. "displace": the change of z over the piece, dz, is a drift
-// dz n / h that the integrator adds to the positions (ForceSet::drift), so the springs answer
-// the displaced cloth inside the solve while damping and drag see only the cloth's own velocity;
-// the ledger's flap entry is its work against springs and gravity. Moving the positions after
-// the solve instead stored whatever the wave stretched in the springs: at k_s = 1e6 N/m that
-// was 5e4 J in a 66 g flag (docs/energy.md). Pinned vertices stay put.
+// Paper eq. 5 at the end of the piece (flapping/flap_stage.h), from the air speed at the pole
+// and the normals at the piece's start.
 void Simulation::stage_flap_drift() {
   StageClock::Scope t(&clock_, Stage::kFlap);
   u_p_ = sample_pole_air_speed();
   compute_vertex_normals(topo_, x_, n_);
-  flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, t_piece_ + h_, scene_.flapping, flap_z_);
-  for (Index i = 0; i < topo_.num_vertices(); ++i)
-    flap_drift_.row(i) = topo_.pinned(i)
-                             ? Vec3::Zero().transpose()
-                             : (((flap_z_[i] - flap_applied_[i]) / h_) * n_.row(i)).eval();
+  flap_.drift(topo_, n_, u_p_, t_piece_ + h_, h_, flap_drift_);
 }
 
-// "force": F = m d2z/dt2 n, the force that would move a free mass along the wave (d2z/dt2 by the
-// central difference over the piece), held over the piece by the integrator as an external
-// force (its work is the ledger's flap entry). Pinned vertices get none.
 void Simulation::stage_flap_force() {
   StageClock::Scope t(&clock_, Stage::kFlap);
-  const FlappingParams& fp = scene_.flapping;
-  const double h = h_, t1 = t_piece_ + h_;
   u_p_ = sample_pole_air_speed();
   compute_vertex_normals(topo_, x_, n_);
-  flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, t1, fp, flap_z_);
-  flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, t1 - h, fp, flap_before_);
-  flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, t1 + h, fp, flap_after_);
-  for (Index i = 0; i < topo_.num_vertices(); ++i) {
-    const double a = (flap_after_[i] - 2 * flap_z_[i] + flap_before_[i]) / (h * h);
-    flap_force_.row(i) =
-        topo_.pinned(i) ? Vec3::Zero().transpose() : ((topo_.mass[i] * a) * n_.row(i)).eval();
-  }
+  flap_.force(topo_, n_, u_p_, t_piece_ + h_, h_, flap_force_);
 }
 
 double Simulation::limit_cloth_strain(MatX3& x, MatX3& v) {
@@ -363,9 +328,7 @@ void Simulation::stage_collide() {
 void Simulation::stage_flap_visual() {
   StageClock::Scope t(&clock_, Stage::kFlapVisual);
   u_p_ = sample_pole_air_speed();
-  flapping_displacement(noise_, flap_xy_, flap_L_, u_p_, time_, scene_.flapping, flap_z_);
-  for (Index i = 0; i < topo_.num_vertices(); ++i)
-    render_x_.row(i) = x_.row(i) + flap_z_[i] * n_.row(i);
+  flap_.displace(x_, n_, u_p_, time_, render_x_);
   compute_vertex_normals(topo_, render_x_, render_n_);
 }
 

@@ -11,7 +11,7 @@
 #include "cloth/integrators.h"
 #include "cloth/topology.h"
 #include "collision/self_collision.h"
-#include "flapping/perlin.h"
+#include "flapping/flap_stage.h"
 #include "fluid/fluid.h"
 #include "scene/scene.h"
 
@@ -91,7 +91,9 @@ class Simulation {
   /// (N x 3) unit vertex normals of render_positions().
   const MatX3& render_normals() const { return visual_ ? render_n_ : n_; }
   /// (N) eq. 5 displacement z of each vertex at the current time, m (zero with flapping off).
-  const VecX& flap_displacement() const { return flap_z_; }
+  const VecX& flap_displacement() const {
+    return built(Stage::kFlap) || built(Stage::kFlapVisual) ? flap_.z() : flap_off_z_;
+  }
   /// u_p of eq. 5: mean air speed along the pole-side edge at the last flap stage, m/s.
   double pole_air_speed() const { return u_p_; }
   /// Statistics of the last self-collision stage; nullptr when the stage is not built.
@@ -175,14 +177,10 @@ class Simulation {
   std::vector<std::string> stage_names_;
   std::unique_ptr<Fluid> fluid_;  // the air grid, when the scene needs one
 
-  // Flapping (paper eq. 5), set up only when flapping.mode != FlapMode::kOff.
-  Perlin1D noise_{0};
-  MatX2 flap_xy_;                  // (N x 2) eq. 5's normalised (x, y): the rest uv
-  VecX flap_L_;                    // (N) m, rest distance to the nearest pinned vertex
-  VecX flap_z_;                    // (N) m, z at the current time
-  VecX flap_applied_;              // (N) m, "displace": z already applied to the cloth
-  VecX flap_before_, flap_after_;  // (N) m, "force": z at t - dt and t + dt
-  MatX3 edge_points_, edge_air_;   // (P x 3) where u_p is sampled, and the air there
+  // Flapping (paper eq. 5), set up only when flapping.mode is not "off".
+  FlapStage flap_;
+  VecX flap_off_z_;               // (N) zeros: flap_displacement() with flapping off
+  MatX3 edge_points_, edge_air_;  // (P x 3) where u_p is sampled, and the air there
   double u_p_ = 0;
   bool visual_ = false;
   MatX3 render_x_, render_n_;  // (N x 3) "visual" geometry
@@ -196,7 +194,6 @@ class Simulation {
   double energy_end_ = 0, energy_run_ = 0, gravity_potential_0_ = 0, energy_scale_ = 0;
   MatX3 flap_drift_;  // (N x 3) m/s, "displace": dz n / h, the integrator's drift
   MatX3 flap_force_;  // (N x 3) N, "force": held over the piece by the integrator
-  VecX flap_start_;   // (N) m, flap_applied_ at the start of the step (rollback)
 
   std::unique_ptr<SelfCollision> self_collision_;
   std::atomic<bool> stepping_{false};          // a step() is running (one thread at a time)
