@@ -86,6 +86,7 @@ SelfCollision::SelfCollision(const MatX3i& triangles, Index num_vertices,
       edges_(mesh_edges(triangles)),
       n_(num_vertices),
       params_(params),
+      zones_(num_vertices),
       vlo_(num_vertices, 3),
       vhi_(num_vertices, 3),
       tlo_(triangles.rows(), 3),
@@ -99,7 +100,6 @@ SelfCollision::SelfCollision(const MatX3i& triangles, Index num_vertices,
       count_v_(static_cast<size_t>(num_vertices), 0),
       on_pole_(static_cast<size_t>(num_vertices), 0),
       moved_(static_cast<size_t>(num_vertices), 0),
-      frozen_(static_cast<size_t>(num_vertices), 0),
       motion_(num_vertices) {
   const size_t threads = static_cast<size_t>(max_threads());
   thread_pairs_.resize(threads);
@@ -695,7 +695,7 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
 bool SelfCollision::find_violations(const MatX3& x0, const MatX3& x, const VecX& inv_mass,
                                     const PoleParams* pole) {
   const double floor = 0.5 * params_.thickness;
-  auto still = [&](int32_t i) { return frozen_[i] || inv_mass[i] == 0; };
+  auto still = [&](int32_t i) { return zones_.still(i, inv_mass); };
   const auto P = static_cast<Index>(pairs_.size());
   if (quiet_) {  // the last sweep saw every pair at this x and found none within the thickness
     std::fill(flag_.begin(), flag_.end(), uint8_t{0});
@@ -720,62 +720,25 @@ bool SelfCollision::find_violations(const MatX3& x0, const MatX3& x, const VecX&
       }
     });
   }
-  bool any = std::find(flag_.begin(), flag_.end(), uint8_t{1}) != flag_.end();
-  if (pole)
-    for (Index i = 0; i < n_ && !any; ++i)
-      any = !still(static_cast<int32_t>(i)) && inside_pole(*pole, row(x, i));
-  return any;
+  const bool any = std::find(flag_.begin(), flag_.end(), uint8_t{1}) != flag_.end();
+  return any || (pole && zones_.any_in_pole(*pole, x, inv_mass));
 }
 
 void SelfCollision::freeze_fallback(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
                                     const PoleParams* pole) {
-  std::fill(frozen_.begin(), frozen_.end(), uint8_t{0});
+  zones_.clear();
   if (!find_violations(x0, x, inv_mass, pole)) return;
   // Frozen vertices stay at x0 in the world frame, so collect candidates there (no shift): every
   // state the loop can reach lies within these boxes.
   broad_phase(x0, x, inv_mass, /*shifted=*/false);
-  auto still = [&](int32_t i) { return frozen_[i] || inv_mass[i] == 0; };
   for (Index round = 0; round <= n_ && find_violations(x0, x, inv_mass, pole); ++round) {
     for (size_t k = 0; k < pairs_.size(); ++k) {
       if (!flag_[k]) continue;
       int32_t group[4];
       corners(pairs_[k], group);
-      // Inelastic impact zone: the group keeps its momentum, moves as one, and stays at x0.
-      Vec3 momentum = Vec3::Zero();
-      double mass = 0;
-      bool pinned = false;
-      for (const int32_t i : group) {
-        if (inv_mass[i] == 0) {
-          pinned = true;
-          continue;
-        }
-        momentum += row(v, i) / inv_mass[i];
-        mass += 1 / inv_mass[i];
-      }
-      const Vec3 common = pinned || !(mass > 0) ? Vec3::Zero() : Vec3(momentum / mass);
-      for (const int32_t i : group) {
-        if (inv_mass[i] == 0) continue;
-        x.row(i) = x0.row(i);
-        v.row(i) = common.transpose();
-        if (!frozen_[i]) {
-          frozen_[i] = 1;
-          ++stats_.frozen;
-        }
-      }
+      stats_.frozen += zones_.freeze(group, x0, x, v, inv_mass);
     }
-    if (!pole) continue;
-    for (Index i = 0; i < n_; ++i) {
-      if (still(static_cast<int32_t>(i)) || !inside_pole(*pole, row(x, i))) continue;
-      x.row(i) = x0.row(i);
-      const Vec3 radial(x0(i, 0) - pole->base.x(), 0.0, x0(i, 2) - pole->base.z());
-      const double r = radial.norm();
-      if (r > 0) {
-        const double vn = v.row(i).dot(radial.transpose()) / r;
-        if (vn < 0) v.row(i) -= (vn / r) * radial.transpose();
-      }
-      frozen_[i] = 1;
-      ++stats_.frozen;
-    }
+    if (pole) stats_.frozen += zones_.freeze_in_pole(*pole, x0, x, v, inv_mass);
   }
 }
 

@@ -39,9 +39,9 @@
 //       immovable for the pushes (contact mass scaling), so stacked layers do not fight it;
 //     - a pair is skipped outright when its start-of-step distance exceeds the largest relative
 //       displacement of its points plus the thickness (linear motion cannot close that gap);
-//   fallback: a pair still crossing (vertex-triangle or edge-edge), a vertex closer than
-//     thickness / 2 to a triangle, or a vertex in the pole, has its
-//     free vertices sent back to x0 with their momentum-weighted mean velocity (an inelastic
+//   fallback (impact_zones.h): a pair still crossing (vertex-triangle or edge-edge), a vertex
+//     closer than thickness / 2 to a triangle, or a vertex in the pole, has its free vertices
+//     sent back to x0 with their momentum-weighted mean velocity (an inelastic
 //     impact zone in the sense of Provot 1997 / Bridson et al. 2002, with zero motion over the
 //     step), with candidates recollected in the world frame, repeated until clean: x0 is clean,
 //     so this terminates.
@@ -56,6 +56,7 @@
 #include <vector>
 
 #include "collision/box_tree.h"
+#include "collision/impact_zones.h"
 #include "collision/params.h"
 #include "common/types.h"
 
@@ -144,6 +145,7 @@ class SelfCollision {
   MatX2i edges_;
   Index n_;
   SelfCollisionParams params_;
+  ImpactZones zones_;             // the fallback's frozen vertices
   BoxTree tri_tree_, edge_tree_;  // shaped on the first broad phase, refitted after
   Vec3 shift_ = Vec3::Zero();     // mean displacement over the step (broad-phase frame)
   MatX3 vlo_, vhi_;               // N x 3 swept vertex boxes in the shifted frame
@@ -172,7 +174,6 @@ class SelfCollision {
   std::vector<int> count_v_;       // per vertex: impulses in that sum
   std::vector<uint8_t> on_pole_;   // per vertex: resting on the pole in this sweep
   std::vector<uint8_t> moved_;     // per vertex: moved by the last sweep
-  std::vector<uint8_t> frozen_;    // per vertex
   VecX motion_;                    // per vertex: displacement less shift_ (measure_motion), m
   double motion_guard_ = 0;        // m, round-off guard of the bounds on motion_
   // The last sweep detected every candidate pair (the first of its broad phase) and found nothing
