@@ -10,14 +10,10 @@
 //       (the response aims at the full thickness; / 2 is the guaranteed floor),
 //   (3) with a pole, no vertex ends inside the pole.
 // Pipeline:
-//   broad phase: swept boxes of vertices and triangles over the step in a frame moving with the
-//     cloth's mean displacement (crossings are invariant under a common translation, so a 30 m/s
-//     gust does not stretch the boxes) -> box trees (box_tree.h) -> candidate pairs: (vertex,
-//     triangle), the vertex not in the triangle, and (edge, edge) sharing no vertex. The trees are
-//     queried wider than needed (a skin) into a pair list that later broad phases filter by the
-//     same box test for as long as no vertex box has left its box at the list's build by more than
-//     the skin (a Verlet list): the same candidates, in the same order, without the queries.
-//     Used only while it pays (see next_skin);
+//   broad phase (candidates.h): candidate pairs (vertex, triangle) and (edge, edge) from swept
+//     boxes over the step, through box trees or a Verlet list of them;
+//   narrow phase (contacts.h): vertex-triangle and edge-edge pairs, one type each with one
+//     interface (corners, crossing, proximity, distance), so what follows is written once;
 //   sweeps (<= params.iterations), each detecting on one state (in parallel), then answering in
 //     pair order:
 //     - a crossing of the trajectory x0 -> x (roots of the coplanarity cubic, Provot 1997,
@@ -55,7 +51,8 @@
 #include <functional>
 #include <vector>
 
-#include "collision/box_tree.h"
+#include "collision/candidates.h"
+#include "collision/contacts.h"
 #include "collision/impact_zones.h"
 #include "collision/params.h"
 #include "common/types.h"
@@ -94,42 +91,16 @@ class SelfCollision {
   const SelfCollisionStats& stats() const { return stats_; }
   const SelfCollisionParams& params() const { return params_; }
   /// (E x 2) the mesh's edges, each once, lower vertex index first.
-  const MatX2i& edges() const { return edges_; }
+  const MatX2i& edges() const { return candidates_.edges(); }
 
  private:
-  // A candidate: vertex a against triangle b, or (edge_pair) edge a against edge b (a < b).
-  struct Pair {
-    int32_t a, b;
-    bool edge_pair;
-  };
-  struct Contact {  // one pair's response in a sweep
-    // kDegenerate: a crossing or touch with no usable normal, left to the fallback.
-    enum Kind : uint8_t { kNone, kCrossing, kProximity, kDegenerate } kind;
-    // The constraint C = (sum_k g_k x_k) . n - thickness >= 0 on the pair's four points:
-    // vertex-triangle g = (1, -b_a, -b_b, -b_c), edge-edge g = (1 - s, s, -(1 - u), -u).
-    double g[4];
-    Vec3 n;    // unit direction, from the second point set to the first
-    double C;  // proximity: distance - thickness at detection, < 0
-  };
-  void corners(const Pair& pr, int32_t idx[4]) const;
-  void detect(const Pair& pr, const MatX3& x0, const MatX3& x, Contact& ct) const;
-  bool crossing(const Pair& pr, const MatX3& x0, const MatX3& x, double& t) const;
-  double separation(const Pair& pr, const MatX3& x0, const MatX3& x, double t) const;
-  double reach(const Pair& pr, const MatX3& x0, const MatX3& x) const;
-  double start_distance(const Pair& pr, const MatX3& x0) const;
-  void measure_motion(const MatX3& x0, const MatX3& x);
-  bool out_of_reach(Index k, const MatX3& x0, const MatX3& x, double need) const;
   void broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv_mass, bool shifted);
-  bool list_covers(const Vec3& centre) const;
-  double next_skin(const Vec3& centre);
-  bool query_trees(double wide, const VecX* inv_mass, std::vector<Pair>& out,
-                   size_t budget = SIZE_MAX);
-  void miss();
-  size_t list_budget() const;
-  void filter_list(const VecX& inv_mass);
+  void measure_motion(const MatX3& x0, const MatX3& x);
+  template <class K>
+  bool out_of_reach(const int32_t idx[4], Index k, const MatX3& x0, const MatX3& x,
+                    double need) const;
   bool find_violations(const MatX3& x0, const MatX3& x, const VecX& inv_mass,
                        const PoleParams* pole);
-  bool within_boxes(const MatX3& x) const;
   bool sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass, const PoleParams* pole,
              const Projector* constraints, bool first);
   void freeze_fallback(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
@@ -141,40 +112,20 @@ class SelfCollision {
   void accumulate_impulse(const int32_t idx[4], const Contact& c, const MatX3& v,
                           const VecX& inv_mass);
 
-  MatX3i tris_;
-  MatX2i edges_;
   Index n_;
   SelfCollisionParams params_;
-  ImpactZones zones_;             // the fallback's frozen vertices
-  BoxTree tri_tree_, edge_tree_;  // shaped on the first broad phase, refitted after
-  Vec3 shift_ = Vec3::Zero();     // mean displacement over the step (broad-phase frame)
-  MatX3 vlo_, vhi_;               // N x 3 swept vertex boxes in the shifted frame
-  MatX3 tlo_, thi_;               // T x 3 swept triangle boxes, grown by the margin
-  MatX3 elo_, ehi_;               // E x 3 swept edge boxes, grown by the margin
-  std::vector<std::vector<Pair>> thread_pairs_, thread_edge_pairs_;
-  std::vector<Pair> pairs_;  // vertex-triangle pairs by vertex, then edge-edge pairs by edge
-  // The pair list (a Verlet list): every pair whose boxes come within 2 skin_ of the query, from
-  // the vertex boxes ref_lo_/ref_hi_ (less their mean position) of the step that built it.
-  std::vector<Pair> list_;             // ordered as pairs_
-  MatX3 ref_lo_, ref_hi_;              // N x 3
-  double skin_ = 0;                    // m; 0: no list (direct queries)
-  double ref_scale_ = 0;               // m, largest coordinate of those boxes (round-off guard)
-  bool list_valid_ = false;            // false: the next broad phase builds the list
-  int served_ = 0;                     // broad phases the list has served
-  Index last_candidates_ = 0;          // candidates of the last broad phase
-  int direct_left_ = kDirectBuilds;    // queries still to make without a list
-  int direct_streak_ = kDirectBuilds;  // how many after the next miss (doubles per miss)
-  static constexpr double kSkinSteps = 6, kListRatio = 1.5;
-  static constexpr int kDirectBuilds = 8, kMaxDirectBuilds = 512;
-  std::vector<uint8_t> flag_;      // per pair: violation found by the parallel pass
-  std::vector<double> start_gap_;  // per pair: distance at x0, m
-  std::vector<Contact> contacts_;  // per pair, in a sweep
+  Candidates candidates_;
+  ImpactZones zones_;
+  // Per candidate pair (vertex-triangle pairs, then edge-edge pairs, as candidates_.pairs()):
+  std::vector<uint8_t> flag_;      // violation found by the parallel pass
+  std::vector<double> start_gap_;  // distance at x0, m
+  std::vector<Contact> contacts_;  // response in a sweep
   MatX3 x_sweep_;                  // N x 3 positions at the start of a sweep
   MatX3 dv_;                       // N x 3 summed velocity changes of a sweep
   std::vector<int> count_v_;       // per vertex: impulses in that sum
   std::vector<uint8_t> on_pole_;   // per vertex: resting on the pole in this sweep
   std::vector<uint8_t> moved_;     // per vertex: moved by the last sweep
-  VecX motion_;                    // per vertex: displacement less shift_ (measure_motion), m
+  VecX motion_;                    // per vertex: displacement less the shift (measure_motion), m
   double motion_guard_ = 0;        // m, round-off guard of the bounds on motion_
   // The last sweep detected every candidate pair (the first of its broad phase) and found nothing
   // to do: no contact, no degenerate one, no pole push. Every candidate is then at least the

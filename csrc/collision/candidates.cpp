@@ -1,0 +1,387 @@
+#include "collision/candidates.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
+
+namespace flagsim {
+
+namespace {
+
+// Box reach in thicknesses: triangle and edge boxes carry one; a vertex query adds two and an
+// edge query one (the other edge's box carries its own), so every pair is seen within three.
+constexpr double kBoxMargin = 1, kVertexQuery = 2, kEdgeQuery = 1;
+// The list's skin: this many times the step's largest vertex box (so it serves several steps)...
+constexpr double kSkinSteps = 6;
+// ...at most this many thicknesses (a sheet's list grows as the square of the query's reach).
+constexpr double kMaxSkin = 4;
+// A list longer than this many times its candidates at first use does not pay: a miss.
+constexpr double kListRatio = 1.5;
+// A list that has served and grew this many times its candidates (the motion calmed): rebuilt.
+constexpr double kStaleRatio = 4;
+// Pairs of slack on those ratios, so that tiny cloths do not miss on a handful of pairs.
+constexpr size_t kListSlack = 64;
+// Direct queries after a miss (and at the start), doubled per further miss up to the maximum.
+constexpr int kDirectBuilds = 8, kMaxDirectBuilds = 512;
+// Pairs per vertex (and per edge) the scratch is reserved for at construction.
+constexpr size_t kExpectedPerItem = 8;
+
+int max_threads() {
+#ifdef _OPENMP
+  return omp_get_max_threads();
+#else
+  return 1;
+#endif
+}
+
+int thread_id() {
+#ifdef _OPENMP
+  return omp_get_thread_num();
+#else
+  return 0;
+#endif
+}
+
+int team_size() {
+#ifdef _OPENMP
+  return omp_get_num_threads();
+#else
+  return 1;
+#endif
+}
+
+inline Vec3 row(const MatX3& m, Index i) { return m.row(i).transpose(); }
+
+// A pair with no free vertex (all four inverse masses 0) is never a candidate: nothing to move.
+inline bool none_free(const VecX& inv_mass, int32_t a, int32_t b, int32_t c, int32_t d) {
+  return inv_mass[a] == 0 && inv_mass[b] == 0 && inv_mass[c] == 0 && inv_mass[d] == 0;
+}
+
+// Each edge of the mesh once, (lower, higher) vertex index, sorted.
+MatX2i mesh_edges(const MatX3i& tris) {
+  std::vector<std::pair<int32_t, int32_t>> e;
+  e.reserve(3 * static_cast<size_t>(tris.rows()));
+  for (Index t = 0; t < tris.rows(); ++t)
+    for (int k = 0; k < 3; ++k) {
+      const int32_t a = tris(t, k), b = tris(t, (k + 1) % 3);
+      e.emplace_back(std::min(a, b), std::max(a, b));
+    }
+  std::sort(e.begin(), e.end());
+  e.erase(std::unique(e.begin(), e.end()), e.end());
+  MatX2i out(static_cast<Index>(e.size()), 2);
+  for (size_t i = 0; i < e.size(); ++i) out.row(static_cast<Index>(i)) << e[i].first, e[i].second;
+  return out;
+}
+
+// Concatenate per-thread buffers (in thread order) onto out.
+template <class T>
+void append(const std::vector<std::vector<T>>& buffers, std::vector<T>& out) {
+  for (const auto& b : buffers) out.insert(out.end(), b.begin(), b.end());
+}
+
+// Closed boxes [q0 - r, q1 + r] and [l, u] (3 doubles each) overlap: the trees' own test.
+inline bool boxes_meet(const double* q0, const double* q1, const double* l, const double* u,
+                       double r) {
+  return l[0] <= q1[0] + r && u[0] >= q0[0] - r && l[1] <= q1[1] + r && u[1] >= q0[1] - r &&
+         l[2] <= q1[2] + r && u[2] >= q0[2] - r;
+}
+
+}  // namespace
+
+Candidates::Candidates(const MatX3i& triangles, Index num_vertices, double thickness)
+    : tris_(triangles),
+      edges_(mesh_edges(triangles)),
+      n_(num_vertices),
+      thickness_(thickness),
+      vlo_(num_vertices, 3),
+      vhi_(num_vertices, 3),
+      tlo_(triangles.rows(), 3),
+      thi_(triangles.rows(), 3),
+      elo_(edges_.rows(), 3),
+      ehi_(edges_.rows(), 3),
+      ref_lo_(num_vertices, 3),
+      ref_hi_(num_vertices, 3),
+      direct_left_(kDirectBuilds),
+      direct_streak_(kDirectBuilds) {
+  const size_t threads = static_cast<size_t>(max_threads());
+  thread_pairs_.resize(threads);
+  thread_edge_pairs_.resize(threads);
+  const size_t expected = kExpectedPerItem * static_cast<size_t>(num_vertices) + kListSlack;
+  const size_t expected_edges = kExpectedPerItem * static_cast<size_t>(edges_.rows()) + kListSlack;
+  reserved_ = expected + expected_edges;
+  // Thread 0 collects every pair when the broad phase runs on one thread.
+  for (auto& buffer : thread_pairs_) buffer.reserve(expected);
+  for (auto& buffer : thread_edge_pairs_) buffer.reserve(expected_edges);
+  // A list that pays is at most kListRatio times the candidates.
+  for (CandidatePairs* p : {&pairs_, &list_}) {
+    p->vertex_triangle.reserve(expected);
+    p->edge_edge.reserve(expected_edges);
+  }
+}
+
+// Whether the list still holds every pair the trees could give now: each vertex box, less the
+// mean start position, within skin_ of its box when the list was built (a common translation
+// cannot bring two boxes together). Then a vertex box, and with it every triangle or edge box,
+// has grown by at most skin_ on each side, and the list was collected 2 skin_ wider.
+bool Candidates::list_covers(const Vec3& centre) const {
+  if (!list_valid_) return false;
+  const double s = skin_ - roundoff_guard(centre.cwiseAbs().maxCoeff() + ref_scale_);
+  for (Index i = 0; i < n_; ++i)
+    for (int d = 0; d < 3; ++d)
+      if (vlo_(i, d) - centre[d] < ref_lo_(i, d) - s || vhi_(i, d) - centre[d] > ref_hi_(i, d) + s)
+        return false;
+  return true;
+}
+
+// The skin of the next list, and the reference boxes it is measured from. The skin is
+// kSkinSteps times the step's largest relative motion (the largest vertex box), at least the
+// thickness and at most kMaxSkin times it.
+// A list pays only while it is about as short as its candidates and serves several broad
+// phases: that is a cloth whose close pairs are its mesh neighbours, thickness well below the
+// spacing, as in the paper's flag. One that came out longer than kListRatio times its
+// candidates, or served one broad phase only, missed: the next kDirectBuilds queries go straight
+// to the candidates, twice as many after each further miss up to kMaxDirectBuilds. The first
+// queries are direct too (a cloth let go moves fastest). Deterministic, and it decides only
+// which pairs get tested, never which are candidates.
+double Candidates::next_skin(const Vec3& centre) {
+  if (skin_ > 0) {
+    if (served_ <= 1)
+      miss();
+    else
+      direct_streak_ = kDirectBuilds;
+  }
+  served_ = 1;
+  if (direct_left_ > 0) {
+    --direct_left_;
+    skin_ = 0;
+    list_valid_ = false;
+    return skin_;
+  }
+  double motion = 0, size = 0;
+  for (Index i = 0; i < n_; ++i) {
+    motion = std::max(motion, (vhi_.row(i) - vlo_.row(i)).maxCoeff());
+    size = std::max(size,
+                    std::max(vlo_.row(i).cwiseAbs().maxCoeff(), vhi_.row(i).cwiseAbs().maxCoeff()));
+  }
+  const double h = thickness_;
+  skin_ = std::min(std::max(kSkinSteps * motion, h), kMaxSkin * h);
+  list_valid_ = true;
+  ref_scale_ = size;
+  ref_lo_ = vlo_.rowwise() - centre.transpose();
+  ref_hi_ = vhi_.rowwise() - centre.transpose();
+  return skin_;
+}
+
+void Candidates::miss() {
+  direct_left_ = direct_streak_;
+  direct_streak_ = std::min(2 * direct_streak_, kMaxDirectBuilds);
+}
+
+// A list longer than kListRatio times the last candidates does not pay (see next_skin).
+size_t Candidates::list_budget() const {
+  return static_cast<size_t>(kListRatio * double(last_candidates_)) + kListSlack;
+}
+
+// Box-tree queries (the trees refitted to the current boxes), every query `wide` wider, into out
+// (ordered as the header says). With inv_mass, pairs with no free vertex are left out. Returns
+// false, with out incomplete, as soon as out would hold more than `budget` pairs (each thread
+// stops at its share).
+bool Candidates::query_trees(double wide, const VecX* inv_mass, CandidatePairs& out,
+                             size_t budget) {
+  const double h = kEdgeQuery * thickness_, reach = kVertexQuery * thickness_;
+  // The trees take their shape from the first query's boxes and are refitted after that.
+  if (tri_tree_.built()) {
+    tri_tree_.refit(tlo_, thi_);
+    edge_tree_.refit(elo_, ehi_);
+  } else {
+    tri_tree_.build(tlo_, thi_);
+    edge_tree_.build(elo_, ehi_);
+  }
+  const size_t threads = static_cast<size_t>(max_threads());
+  if (thread_pairs_.size() < threads) {
+    thread_pairs_.resize(threads);
+    thread_edge_pairs_.resize(threads);
+  }
+  for (auto& buffer : thread_pairs_) buffer.clear();
+  for (auto& buffer : thread_edge_pairs_) buffer.clear();
+  auto by_b = [](const Pair& p, const Pair& q) { return p.b < q.b; };
+  auto collect_vertex = [&](Index i, std::vector<Pair>& buffer) {
+    const Vec3 qlo = vlo_.row(i).transpose().array() - (reach + wide);
+    const Vec3 qhi = vhi_.row(i).transpose().array() + (reach + wide);
+    const size_t begin = buffer.size();
+    const auto vi = static_cast<int32_t>(i);
+    tri_tree_.query(tlo_, thi_, qlo, qhi, [&](int32_t t) {
+      const int32_t a = tris_(t, 0), b = tris_(t, 1), c = tris_(t, 2);
+      if (a == vi || b == vi || c == vi) return;  // never against its own triangles
+      if (inv_mass && none_free(*inv_mass, vi, a, b, c)) return;
+      buffer.push_back({vi, t});
+    });
+    std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(), by_b);
+  };
+  auto collect_edge = [&](Index e, std::vector<Pair>& buffer) {
+    const Vec3 qlo = elo_.row(e).transpose().array() - (h + wide);
+    const Vec3 qhi = ehi_.row(e).transpose().array() + (h + wide);
+    const size_t begin = buffer.size();
+    const int32_t a = edges_(e, 0), b = edges_(e, 1);
+    edge_tree_.query(
+        elo_, ehi_, qlo, qhi,
+        [&](int32_t f) {  // f > e: each pair once
+          const int32_t c = edges_(f, 0), d = edges_(f, 1);
+          if (a == c || a == d || b == c || b == d) return;  // edges sharing a vertex never cross
+          if (inv_mass && none_free(*inv_mass, a, b, c, d)) return;
+          buffer.push_back({static_cast<int32_t>(e), f});
+        },
+        static_cast<int32_t>(e));
+    std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(), by_b);
+  };
+  const Index E = edges_.rows();
+  bool within = true;
+  if (use_team(n_ >= kParallelGrain)) {
+    std::atomic<bool> over{false};
+#pragma omp parallel
+    {
+      const size_t id = static_cast<size_t>(thread_id());
+      const size_t share = budget / static_cast<size_t>(team_size()) + 1;
+      std::vector<Pair>& pv = thread_pairs_[id];
+      std::vector<Pair>& pe = thread_edge_pairs_[id];
+      auto full = [&] {
+        if (pv.size() + pe.size() > share) over.store(true, std::memory_order_relaxed);
+        return over.load(std::memory_order_relaxed);
+      };
+      // Static schedule: thread k gets the k-th contiguous block, so concatenating the buffers
+      // in thread order lists pairs by vertex (edge) whatever the thread count.
+#pragma omp for schedule(static)
+      for (Index i = 0; i < n_; ++i)
+        if (!full()) collect_vertex(i, pv);
+#pragma omp for schedule(static)
+      for (Index e = 0; e < E; ++e)
+        if (!full()) collect_edge(e, pe);
+    }
+    within = !over.load();
+  } else {
+    std::vector<Pair>& pv = thread_pairs_[0];
+    std::vector<Pair>& pe = thread_edge_pairs_[0];
+    for (Index i = 0; i < n_ && within; ++i) {
+      collect_vertex(i, pv);
+      within = pv.size() <= budget;
+    }
+    for (Index e = 0; e < E && within; ++e) {
+      collect_edge(e, pe);
+      within = pv.size() + pe.size() <= budget;
+    }
+  }
+  out.clear();
+  append(thread_pairs_, out.vertex_triangle);
+  append(thread_edge_pairs_, out.edge_edge);
+  return within;
+}
+
+// pairs_ = the list's pairs the trees would give now: a free vertex, and boxes that overlap by the
+// trees' own test on the same numbers (so the same pairs, in the list's order, which is theirs).
+void Candidates::filter_list(const VecX& inv_mass) {
+  const double h = kEdgeQuery * thickness_, reach = kVertexQuery * thickness_;
+  auto keep_vertex = [&](const Pair& p) {
+    if (none_free(inv_mass, p.a, tris_(p.b, 0), tris_(p.b, 1), tris_(p.b, 2))) return false;
+    return boxes_meet(vlo_.data() + 3 * Index(p.a), vhi_.data() + 3 * Index(p.a),
+                      tlo_.data() + 3 * Index(p.b), thi_.data() + 3 * Index(p.b), reach);
+  };
+  auto keep_edge = [&](const Pair& p) {
+    if (none_free(inv_mass, edges_(p.a, 0), edges_(p.a, 1), edges_(p.b, 0), edges_(p.b, 1)))
+      return false;
+    return boxes_meet(elo_.data() + 3 * Index(p.a), ehi_.data() + 3 * Index(p.a),
+                      elo_.data() + 3 * Index(p.b), ehi_.data() + 3 * Index(p.b), h);
+  };
+  const std::vector<Pair>& lv = list_.vertex_triangle;
+  const std::vector<Pair>& le = list_.edge_edge;
+  const auto LV = static_cast<Index>(lv.size()), LE = static_cast<Index>(le.size());
+  pairs_.clear();
+  if (use_team(LV + LE >= kPairGrain)) {
+    for (auto& buffer : thread_pairs_) buffer.clear();
+    for (auto& buffer : thread_edge_pairs_) buffer.clear();
+#pragma omp parallel
+    {
+      const auto id = static_cast<size_t>(thread_id());
+      std::vector<Pair>& pv = thread_pairs_[id];
+      std::vector<Pair>& pe = thread_edge_pairs_[id];
+#pragma omp for schedule(static) nowait
+      for (Index k = 0; k < LV; ++k)
+        if (keep_vertex(lv[size_t(k)])) pv.push_back(lv[size_t(k)]);
+#pragma omp for schedule(static)
+      for (Index k = 0; k < LE; ++k)
+        if (keep_edge(le[size_t(k)])) pe.push_back(le[size_t(k)]);
+    }
+    // Static blocks in thread order: the list's order.
+    append(thread_pairs_, pairs_.vertex_triangle);
+    append(thread_edge_pairs_, pairs_.edge_edge);
+  } else {
+    for (const Pair& p : lv)
+      if (keep_vertex(p)) pairs_.vertex_triangle.push_back(p);
+    for (const Pair& p : le)
+      if (keep_edge(p)) pairs_.edge_edge.push_back(p);
+  }
+  // Too long to pay (see next_skin) at its first use; long later (it came from a fast
+  // transient and the motion has calmed): build it again.
+  const double ratio = served_ == 1 ? kListRatio : kStaleRatio;
+  if (double(list_.size()) > ratio * double(pairs_.size()) + kListSlack) list_valid_ = false;
+}
+
+void Candidates::collect(const MatX3& x0, const MatX3& x, const VecX& inv_mass, bool shifted) {
+  const double margin = kBoxMargin * thickness_;
+  shift_.setZero();
+  if (shifted) {
+    for (Index i = 0; i < n_; ++i) shift_ += row(x, i) - row(x0, i);
+    shift_ /= static_cast<double>(std::max<Index>(n_, 1));
+  }
+  Vec3 centre = Vec3::Zero();
+  for (Index i = 0; i < n_; ++i) {
+    const Vec3 a = row(x0, i), b = row(x, i) - shift_;
+    vlo_.row(i) = a.cwiseMin(b).transpose();
+    vhi_.row(i) = a.cwiseMax(b).transpose();
+    centre += a;
+  }
+  centre /= static_cast<double>(std::max<Index>(n_, 1));
+  const Index T = tris_.rows(), E = edges_.rows();
+  for (Index t = 0; t < T; ++t) {
+    const int32_t a = tris_(t, 0), b = tris_(t, 1), c = tris_(t, 2);
+    tlo_.row(t) = vlo_.row(a).cwiseMin(vlo_.row(b)).cwiseMin(vlo_.row(c)).array() - margin;
+    thi_.row(t) = vhi_.row(a).cwiseMax(vhi_.row(b)).cwiseMax(vhi_.row(c)).array() + margin;
+  }
+  for (Index e = 0; e < E; ++e) {
+    const int32_t a = edges_(e, 0), b = edges_(e, 1);
+    elo_.row(e) = vlo_.row(a).cwiseMin(vlo_.row(b)).array() - margin;
+    ehi_.row(e) = vhi_.row(a).cwiseMax(vhi_.row(b)).array() + margin;
+  }
+  // From the pair list while it covers the motion, else from the trees.
+  from_list_ = list_covers(centre);
+  if (from_list_) {
+    ++served_;
+    filter_list(inv_mass);
+  } else if (const double skin = next_skin(centre);
+             skin > 0 && query_trees(2 * skin, nullptr, list_, list_budget())) {
+    filter_list(inv_mass);
+  } else {
+    if (skin_ > 0) {  // the list outgrew its budget before it was complete: a miss
+      list_valid_ = false;
+      skin_ = 0;
+      miss();
+    }
+    query_trees(0, &inv_mass, pairs_);
+  }
+  last_candidates_ = static_cast<Index>(pairs_.size());
+}
+
+bool Candidates::within_boxes(const MatX3& x) const {
+  const double margin = kBoxMargin * thickness_;
+  for (Index i = 0; i < n_; ++i) {
+    const Vec3 p = row(x, i) - shift_;
+    if ((p.array() < vlo_.row(i).transpose().array() - margin).any() ||
+        (p.array() > vhi_.row(i).transpose().array() + margin).any())
+      return false;
+  }
+  return true;
+}
+
+}  // namespace flagsim
