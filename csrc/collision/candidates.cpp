@@ -82,6 +82,13 @@ void append(const std::vector<std::vector<T>>& buffers, std::vector<T>& out) {
   for (const auto& b : buffers) out.insert(out.end(), b.begin(), b.end());
 }
 
+// Sorts buffer[begin, end) by the pairs' second item (one first item's pairs: the tree's order
+// is not sorted).
+void sort_by_second(std::vector<Pair>& buffer, size_t begin) {
+  std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(),
+            [](const Pair& p, const Pair& q) { return p.b < q.b; });
+}
+
 // Closed boxes [q0 - r, q1 + r] and [l, u] (3 doubles each) overlap: the trees' own test.
 inline bool boxes_meet(const double* q0, const double* q1, const double* l, const double* u,
                        double r) {
@@ -185,13 +192,51 @@ size_t Candidates::list_budget() const {
   return static_cast<size_t>(kListRatio * double(last_candidates_)) + kListSlack;
 }
 
+// Appends to buffer the pairs of vertex i with the triangles whose boxes the tree finds within
+// the vertex query's reach, `wide` wider, sorted by triangle.
+void Candidates::collect_vertex(Index i, double wide, const VecX* inv_mass,
+                                std::vector<Pair>& buffer) const {
+  const double reach = kVertexQuery * thickness_;
+  const Vec3 qlo = vlo_.row(i).transpose().array() - (reach + wide);
+  const Vec3 qhi = vhi_.row(i).transpose().array() + (reach + wide);
+  const size_t begin = buffer.size();
+  const auto vi = static_cast<int32_t>(i);
+  tri_tree_.query(tlo_, thi_, qlo, qhi, [&](int32_t t) {
+    const int32_t a = tris_(t, 0), b = tris_(t, 1), c = tris_(t, 2);
+    if (a == vi || b == vi || c == vi) return;  // never against its own triangles
+    if (inv_mass && none_free(*inv_mass, vi, a, b, c)) return;
+    buffer.push_back({vi, t});
+  });
+  sort_by_second(buffer, begin);
+}
+
+// Appends to buffer the pairs of edge e with the edges above it whose boxes the tree finds within
+// the edge query's reach, `wide` wider, sorted by the second edge.
+void Candidates::collect_edge(Index e, double wide, const VecX* inv_mass,
+                              std::vector<Pair>& buffer) const {
+  const double h = kEdgeQuery * thickness_;
+  const Vec3 qlo = elo_.row(e).transpose().array() - (h + wide);
+  const Vec3 qhi = ehi_.row(e).transpose().array() + (h + wide);
+  const size_t begin = buffer.size();
+  const int32_t a = edges_(e, 0), b = edges_(e, 1);
+  edge_tree_.query(
+      elo_, ehi_, qlo, qhi,
+      [&](int32_t f) {  // f > e: each pair once
+        const int32_t c = edges_(f, 0), d = edges_(f, 1);
+        if (a == c || a == d || b == c || b == d) return;  // edges sharing a vertex never cross
+        if (inv_mass && none_free(*inv_mass, a, b, c, d)) return;
+        buffer.push_back({static_cast<int32_t>(e), f});
+      },
+      static_cast<int32_t>(e));
+  sort_by_second(buffer, begin);
+}
+
 // Box-tree queries (the trees refitted to the current boxes), every query `wide` wider, into out
 // (ordered as the header says). With inv_mass, pairs with no free vertex are left out. Returns
 // false, with out incomplete, as soon as out would hold more than `budget` pairs (each thread
 // stops at its share).
 bool Candidates::query_trees(double wide, const VecX* inv_mass, CandidatePairs& out,
                              size_t budget) {
-  const double h = kEdgeQuery * thickness_, reach = kVertexQuery * thickness_;
   // The trees take their shape from the first query's boxes and are refitted after that.
   if (tri_tree_.built()) {
     tri_tree_.refit(tlo_, thi_);
@@ -207,36 +252,6 @@ bool Candidates::query_trees(double wide, const VecX* inv_mass, CandidatePairs& 
   }
   for (auto& buffer : thread_pairs_) buffer.clear();
   for (auto& buffer : thread_edge_pairs_) buffer.clear();
-  auto by_b = [](const Pair& p, const Pair& q) { return p.b < q.b; };
-  auto collect_vertex = [&](Index i, std::vector<Pair>& buffer) {
-    const Vec3 qlo = vlo_.row(i).transpose().array() - (reach + wide);
-    const Vec3 qhi = vhi_.row(i).transpose().array() + (reach + wide);
-    const size_t begin = buffer.size();
-    const auto vi = static_cast<int32_t>(i);
-    tri_tree_.query(tlo_, thi_, qlo, qhi, [&](int32_t t) {
-      const int32_t a = tris_(t, 0), b = tris_(t, 1), c = tris_(t, 2);
-      if (a == vi || b == vi || c == vi) return;  // never against its own triangles
-      if (inv_mass && none_free(*inv_mass, vi, a, b, c)) return;
-      buffer.push_back({vi, t});
-    });
-    std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(), by_b);
-  };
-  auto collect_edge = [&](Index e, std::vector<Pair>& buffer) {
-    const Vec3 qlo = elo_.row(e).transpose().array() - (h + wide);
-    const Vec3 qhi = ehi_.row(e).transpose().array() + (h + wide);
-    const size_t begin = buffer.size();
-    const int32_t a = edges_(e, 0), b = edges_(e, 1);
-    edge_tree_.query(
-        elo_, ehi_, qlo, qhi,
-        [&](int32_t f) {  // f > e: each pair once
-          const int32_t c = edges_(f, 0), d = edges_(f, 1);
-          if (a == c || a == d || b == c || b == d) return;  // edges sharing a vertex never cross
-          if (inv_mass && none_free(*inv_mass, a, b, c, d)) return;
-          buffer.push_back({static_cast<int32_t>(e), f});
-        },
-        static_cast<int32_t>(e));
-    std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(), by_b);
-  };
   const Index E = edges_.rows();
   bool within = true;
   if (use_team(n_ >= kParallelGrain)) {
@@ -255,21 +270,21 @@ bool Candidates::query_trees(double wide, const VecX* inv_mass, CandidatePairs& 
       // in thread order lists pairs by vertex (edge) whatever the thread count.
 #pragma omp for schedule(static)
       for (Index i = 0; i < n_; ++i)
-        if (!full()) collect_vertex(i, pv);
+        if (!full()) collect_vertex(i, wide, inv_mass, pv);
 #pragma omp for schedule(static)
       for (Index e = 0; e < E; ++e)
-        if (!full()) collect_edge(e, pe);
+        if (!full()) collect_edge(e, wide, inv_mass, pe);
     }
     within = !over.load();
   } else {
     std::vector<Pair>& pv = thread_pairs_[0];
     std::vector<Pair>& pe = thread_edge_pairs_[0];
     for (Index i = 0; i < n_ && within; ++i) {
-      collect_vertex(i, pv);
+      collect_vertex(i, wide, inv_mass, pv);
       within = pv.size() <= budget;
     }
     for (Index e = 0; e < E && within; ++e) {
-      collect_edge(e, pe);
+      collect_edge(e, wide, inv_mass, pe);
       within = pv.size() + pe.size() <= budget;
     }
   }

@@ -83,6 +83,8 @@ class Candidates {
   double next_skin(const Vec3& centre);
   void miss();
   size_t list_budget() const;
+  void collect_vertex(Index i, double wide, const VecX* inv_mass, std::vector<Pair>& buffer) const;
+  void collect_edge(Index e, double wide, const VecX* inv_mass, std::vector<Pair>& buffer) const;
   bool query_trees(double wide, const VecX* inv_mass, CandidatePairs& out,
                    size_t budget = SIZE_MAX);
   void filter_list(const VecX& inv_mass);

@@ -163,23 +163,22 @@ void SelfCollision::accumulate_impulse(const int32_t idx[4], const Contact& c, c
   }
 }
 
-bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
-                          const PoleParams* pole, const Projector* constraints, bool first) {
+// on_pole_: the vertices within half the thickness of the pole's surface (the sweeps end on the
+// pole's projection, so these are the vertices it holds).
+void SelfCollision::mark_on_pole(const PoleParams& pole, const MatX3& x) {
+  const double h = params_.thickness;
+  PoleParams grown = pole;
+  grown.radius += 0.5 * h;
+  grown.height += h;
+  grown.base.y() -= 0.5 * h;
+  for (Index i = 0; i < n_; ++i) on_pole_[i] = inside_pole(grown, row(x, i));
+}
+
+// contacts_ for every pair, in parallel on one state; after the first sweep only pairs with a
+// vertex the last sweep moved can have changed.
+void SelfCollision::detect_contacts(const MatX3& x0, const MatX3& x, bool first) {
   const double h = params_.thickness;
   const CandidatePairs& pairs = candidates_.pairs();
-  bool changed = false;
-  x_sweep_ = x;  // to see, at the end, which vertices this sweep moved
-  if (pole) {
-    // On the pole: within half the thickness of its surface (the sweeps end on the pole's
-    // projection, so these are the vertices it holds).
-    PoleParams grown = *pole;
-    grown.radius += 0.5 * h;
-    grown.height += h;
-    grown.base.y() -= 0.5 * h;
-    for (Index i = 0; i < n_; ++i) on_pole_[i] = inside_pole(grown, row(x, i));
-  }
-  // Detection in parallel on one state; after the first sweep only pairs with a vertex the last
-  // sweep moved can have changed.
   const auto P = static_cast<Index>(pairs.size());
   measure_motion(x0, x);
   for_each_pair(pairs, P >= kPairGrain, [&](auto kind, const Pair& pr, Index k) {
@@ -194,26 +193,31 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
     gather(x, i, p1);
     K::detect(p0, p1, h, contacts_[k]);
   });
-  // Response, in pair order. A crossing moves the pair's four points back along their paths to
-  // the time they were still the thickness (or their starting distance) apart: an inelastic stop
-  // short of the hit, which only ever undoes motion, so it cannot push anything through a third
-  // layer (the freeze fallback is its limit, everything back at x0). A proximity is projected
-  // apart (Gauss-Seidel, C re-evaluated on the current positions along its detected normal and
-  // points). Velocities: Jacobi, every impulse from the sweep's starting velocities, averaged per
-  // vertex over the impulses that move it, so contacts sharing a vertex (a vertex over a shared
-  // edge, a triangle on two pinned bumps) neither add up nor bounce it.
+}
+
+// The responses to contacts_, in pair order. A crossing moves the pair's four points back along
+// their paths to the time they were still the thickness (or their starting distance) apart: an
+// inelastic stop short of the hit, which only ever undoes motion, so it cannot push anything
+// through a third layer (the freeze fallback is its limit, everything back at x0). A proximity is
+// projected apart (Gauss-Seidel, C re-evaluated on the current positions along its detected
+// normal and points). Velocities: Jacobi, every impulse from the sweep's starting velocities,
+// averaged per vertex over the impulses that move it, so contacts sharing a vertex (a vertex over
+// a shared edge, a triangle on two pinned bumps) neither add up nor bounce it.
+SelfCollision::Responses SelfCollision::respond(const MatX3& x0, MatX3& x, MatX3& v,
+                                                const VecX& inv_mass) {
+  const double h = params_.thickness;
+  Responses r;
   dv_.setZero();
   std::fill(count_v_.begin(), count_v_.end(), 0);
-  bool responded = false, degenerate = false;
-  for_each_pair(pairs, false, [&](auto kind, const Pair& pr, Index k) {
+  for_each_pair(candidates_.pairs(), false, [&](auto kind, const Pair& pr, Index k) {
     using K = decltype(kind);
     const Contact& ct = contacts_[k];
     if (ct.kind == Contact::kNone) return;
     if (ct.kind == Contact::kDegenerate) {
-      degenerate = true;
+      r.degenerate = true;
       return;
     }
-    responded = true;
+    r.any = true;
     int32_t idx[4];
     K::corners(candidates_, pr, idx);
     if (ct.kind == Contact::kCrossing) {
@@ -226,21 +230,32 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
       for (const int32_t i : idx)
         if (inv_mass[i] > 0) x.row(i) = x0.row(i) + back * (x.row(i) - x0.row(i));
       ++stats_.crossings;
-      changed = true;
+      r.changed = true;
     } else {
       Vec3 gap = Vec3::Zero();
       for (int j = 0; j < 4; ++j) gap += ct.g[j] * row(x, idx[j]);
       project(idx, ct, gap.dot(ct.n) - h, x, inv_mass);
       ++stats_.contacts;
-      changed = changed || ct.C < -1e-2 * h;
+      r.changed = r.changed || ct.C < -1e-2 * h;
     }
     accumulate_impulse(idx, ct, v, inv_mass);
   });
   for (Index i = 0; i < n_; ++i)
     if (count_v_[i]) v.row(i) += dv_.row(i) / count_v_[i];
+  return r;
+}
+
+bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
+                          const PoleParams* pole, const Projector* constraints, bool first) {
+  const double h = params_.thickness;
+  x_sweep_ = x;  // to see, at the end, which vertices this sweep moved
+  if (pole) mark_on_pole(*pole, x);
+  detect_contacts(x0, x, first);
+  const Responses r = respond(x0, x, v, inv_mass);
+  bool changed = r.changed;
   // The caller's constraints next, when the responses moved anything (contacts alone would hold
   // a stretched cloth stretched).
-  if (constraints && responded) (*constraints)(x, v);
+  if (constraints && r.any) (*constraints)(x, v);
   // The pole last: no sweep leaves a vertex inside it.
   Index pushed = 0;
   if (pole) {
@@ -249,7 +264,7 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
     stats_.pole += pushed;
     changed = changed || largest > 1e-2 * h;
   }
-  quiet_ = first && !responded && !degenerate && pushed == 0;
+  quiet_ = first && !r.any && !r.degenerate && pushed == 0;
   for (Index i = 0; i < n_; ++i) moved_[i] = x.row(i) != x_sweep_.row(i);
   return changed;
 }

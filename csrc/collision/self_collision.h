@@ -101,6 +101,14 @@ class SelfCollision {
                     double need) const;
   bool find_violations(const MatX3& x0, const MatX3& x, const VecX& inv_mass,
                        const PoleParams* pole);
+  // What a sweep's responses did: any response, a degenerate contact left to the fallback, a
+  // crossing stopped or a proximity deeper than 1% of the thickness (worth another sweep).
+  struct Responses {
+    bool any = false, degenerate = false, changed = false;
+  };
+  void mark_on_pole(const PoleParams& pole, const MatX3& x);
+  void detect_contacts(const MatX3& x0, const MatX3& x, bool first);
+  Responses respond(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass);
   bool sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass, const PoleParams* pole,
              const Projector* constraints, bool first);
   void freeze_fallback(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
