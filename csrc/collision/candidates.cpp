@@ -84,9 +84,9 @@ void append(const std::vector<std::vector<T>>& buffers, std::vector<T>& out) {
 
 // Sorts buffer[begin, end) by the pairs' second item (one first item's pairs: the tree's order
 // is not sorted).
-void sort_by_second(std::vector<Pair>& buffer, size_t begin) {
+void sort_by_second(std::vector<CandidatePair>& buffer, size_t begin) {
   std::sort(buffer.begin() + static_cast<std::ptrdiff_t>(begin), buffer.end(),
-            [](const Pair& p, const Pair& q) { return p.b < q.b; });
+            [](const CandidatePair& p, const CandidatePair& q) { return p.b < q.b; });
 }
 
 // Closed boxes [q0 - r, q1 + r] and [l, u] (3 doubles each) overlap: the trees' own test.
@@ -195,7 +195,7 @@ size_t Candidates::list_budget() const {
 // Appends to buffer the pairs of vertex i with the triangles whose boxes the tree finds within
 // the vertex query's reach, `wide` wider, sorted by triangle.
 void Candidates::collect_vertex(Index i, double wide, const VecX* inv_mass,
-                                std::vector<Pair>& buffer) const {
+                                std::vector<CandidatePair>& buffer) const {
   const double reach = kVertexQuery * thickness_;
   const Vec3 qlo = vlo_.row(i).transpose().array() - (reach + wide);
   const Vec3 qhi = vhi_.row(i).transpose().array() + (reach + wide);
@@ -213,7 +213,7 @@ void Candidates::collect_vertex(Index i, double wide, const VecX* inv_mass,
 // Appends to buffer the pairs of edge e with the edges above it whose boxes the tree finds within
 // the edge query's reach, `wide` wider, sorted by the second edge.
 void Candidates::collect_edge(Index e, double wide, const VecX* inv_mass,
-                              std::vector<Pair>& buffer) const {
+                              std::vector<CandidatePair>& buffer) const {
   const double h = kEdgeQuery * thickness_;
   const Vec3 qlo = elo_.row(e).transpose().array() - (h + wide);
   const Vec3 qhi = ehi_.row(e).transpose().array() + (h + wide);
@@ -260,8 +260,8 @@ bool Candidates::query_trees(double wide, const VecX* inv_mass, CandidatePairs& 
     {
       const size_t id = static_cast<size_t>(thread_id());
       const size_t share = budget / static_cast<size_t>(team_size()) + 1;
-      std::vector<Pair>& pv = thread_pairs_[id];
-      std::vector<Pair>& pe = thread_edge_pairs_[id];
+      std::vector<CandidatePair>& pv = thread_pairs_[id];
+      std::vector<CandidatePair>& pe = thread_edge_pairs_[id];
       auto full = [&] {
         if (pv.size() + pe.size() > share) over.store(true, std::memory_order_relaxed);
         return over.load(std::memory_order_relaxed);
@@ -277,8 +277,8 @@ bool Candidates::query_trees(double wide, const VecX* inv_mass, CandidatePairs& 
     }
     within = !over.load();
   } else {
-    std::vector<Pair>& pv = thread_pairs_[0];
-    std::vector<Pair>& pe = thread_edge_pairs_[0];
+    std::vector<CandidatePair>& pv = thread_pairs_[0];
+    std::vector<CandidatePair>& pe = thread_edge_pairs_[0];
     for (Index i = 0; i < n_ && within; ++i) {
       collect_vertex(i, wide, inv_mass, pv);
       within = pv.size() <= budget;
@@ -298,19 +298,19 @@ bool Candidates::query_trees(double wide, const VecX* inv_mass, CandidatePairs& 
 // trees' own test on the same numbers (so the same pairs, in the list's order, which is theirs).
 void Candidates::filter_list(const VecX& inv_mass) {
   const double h = kEdgeQuery * thickness_, reach = kVertexQuery * thickness_;
-  auto keep_vertex = [&](const Pair& p) {
+  auto keep_vertex = [&](const CandidatePair& p) {
     if (none_free(inv_mass, p.a, tris_(p.b, 0), tris_(p.b, 1), tris_(p.b, 2))) return false;
     return boxes_meet(vlo_.data() + 3 * Index(p.a), vhi_.data() + 3 * Index(p.a),
                       tlo_.data() + 3 * Index(p.b), thi_.data() + 3 * Index(p.b), reach);
   };
-  auto keep_edge = [&](const Pair& p) {
+  auto keep_edge = [&](const CandidatePair& p) {
     if (none_free(inv_mass, edges_(p.a, 0), edges_(p.a, 1), edges_(p.b, 0), edges_(p.b, 1)))
       return false;
     return boxes_meet(elo_.data() + 3 * Index(p.a), ehi_.data() + 3 * Index(p.a),
                       elo_.data() + 3 * Index(p.b), ehi_.data() + 3 * Index(p.b), h);
   };
-  const std::vector<Pair>& lv = list_.vertex_triangle;
-  const std::vector<Pair>& le = list_.edge_edge;
+  const std::vector<CandidatePair>& lv = list_.vertex_triangle;
+  const std::vector<CandidatePair>& le = list_.edge_edge;
   const auto LV = static_cast<Index>(lv.size()), LE = static_cast<Index>(le.size());
   pairs_.clear();
   if (use_team(LV + LE >= kPairGrain)) {
@@ -319,8 +319,8 @@ void Candidates::filter_list(const VecX& inv_mass) {
 #pragma omp parallel
     {
       const auto id = static_cast<size_t>(thread_id());
-      std::vector<Pair>& pv = thread_pairs_[id];
-      std::vector<Pair>& pe = thread_edge_pairs_[id];
+      std::vector<CandidatePair>& pv = thread_pairs_[id];
+      std::vector<CandidatePair>& pe = thread_edge_pairs_[id];
 #pragma omp for schedule(static) nowait
       for (Index k = 0; k < LV; ++k)
         if (keep_vertex(lv[size_t(k)])) pv.push_back(lv[size_t(k)]);
@@ -332,9 +332,9 @@ void Candidates::filter_list(const VecX& inv_mass) {
     append(thread_pairs_, pairs_.vertex_triangle);
     append(thread_edge_pairs_, pairs_.edge_edge);
   } else {
-    for (const Pair& p : lv)
+    for (const CandidatePair& p : lv)
       if (keep_vertex(p)) pairs_.vertex_triangle.push_back(p);
-    for (const Pair& p : le)
+    for (const CandidatePair& p : le)
       if (keep_edge(p)) pairs_.edge_edge.push_back(p);
   }
   // Too long to pay (see next_skin) at its first use; long later (it came from a fast

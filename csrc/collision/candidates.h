@@ -36,13 +36,13 @@ inline double roundoff_guard(double size) { return 1e-12 * (1 + size); }
 
 /// A candidate: (vertex a, triangle b) in CandidatePairs::vertex_triangle, (edge a, edge b),
 /// a < b, in CandidatePairs::edge_edge (edges as Candidates::edges() numbers them).
-struct Pair {
+struct CandidatePair {
   int32_t a, b;
 };
 
 struct CandidatePairs {
-  std::vector<Pair> vertex_triangle;  ///< by vertex, then by triangle
-  std::vector<Pair> edge_edge;        ///< by first edge, then by second
+  std::vector<CandidatePair> vertex_triangle;  ///< by vertex, then by triangle
+  std::vector<CandidatePair> edge_edge;        ///< by first edge, then by second
   size_t size() const { return vertex_triangle.size() + edge_edge.size(); }
   void clear() {
     vertex_triangle.clear();
@@ -83,8 +83,10 @@ class Candidates {
   double next_skin(const Vec3& centre);
   void miss();
   size_t list_budget() const;
-  void collect_vertex(Index i, double wide, const VecX* inv_mass, std::vector<Pair>& buffer) const;
-  void collect_edge(Index e, double wide, const VecX* inv_mass, std::vector<Pair>& buffer) const;
+  void collect_vertex(Index i, double wide, const VecX* inv_mass,
+                      std::vector<CandidatePair>& buffer) const;
+  void collect_edge(Index e, double wide, const VecX* inv_mass,
+                    std::vector<CandidatePair>& buffer) const;
   bool query_trees(double wide, const VecX* inv_mass, CandidatePairs& out,
                    size_t budget = SIZE_MAX);
   void filter_list(const VecX& inv_mass);
@@ -99,7 +101,7 @@ class Candidates {
   MatX3 vlo_, vhi_;               // N x 3 swept vertex boxes in the shifted frame
   MatX3 tlo_, thi_;               // T x 3 swept triangle boxes, grown by the thickness
   MatX3 elo_, ehi_;               // E x 3 swept edge boxes, grown by the thickness
-  std::vector<std::vector<Pair>> thread_pairs_, thread_edge_pairs_;
+  std::vector<std::vector<CandidatePair>> thread_pairs_, thread_edge_pairs_;
   CandidatePairs pairs_;
   // The pair list (a Verlet list): every pair whose boxes come within 2 skin_ of the query, from
   // the vertex boxes ref_lo_/ref_hi_ (less their mean position) of the step that built it.

@@ -2,14 +2,7 @@
 
 namespace flagsim {
 
-double VertexTriangleContact::distance(const Points& x) {
-  const Vec3 &p = x[0], &a = x[1], &b = x[2], &c = x[3];
-  bool interior;
-  const Vec3 w = closest_point_barycentric(p, a, b, c, interior);
-  return (p - (w[0] * a + w[1] * b + w[2] * c)).norm();
-}
-
-bool VertexTriangleContact::closer_than(const Points& x, double gap) {
+bool VertexTriangleContact::closer_than(const PairPoints& x, double gap) {
   const Vec3 &p = x[0], &a = x[1], &b = x[2], &c = x[3];
   if (beyond_reach(p, a, b, c, gap)) return false;
   bool interior;
@@ -17,7 +10,7 @@ bool VertexTriangleContact::closer_than(const Points& x, double gap) {
   return (p - (bary[0] * a + bary[1] * b + bary[2] * c)).norm() < gap;
 }
 
-void VertexTriangleContact::detect(const Points& x0, const Points& x1, double thickness,
+void VertexTriangleContact::detect(const PairPoints& x0, const PairPoints& x1, double thickness,
                                    Contact& ct) {
   const double h = thickness;
   const Vec3 &p0 = x0[0], &a0 = x0[1], &b0 = x0[2], &c0 = x0[3];
@@ -61,13 +54,8 @@ void VertexTriangleContact::detect(const Points& x0, const Points& x1, double th
   ct.kind = Contact::kProximity;
 }
 
-double EdgeEdgeContact::distance(const Points& x) {
-  const Vec3 &p = x[0], &a = x[1], &b = x[2], &c = x[3];
-  const Vec2 su = closest_segment_parameters(p, a, b, c);
-  return ((p + su[0] * (a - p)) - (b + su[1] * (c - b))).norm();
-}
-
-void EdgeEdgeContact::detect(const Points& x0, const Points& x1, double thickness, Contact& ct) {
+void EdgeEdgeContact::detect(const PairPoints& x0, const PairPoints& x1, double thickness,
+                             Contact& ct) {
   const double h = thickness;
   // Edges p0a0 -> p1a1 (points 0, 1) and b0c0 -> b1c1 (points 2, 3).
   const Vec3 &p0 = x0[0], &a0 = x0[1], &b0 = x0[2], &c0 = x0[3];

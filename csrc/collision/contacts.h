@@ -30,11 +30,11 @@ struct Contact {
   double C;  // proximity: distance - thickness at detection, < 0
 };
 
-using Points = Vec3[4];
+using PairPoints = Vec3[4];
 
 struct VertexTriangleContact {
   /// The pair's vertices (p, a, b, c) for pr = (vertex, triangle) of the candidates' mesh.
-  static void corners(const Candidates& mesh, const Pair& pr, int32_t idx[4]) {
+  static void corners(const Candidates& mesh, const CandidatePair& pr, int32_t idx[4]) {
     const MatX3i& tris = mesh.triangles();
     idx[0] = pr.a, idx[1] = tris(pr.b, 0), idx[2] = tris(pr.b, 1), idx[3] = tris(pr.b, 2);
   }
@@ -46,34 +46,39 @@ struct VertexTriangleContact {
   /// How far the two sides can have approached over the step, from the points' displacements d
   /// (m): the largest displacement of the vertex relative to a point of the triangle (convex
   /// combinations of the corners, so the largest over the corners).
-  static double reach(const Points& d) {
+  static double reach(const PairPoints& d) {
     double r2 = 0;
     for (int b = 1; b < 4; ++b) r2 = std::max(r2, (d[0] - d[b]).squaredNorm());
     return std::sqrt(r2);
   }
   /// The distance (m) between the vertex and the triangle.
-  static double distance(const Points& x);
+  static double distance(const PairPoints& x) {
+    const Vec3 &p = x[0], &a = x[1], &b = x[2], &c = x[3];
+    bool interior;
+    const Vec3 w = closest_point_barycentric(p, a, b, c, interior);
+    return (p - (w[0] * a + w[1] * b + w[2] * c)).norm();
+  }
   /// The earliest crossing of the vertex through the triangle, at t in [0, 1].
-  static bool crossing(const Points& x0, const Points& x1, double& t) {
+  static bool crossing(const PairPoints& x0, const PairPoints& x1, double& t) {
     Vec3 bary;
     return vertex_triangle_ccd(x0[0], x0[1], x0[2], x0[3], x1[0], x1[1], x1[2], x1[3], t, bary);
   }
   /// For a crossing at t: the time to stop at, `gap` short of it (separation_time).
-  static double separation(const Points& x0, const Points& x1, double t, double gap) {
+  static double separation(const PairPoints& x0, const PairPoints& x1, double t, double gap) {
     return separation_time(x0[0], x0[1], x0[2], x0[3], x1[0], x1[1], x1[2], x1[3], t, gap);
   }
   /// A crossing of the step's trajectory, with the hit's points (g) and the triangle's normal at
   /// the hit time towards the side the vertex started on (Bridson et al. 2002 §7.3, for the
   /// impulse); otherwise a proximity at x1 closer than the thickness, along the closest-points
   /// direction (the triangle's normal when the vertex lies on it); else kNone.
-  static void detect(const Points& x0, const Points& x1, double thickness, Contact& ct);
+  static void detect(const PairPoints& x0, const PairPoints& x1, double thickness, Contact& ct);
   /// Whether the vertex is closer than gap to the triangle (the fallback's floor).
-  static bool closer_than(const Points& x, double gap);
+  static bool closer_than(const PairPoints& x, double gap);
 };
 
 struct EdgeEdgeContact {
   /// The pair's vertices (p, a, b, c) for pr = (edge pa, edge bc) of the candidates' mesh.
-  static void corners(const Candidates& mesh, const Pair& pr, int32_t idx[4]) {
+  static void corners(const Candidates& mesh, const CandidatePair& pr, int32_t idx[4]) {
     const MatX2i& edges = mesh.edges();
     idx[0] = edges(pr.a, 0), idx[1] = edges(pr.a, 1);
     idx[2] = edges(pr.b, 0), idx[3] = edges(pr.b, 1);
@@ -84,29 +89,33 @@ struct EdgeEdgeContact {
   }
   /// As VertexTriangleContact::reach: the largest displacement of a point of the first edge
   /// relative to a point of the second (the largest over the corner pairs).
-  static double reach(const Points& d) {
+  static double reach(const PairPoints& d) {
     double r2 = 0;
     for (int a = 0; a < 2; ++a)
       for (int b = 2; b < 4; ++b) r2 = std::max(r2, (d[a] - d[b]).squaredNorm());
     return std::sqrt(r2);
   }
   /// The distance (m) between the two segments.
-  static double distance(const Points& x);
+  static double distance(const PairPoints& x) {
+    const Vec3 &p = x[0], &a = x[1], &b = x[2], &c = x[3];
+    const Vec2 su = closest_segment_parameters(p, a, b, c);
+    return ((p + su[0] * (a - p)) - (b + su[1] * (c - b))).norm();
+  }
   /// The earliest crossing of the two edges, at t in [0, 1].
-  static bool crossing(const Points& x0, const Points& x1, double& t) {
+  static bool crossing(const PairPoints& x0, const PairPoints& x1, double& t) {
     Vec2 su;
     return edge_edge_ccd(x0[0], x0[1], x0[2], x0[3], x1[0], x1[1], x1[2], x1[3], t, su);
   }
   /// For a crossing at t: the time to stop at, `gap` short of it (edge_separation_time).
-  static double separation(const Points& x0, const Points& x1, double t, double gap) {
+  static double separation(const PairPoints& x0, const PairPoints& x1, double t, double gap) {
     return edge_separation_time(x0[0], x0[1], x0[2], x0[3], x1[0], x1[1], x1[2], x1[3], t, gap);
   }
   /// A crossing, with the edges' points at the hit (g) and the normal of the two edges at the hit
   /// time towards the side they started on; otherwise a proximity at x1 closer than the
   /// thickness, along the closest-points direction; else kNone.
-  static void detect(const Points& x0, const Points& x1, double thickness, Contact& ct);
+  static void detect(const PairPoints& x0, const PairPoints& x1, double thickness, Contact& ct);
   /// Edges never trigger the fallback by proximity alone (only by crossing): false.
-  static bool closer_than(const Points&, double) { return false; }
+  static bool closer_than(const PairPoints&, double) { return false; }
 };
 
 }  // namespace flagsim

@@ -12,7 +12,7 @@ namespace {
 inline Vec3 row(const MatX3& m, Index i) { return m.row(i).transpose(); }
 
 // The pair's four points in x.
-inline void gather(const MatX3& x, const int32_t idx[4], Points& p) {
+inline void gather(const MatX3& x, const int32_t idx[4], PairPoints& p) {
   for (int k = 0; k < 4; ++k) p[k] = row(x, idx[k]);
 }
 
@@ -21,8 +21,8 @@ inline void gather(const MatX3& x, const int32_t idx[4], Points& p) {
 // use_team(parallel), else in order on the calling thread.
 template <class Body>
 void for_each_pair(const CandidatePairs& pairs, bool parallel, const Body& body) {
-  const std::vector<Pair>& vt = pairs.vertex_triangle;
-  const std::vector<Pair>& ee = pairs.edge_edge;
+  const std::vector<CandidatePair>& vt = pairs.vertex_triangle;
+  const std::vector<CandidatePair>& ee = pairs.edge_edge;
   const auto V = static_cast<Index>(vt.size());
   parallel_for_if(parallel, static_cast<Index>(pairs.size()), [&](Index k) {
     if (k < V)
@@ -66,11 +66,11 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
   stats_.candidates = P;
   // Each pair's distance at the start of the step: with it, a pair whose points cannot have
   // closed that gap (see out_of_reach) needs no test at all.
-  for_each_pair(pairs, P >= kPairGrain, [&](auto kind, const Pair& pr, Index k) {
+  for_each_pair(pairs, P >= kPairGrain, [&](auto kind, const CandidatePair& pr, Index k) {
     using K = decltype(kind);
     int32_t i[4];
     K::corners(candidates_, pr, i);
-    Points p;
+    PairPoints p;
     gather(x0, i, p);
     start_gap_[k] = K::distance(p);
   });
@@ -100,7 +100,7 @@ bool SelfCollision::out_of_reach(const int32_t idx[4], Index k, const MatX3& x0,
                                  double need) const {
   const double bound = K::motion_bound(motion_.data(), idx) + motion_guard_;
   if (start_gap_[k] - bound >= need) return true;
-  Points d;
+  PairPoints d;
   for (int j = 0; j < 4; ++j) d[j] = row(x, idx[j]) - row(x0, idx[j]);
   return start_gap_[k] - K::reach(d) >= need;
 }
@@ -181,14 +181,14 @@ void SelfCollision::detect_contacts(const MatX3& x0, const MatX3& x, bool first)
   const CandidatePairs& pairs = candidates_.pairs();
   const auto P = static_cast<Index>(pairs.size());
   measure_motion(x0, x);
-  for_each_pair(pairs, P >= kPairGrain, [&](auto kind, const Pair& pr, Index k) {
+  for_each_pair(pairs, P >= kPairGrain, [&](auto kind, const CandidatePair& pr, Index k) {
     using K = decltype(kind);
     contacts_[k].kind = Contact::kNone;
     int32_t i[4];
     K::corners(candidates_, pr, i);
     if (!first && !moved_[i[0]] && !moved_[i[1]] && !moved_[i[2]] && !moved_[i[3]]) return;
     if (out_of_reach<K>(i, k, x0, x, h)) return;  // never within the thickness
-    Points p0, p1;
+    PairPoints p0, p1;
     gather(x0, i, p0);
     gather(x, i, p1);
     K::detect(p0, p1, h, contacts_[k]);
@@ -209,7 +209,7 @@ SelfCollision::Responses SelfCollision::respond(const MatX3& x0, MatX3& x, MatX3
   Responses r;
   dv_.setZero();
   std::fill(count_v_.begin(), count_v_.end(), 0);
-  for_each_pair(candidates_.pairs(), false, [&](auto kind, const Pair& pr, Index k) {
+  for_each_pair(candidates_.pairs(), false, [&](auto kind, const CandidatePair& pr, Index k) {
     using K = decltype(kind);
     const Contact& ct = contacts_[k];
     if (ct.kind == Contact::kNone) return;
@@ -221,7 +221,7 @@ SelfCollision::Responses SelfCollision::respond(const MatX3& x0, MatX3& x, MatX3
     int32_t idx[4];
     K::corners(candidates_, pr, idx);
     if (ct.kind == Contact::kCrossing) {
-      Points p0, p1;
+      PairPoints p0, p1;
       gather(x0, idx, p0);
       gather(x, idx, p1);
       double t;
@@ -281,7 +281,7 @@ bool SelfCollision::find_violations(const MatX3& x0, const MatX3& x, const VecX&
     std::fill(flag_.begin(), flag_.end(), uint8_t{0});
   } else {
     measure_motion(x0, x);
-    for_each_pair(pairs, P >= kPairGrain, [&](auto kind, const Pair& pr, Index k) {
+    for_each_pair(pairs, P >= kPairGrain, [&](auto kind, const CandidatePair& pr, Index k) {
       using K = decltype(kind);
       int32_t i[4];
       K::corners(candidates_, pr, i);
@@ -289,7 +289,7 @@ bool SelfCollision::find_violations(const MatX3& x0, const MatX3& x, const VecX&
       auto still = [&](int j) { return zones_.still(i[j], inv_mass); };
       if (still(0) && still(1) && still(2) && still(3)) return;  // nothing to undo
       if (out_of_reach<K>(i, k, x0, x, floor)) return;           // cannot have crossed or closed in
-      Points p0, p1;
+      PairPoints p0, p1;
       gather(x0, i, p0);
       gather(x, i, p1);
       double t;
@@ -308,7 +308,7 @@ void SelfCollision::freeze_fallback(const MatX3& x0, MatX3& x, MatX3& v, const V
   // state the loop can reach lies within these boxes.
   broad_phase(x0, x, inv_mass, /*shifted=*/false);
   for (Index round = 0; round <= n_ && find_violations(x0, x, inv_mass, pole); ++round) {
-    for_each_pair(candidates_.pairs(), false, [&](auto kind, const Pair& pr, Index k) {
+    for_each_pair(candidates_.pairs(), false, [&](auto kind, const CandidatePair& pr, Index k) {
       using K = decltype(kind);
       if (!flag_[k]) return;
       int32_t group[4];

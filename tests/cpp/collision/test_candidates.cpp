@@ -16,9 +16,9 @@ using test_support::make_grid;
 
 using PairList = std::vector<std::pair<int32_t, int32_t>>;
 
-PairList as_list(const std::vector<Pair>& pairs) {
+PairList as_list(const std::vector<CandidatePair>& pairs) {
   PairList out;
-  for (const Pair& p : pairs) out.emplace_back(p.a, p.b);
+  for (const CandidatePair& p : pairs) out.emplace_back(p.a, p.b);
   return out;
 }
 
@@ -54,10 +54,10 @@ TEST(Candidates, NeverPairsAVertexWithItsOwnTriangleNorEdgesSharingAVertex) {
   c.collect(s.at(0), s.at(1), s.w, /*shifted=*/true);
   ASSERT_GT(c.pairs().vertex_triangle.size(), 0u);
   ASSERT_GT(c.pairs().edge_edge.size(), 0u);
-  for (const Pair& p : c.pairs().vertex_triangle)
+  for (const CandidatePair& p : c.pairs().vertex_triangle)
     for (int k = 0; k < 3; ++k) EXPECT_NE(s.tris(p.b, k), p.a);
   const MatX2i& e = c.edges();
-  for (const Pair& p : c.pairs().edge_edge) {
+  for (const CandidatePair& p : c.pairs().edge_edge) {
     EXPECT_LT(p.a, p.b);
     const std::set<int32_t> four{e(p.a, 0), e(p.a, 1), e(p.b, 0), e(p.b, 1)};
     EXPECT_EQ(four.size(), 4u);

@@ -9,7 +9,7 @@ namespace {
 
 constexpr double kH = 0.005;  // thickness, m
 
-void set(Points& p, const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d) {
+void set(PairPoints& p, const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d) {
   p[0] = a, p[1] = b, p[2] = c, p[3] = d;
 }
 
@@ -23,7 +23,7 @@ void expect_g(const Contact& ct, double g0, double g1, double g2, double g3) {
 // Triangle (0,0,0), (1,0,0), (0,1,0) in z = 0; the vertex 3 mm above its point (0.2, 0.3):
 // barycentric (0.5, 0.2, 0.3).
 TEST(VertexTriangleContact, ProximityOverTheFaceHasTheFaceNormalAndBarycentricPoint) {
-  Points x;
+  PairPoints x;
   set(x, Vec3(0.2, 0.3, 0.003), Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0));
   Contact ct;
   VertexTriangleContact::detect(x, x, kH, ct);
@@ -39,7 +39,7 @@ TEST(VertexTriangleContact, ProximityOverTheFaceHasTheFaceNormalAndBarycentricPo
 // The vertex 3 mm beside edge ca, level with its midpoint (0, 0.5, 0): the closest point is on
 // the edge, the direction along -x.
 TEST(VertexTriangleContact, ProximityBesideAnEdgeUsesTheEdgePoint) {
-  Points x;
+  PairPoints x;
   set(x, Vec3(-0.003, 0.5, 0), Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0));
   Contact ct;
   VertexTriangleContact::detect(x, x, kH, ct);
@@ -52,7 +52,7 @@ TEST(VertexTriangleContact, ProximityBesideAnEdgeUsesTheEdgePoint) {
 // The vertex falls from 10 cm above (0.2, 0.3) to 10 cm below: it crosses at t = 0.5, and is
 // the thickness above the face at t = 0.475.
 TEST(VertexTriangleContact, CrossingAtTheKnownTimeAndPoint) {
-  Points x0, x1;
+  PairPoints x0, x1;
   set(x0, Vec3(0.2, 0.3, 0.1), Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0));
   set(x1, x0[0], x0[1], x0[2], x0[3]);
   x1[0].z() = -0.1;
@@ -68,7 +68,7 @@ TEST(VertexTriangleContact, CrossingAtTheKnownTimeAndPoint) {
 }
 
 TEST(VertexTriangleContact, NothingBeyondTheThickness) {
-  Points x;
+  PairPoints x;
   set(x, Vec3(0.2, 0.3, 0.006), Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0));
   Contact ct;
   VertexTriangleContact::detect(x, x, kH, ct);
@@ -81,7 +81,7 @@ TEST(VertexTriangleContact, NothingBeyondTheThickness) {
 // Edge (0,0,3 mm) - (1,0,3 mm) along x over edge (0.5,-0.5,0) - (0.5,0.5,0) along y: closest at
 // the middle of both (s = u = 0.5), 3 mm apart along +z.
 TEST(EdgeEdgeContact, ProximityOfCrossedEdgesAtTheirMidpoints) {
-  Points x;
+  PairPoints x;
   set(x, Vec3(0, 0, 0.003), Vec3(1, 0, 0.003), Vec3(0.5, -0.5, 0), Vec3(0.5, 0.5, 0));
   Contact ct;
   EdgeEdgeContact::detect(x, x, kH, ct);
@@ -96,7 +96,7 @@ TEST(EdgeEdgeContact, ProximityOfCrossedEdgesAtTheirMidpoints) {
 
 // The upper edge at the quarter point of the lower: (s, u) = (0.25, 0.75) after moving it.
 TEST(EdgeEdgeContact, CrossingAtTheKnownTimeAndPoints) {
-  Points x0, x1;
+  PairPoints x0, x1;
   set(x0, Vec3(0.5, 0.25, 0.1), Vec3(0.5, 1.25, 0.1), Vec3(0, 0.5, 0), Vec3(1, 0.5, 0));
   set(x1, x0[0], x0[1], x0[2], x0[3]);
   x1[0].z() = x1[1].z() = -0.1;
@@ -113,7 +113,7 @@ TEST(EdgeEdgeContact, CrossingAtTheKnownTimeAndPoints) {
 }
 
 TEST(EdgeEdgeContact, NothingBeyondTheThickness) {
-  Points x;
+  PairPoints x;
   set(x, Vec3(0, 0, 0.006), Vec3(1, 0, 0.006), Vec3(0.5, -0.5, 0), Vec3(0.5, 0.5, 0));
   Contact ct;
   EdgeEdgeContact::detect(x, x, kH, ct);
@@ -123,7 +123,7 @@ TEST(EdgeEdgeContact, NothingBeyondTheThickness) {
 // reach: the largest relative displacement between the two sides; motion_bound bounds it from
 // the vertices' own displacements.
 TEST(Contacts, ReachIsTheLargestRelativeDisplacementAndMotionBoundsIt) {
-  Points d;
+  PairPoints d;
   set(d, Vec3(1, 0, 0), Vec3(0, 0, 0), Vec3(-1, 0, 0), Vec3(0, 2, 0));
   const int32_t idx[4] = {0, 1, 2, 3};
   const double m[4] = {d[0].norm(), d[1].norm(), d[2].norm(), d[3].norm()};
@@ -141,12 +141,12 @@ TEST(Contacts, CornersOfAVertexTrianglePairAndAnEdgePair) {
   tris << 0, 1, 2, 2, 1, 3;
   const Candidates mesh(tris, 4, kH);  // edges (0,1) (0,2) (1,2) (1,3) (2,3)
   int32_t idx[4];
-  VertexTriangleContact::corners(mesh, Pair{3, 0}, idx);
+  VertexTriangleContact::corners(mesh, CandidatePair{3, 0}, idx);
   EXPECT_EQ(idx[0], 3);
   EXPECT_EQ(idx[1], 0);
   EXPECT_EQ(idx[2], 1);
   EXPECT_EQ(idx[3], 2);
-  EdgeEdgeContact::corners(mesh, Pair{1, 3}, idx);
+  EdgeEdgeContact::corners(mesh, CandidatePair{1, 3}, idx);
   EXPECT_EQ(idx[0], 0);
   EXPECT_EQ(idx[1], 2);
   EXPECT_EQ(idx[2], 1);
