@@ -4,6 +4,7 @@
 
 #include "collision/pole.h"
 #include "common/parallel.h"
+#include "common/simd.h"
 
 namespace flagsim {
 
@@ -16,20 +17,31 @@ inline void gather(const MatX3& x, const int32_t idx[4], PairPoints& p) {
   for (int k = 0; k < 4; ++k) p[k] = row(x, idx[k]);
 }
 
-// body(K{}, pair, k) for every candidate pair k in order (vertex-triangle pairs, then edge-edge
-// pairs), K its contact type: split over the OpenMP team in static blocks when
-// use_team(parallel), else in order on the calling thread.
+// body(K{}, pair, k) for every candidate pair k (vertex-triangle pairs, then edge-edge pairs,
+// numbered on), K its contact type: one loop per type, so each body is compiled for its type. On
+// the OpenMP team in static blocks when use_team(parallel) (each pair writes its own slot k, so
+// the split does not matter), else in pair order on the calling thread.
 template <class Body>
 void for_each_pair(const CandidatePairs& pairs, bool parallel, const Body& body) {
   const std::vector<CandidatePair>& vt = pairs.vertex_triangle;
   const std::vector<CandidatePair>& ee = pairs.edge_edge;
-  const auto V = static_cast<Index>(vt.size());
-  parallel_for_if(parallel, static_cast<Index>(pairs.size()), [&](Index k) {
-    if (k < V)
-      body(VertexTriangleContact{}, vt[size_t(k)], k);
-    else
-      body(EdgeEdgeContact{}, ee[size_t(k - V)], k);
-  });
+  const auto V = static_cast<Index>(vt.size()), E = static_cast<Index>(ee.size());
+#ifdef _OPENMP
+  if (use_team(parallel)) {
+#pragma omp parallel
+    {
+#pragma omp for schedule(static) nowait
+      for (Index k = 0; k < V; ++k) body(VertexTriangleContact{}, vt[size_t(k)], k);
+#pragma omp for schedule(static)
+      for (Index k = 0; k < E; ++k) body(EdgeEdgeContact{}, ee[size_t(k)], V + k);
+    }
+    return;
+  }
+#else
+  (void)parallel;
+#endif
+  for (Index k = 0; k < V; ++k) body(VertexTriangleContact{}, vt[size_t(k)], k);
+  for (Index k = 0; k < E; ++k) body(EdgeEdgeContact{}, ee[size_t(k)], V + k);
 }
 
 }  // namespace
@@ -96,8 +108,8 @@ void SelfCollision::measure_motion(const MatX3& x0, const MatX3& x) {
 // vertices' own motions, grown by the guard) leaves that open, so the answer is always the exact
 // one.
 template <class K>
-bool SelfCollision::out_of_reach(const int32_t idx[4], Index k, const MatX3& x0, const MatX3& x,
-                                 double need) const {
+FLAGSIM_INLINE bool SelfCollision::out_of_reach(const int32_t idx[4], Index k, const MatX3& x0,
+                                                const MatX3& x, double need) const {
   const double bound = K::motion_bound(motion_.data(), idx) + motion_guard_;
   if (start_gap_[k] - bound >= need) return true;
   PairPoints d;
