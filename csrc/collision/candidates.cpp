@@ -53,8 +53,6 @@ int team_size() {
 #endif
 }
 
-inline Vec3 row(const MatX3& m, Index i) { return m.row(i).transpose(); }
-
 // A pair with no free vertex (all four inverse masses 0) is never a candidate: nothing to move.
 inline bool none_free(const VecX& inv_mass, int32_t a, int32_t b, int32_t c, int32_t d) {
   return inv_mass[a] == 0 && inv_mass[b] == 0 && inv_mass[c] == 0 && inv_mass[d] == 0;

@@ -6,10 +6,6 @@
 
 namespace flagsim {
 
-namespace {
-inline Vec3 row(const MatX3& m, Index i) { return m.row(i).transpose(); }
-}  // namespace
-
 ImpactZones::ImpactZones(Index num_vertices) : frozen_(static_cast<size_t>(num_vertices), 0) {}
 
 void ImpactZones::clear() { std::fill(frozen_.begin(), frozen_.end(), uint8_t{0}); }

@@ -10,8 +10,6 @@ namespace flagsim {
 
 namespace {
 
-inline Vec3 row(const MatX3& m, Index i) { return m.row(i).transpose(); }
-
 // The pair's four points in x.
 inline void gather(const MatX3& x, const int32_t idx[4], PairPoints& p) {
   for (int k = 0; k < 4; ++k) p[k] = row(x, idx[k]);

@@ -20,4 +20,8 @@ using MatX2i = Eigen::Matrix<int32_t, Eigen::Dynamic, 2, Eigen::RowMajor>;
 
 using Index = Eigen::Index;
 
+/// Row i of an N x 3 matrix as a Vec3 (a copy: Eigen row views of a row-major matrix are
+/// transposes of column vectors).
+inline Vec3 row(const MatX3& m, Index i) { return m.row(i).transpose(); }
+
 }  // namespace flagsim
