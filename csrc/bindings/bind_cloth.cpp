@@ -17,7 +17,7 @@ void bind_cloth(py::module_& m) {
   def_field(flag, "cols", &FlagParams::cols, "flag", "masses along the width (>= 2)");
   def_field(flag, "width", &FlagParams::width, "flag", "m, along +x away from the pole");
   def_field(flag, "height", &FlagParams::height, "flag", "m, along -y from the origin");
-  def_vec3_field(flag, "origin", &FlagParams::origin, "flag", "m, top pole-side corner");
+  def_field(flag, "origin", &FlagParams::origin, "flag", "m, top pole-side corner");
   def_field(flag, "areal_density", &FlagParams::areal_density, "flag", "kg/m^2");
   def_field(flag, "stretch_stiffness", &FlagParams::stretch_stiffness, "flag",
             "N/m, structural springs (k_s)");

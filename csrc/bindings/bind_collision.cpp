@@ -31,7 +31,7 @@ void bind_collision(py::module_& m) {
   def_field(pole, "enabled", &PoleParams::enabled, "pole", "collide with the pole");
   def_field(pole, "radius", &PoleParams::radius, "pole", "m");
   def_field(pole, "height", &PoleParams::height, "pole", "m");
-  def_vec3_field(pole, "base", &PoleParams::base, "pole", "m, centre of the bottom cap");
+  def_field(pole, "base", &PoleParams::base, "pole", "m, centre of the bottom cap");
   pole.def("validate", &PoleParams::validate, "prefix"_a = "pole");
 }
 

@@ -40,6 +40,15 @@ void set_component_from(Fluid& f, int c, const py::handle& values) {
   f.set_component(c, a.data());
 }
 
+// Cell counts (nx, ny, nz); a count far outside int becomes -1, so validate() names the field
+// with its own range ([1, 4096]) rather than the conversion naming int's.
+std::array<int, 3> resolution_from_py(const std::string& name, py::handle o) {
+  const auto n = from_py<std::array<long long, 3>>(name, o);
+  std::array<int, 3> r;
+  for (int d = 0; d < 3; ++d) r[d] = (n[d] < -1000000 || n[d] > 1000000) ? -1 : int(n[d]);
+  return r;
+}
+
 }  // namespace
 
 void def_fluid_fields(py::class_<AirParams>& cls, const std::string& section) {
@@ -49,17 +58,15 @@ void def_fluid_fields(py::class_<AirParams>& cls, const std::string& section) {
         return py::make_tuple(a.resolution[0], a.resolution[1], a.resolution[2]);
       },
       [section](AirParams& a, const py::object& o) {
-        const auto n = from_py<std::array<long long, 3>>(section + ".resolution", o);
         AirParams copy = a;
-        for (int d = 0; d < 3; ++d)
-          copy.resolution[d] = (n[d] < -1000000 || n[d] > 1000000) ? -1 : int(n[d]);
+        copy.resolution = resolution_from_py(section + ".resolution", o);
         copy.validate(section);
         a = copy;
       },
       "grid cells (nx, ny, nz) ('grid')");
   def_field<AirParams, double>(cls, "cell_size", &AirParams::cell_size, section, "m ('grid')");
-  def_vec3_field<AirParams>(cls, "origin", &AirParams::origin, section,
-                            "m, min corner of the grid ('grid')");
+  def_field<AirParams, Vec3>(cls, "origin", &AirParams::origin, section,
+                             "m, min corner of the grid ('grid')");
   def_field<AirParams, Boundary>(
       cls, "boundary", &AirParams::boundary, section,
       "'periodic' (mean flow = wind) | 'tunnel' (inflow = wind through x-min)");
@@ -112,10 +119,10 @@ void bind_fluid(py::module_& m) {
       py::arg("max_speed") = 0.0, py::arg("strength") = py::list());
   py::class_<FanParams>& fan = fan_cls;
   def_field(fan, "shape", &FanParams::shape, "fan", "'box' | 'sphere'");
-  def_vec3_field<FanParams>(fan, "center", &FanParams::center, "fan", "m");
-  def_vec3_field<FanParams>(fan, "half_size", &FanParams::half_size, "fan", "m, box half extents");
+  def_field<FanParams, Vec3>(fan, "center", &FanParams::center, "fan", "m");
+  def_field<FanParams, Vec3>(fan, "half_size", &FanParams::half_size, "fan", "m, box half extents");
   def_field<FanParams, double>(fan, "radius", &FanParams::radius, "fan", "m, sphere radius");
-  def_vec3_field<FanParams>(fan, "direction", &FanParams::direction, "fan", "normalised on use");
+  def_field<FanParams, Vec3>(fan, "direction", &FanParams::direction, "fan", "normalised on use");
   def_field<FanParams, double>(fan, "force_density", &FanParams::force_density, "fan", "N/m^3");
   def_field<FanParams, double>(
       fan, "max_speed", &FanParams::max_speed, "fan",
@@ -147,9 +154,7 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
                        const py::object& pcg_max_iterations, const py::object& wind,
                        const py::object& fans) {
              FluidParams p;
-             const auto res = from_py<std::array<long long, 3>>("resolution", resolution);
-             for (int d = 0; d < 3; ++d)
-               p.resolution[d] = (res[d] < -1000000 || res[d] > 1000000) ? -1 : int(res[d]);
+             p.resolution = resolution_from_py("resolution", resolution);
              p.cell_size = from_py<double>("cell_size", cell_size);
              p.origin = from_py<Vec3>("origin", origin);
              p.boundary = from_py<Boundary>("boundary", boundary);

@@ -140,7 +140,7 @@ the scene unchanged. Build one with Scene.paper(), Scene.named(name) or Scene.lo
   scene.def_property(
       "gravity", [](const Scene& s) { return vec3_to_tuple(s.gravity); },
       [](Scene& s, const py::object& o) {
-        Vec3 g = vec3_from("gravity", o);
+        Vec3 g = from_py<Vec3>("gravity", o);
         check_finite_vec("gravity", g);
         s.gravity = g;
       },

@@ -163,15 +163,15 @@ T from_py(const std::string& name, py::handle o) {
 /// Vec3 <-> tuple of 3 floats (a tuple, so `p.origin[0] = 1` fails loudly instead of editing a
 /// copy).
 inline py::tuple vec3_to_tuple(const Vec3& v) { return py::make_tuple(v.x(), v.y(), v.z()); }
-inline Vec3 vec3_from(const std::string& name, const py::object& o) {
-  return from_py<Vec3>(name, o);
-}
 
-/// A C++ value as Python: an enum as its name, anything else as pybind11 casts it.
+/// A C++ value as Python: an enum as its name, a Vec3 as a tuple, anything else as pybind11
+/// casts it.
 template <class T>
 py::object to_py(const T& v) {
   if constexpr (std::is_enum_v<T>)
     return py::str(name_of(v));
+  else if constexpr (std::is_same_v<T, Vec3>)
+    return vec3_to_tuple(v);
   else
     return py::cast(v);
 }
@@ -211,20 +211,6 @@ void def_field(py::class_<S>& cls, const char* name, T S::*member, std::string s
       [member, section, name](S& s, const py::object& value) {
         S copy = s;
         copy.*member = from_py<T>(section + "." + name, value);
-        copy.validate(section);
-        s = copy;
-      },
-      doc);
-}
-
-template <class S>
-void def_vec3_field(py::class_<S>& cls, const char* name, Vec3 S::*member, std::string section,
-                    const char* doc) {
-  cls.def_property(
-      name, [member](const S& s) { return vec3_to_tuple(s.*member); },
-      [member, section, name](S& s, const py::object& value) {
-        S copy = s;
-        copy.*member = from_py<Vec3>(section + "." + name, value);
         copy.validate(section);
         s = copy;
       },

@@ -10,6 +10,8 @@
 #include <chrono>
 #include <cstddef>
 
+#include "common/enums.h"
+
 namespace flagsim {
 
 enum class Stage {
@@ -28,11 +30,14 @@ enum class Stage {
   kCount
 };
 
-/// Names as Simulation.timings and Simulation.stages report them ("flap" for both eq. 5 stages:
-/// a scene builds one or the other).
-constexpr std::array<const char*, std::size_t(Stage::kCount)> kStageNames{
-    "wind",      "fluid",        "flap", "gravity",        "drag",  "springs",
-    "integrate", "strain_limit", "pole", "self_collision", "check", "flap"};
+/// Names (name_of) as Simulation.timings and Simulation.stages report them: "flap" for both
+/// eq. 5 stages, as a scene builds one or the other.
+template <>
+struct EnumNames<Stage> {
+  static constexpr std::array<const char*, std::size_t(Stage::kCount)> names{
+      "wind",      "fluid",        "flap", "gravity",        "drag",  "springs",
+      "integrate", "strain_limit", "pole", "self_collision", "check", "flap"};
+};
 
 class StageClock {
  public:

@@ -26,8 +26,8 @@ struct Fluid::Solver {
   virtual void step(double dt) = 0;
   /// Every velocity value finite.
   virtual bool all_finite() const = 0;
-  /// Back to the field at the start of the last step (its copy is kept by the step anyway).
-  virtual void undo_step(double dt) = 0;
+  /// Back to the field and time t0 at the start of the last step (the step keeps its copy).
+  virtual void undo_step(double t0) = 0;
   virtual void* data(int c) = 0;
   virtual void set_component(int c, const double* values) = 0;
   virtual long sample(const double* points, long m, double* out) const = 0;
@@ -161,13 +161,13 @@ struct TypedSolver final : Fluid::Solver {
 
   // u^n is still held by the step's own copy: the padded source (periodic) or prev (tunnel).
   // The pcg warm start phi may hold the failure too: it restarts from zero.
-  void undo_step(double dt) override {
+  void undo_step(double t0) override {
     if (geo.periodic)
       for (int c = 0; c < 3; ++c) padded.u[c].unpad(u.comp[c].data());
     else
       copy_grid(prev, u);
     std::fill(phi.begin(), phi.end(), T(0));
-    time -= dt;
+    time = t0;
     --stats.steps;
   }
 
@@ -237,9 +237,7 @@ TypedSolver<T>& typed(Fluid::Solver& s) {
 Fluid::Fluid(const FluidParams& params, const std::string& prefix) {
   params.validate(prefix);
   params.validate_combination(prefix);
-  const double cells = double(params.resolution[0]) * params.resolution[1] * params.resolution[2];
-  check_memory("a grid of " + detail::to_text(cells) + " cells",
-               cells * kValuesPerCell * (params.precision == Precision::kFloat ? 4 : 8),
+  check_memory("a grid of " + detail::to_text(params.cells()) + " cells", params.memory_bytes(),
                "use a coarser " +
                    (prefix.empty() ? std::string("resolution") : prefix + ".resolution") +
                    " or precision 'float'");
@@ -260,8 +258,7 @@ void Fluid::step(double dt) {
   const double t0 = s_->time;
   s_->step(dt);
   if (s_->all_finite()) return;
-  s_->undo_step(dt);
-  s_->time = t0;
+  s_->undo_step(t0);
   std::ostringstream s;
   s << "the air diverged at step " << s_->stats.steps << " (t = " << t0
     << " s): a non-finite velocity; the state was restored to the start of that step. Try a "

@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include "common/errors.h"
+#include "common/memory.h"
 
 namespace flagsim {
 
@@ -52,6 +53,11 @@ void FluidParams::validate(const std::string& prefix) const {
   wind.validate(join(prefix, "wind"));
   for (size_t i = 0; i < fans.size(); ++i)
     fans[i].validate(join(prefix, "fans[" + std::to_string(i) + "]"));
+}
+
+double FluidParams::memory_bytes() const {
+  return cells() * kValuesPerCell *
+         double(precision == Precision::kFloat ? sizeof(float) : sizeof(double));
 }
 
 void FluidParams::validate_combination(const std::string& prefix) const {

@@ -84,6 +84,9 @@ struct FluidParams {
   int pcg_max_iterations = 500;  ///< per solve (pressure and each diffusion solve)
   WindSchedule wind;             ///< periodic: mean flow (k = 0 mode); tunnel: inflow velocity
   std::vector<FanParams> fans;
+  double cells() const { return double(resolution[0]) * resolution[1] * resolution[2]; }
+  /// Bytes a Fluid of these parameters allocates, about (common/memory.h, measured).
+  double memory_bytes() const;
   /// Each field on its own: throws InvalidArgument naming "<prefix>.<field>" ("resolution" when
   /// prefix is empty). Field setters run this, so fields can be set in any order.
   void validate(const std::string& prefix) const;

@@ -28,12 +28,10 @@ namespace {
 // allocated: a flag or grid too large fails here in one line, not in std::bad_alloc).
 Scene validated(const Scene& s) {
   s.validate();
-  const double vertices = double(s.flag.rows) * double(s.flag.cols);
-  double cells = 0;
-  if (s.air.model == AirModel::kGrid)
-    cells = double(s.air.resolution[0]) * s.air.resolution[1] * s.air.resolution[2];
-  const double bytes = vertices * kBytesPerVertex +
-                       cells * kValuesPerCell * (s.air.precision == Precision::kFloat ? 4 : 8);
+  const bool grid = s.air.model == AirModel::kGrid;
+  const double cells = grid ? s.air.cells() : 0.0;
+  const double bytes = double(s.flag.rows) * double(s.flag.cols) * kBytesPerVertex +
+                       (grid ? s.air.memory_bytes() : 0.0);
   check_memory("this scene (a " + std::to_string(s.flag.rows) + " x " +
                    std::to_string(s.flag.cols) + " flag" +
                    (cells > 0 ? ", " + detail::to_text(cells) + " air cells" : std::string()) + ")",
@@ -85,7 +83,7 @@ Simulation::Simulation(const Scene& scene)
     };
   }
   for (int s = 0; s < kNumStages; ++s)
-    if (built_[s]) stage_names_.emplace_back(kStageNames[s]);
+    if (built_[s]) stage_names_.emplace_back(name_of(Stage(s)));
   n_.resize(N, 3);
   update_normals();
   setup_flapping();
@@ -147,8 +145,7 @@ void Simulation::setup_flapping() {
   }
   edge_points_ = FlapStage::pole_edge_points(topo_);  // u_p is sampled there, beside the pole
   edge_air_.resize(topo_.rows, 3);
-  visual_ = built(Stage::kFlapVisual);
-  if (visual_) {
+  if (built(Stage::kFlapVisual)) {
     u_p_ = sample_pole_air_speed();
     render_x_.resize(N, 3);
     flap_.displace(x_, n_, u_p_, time_, render_x_);
@@ -478,7 +475,7 @@ void Simulation::diverge(const std::string& cause, long vertex, const std::strin
 std::vector<std::pair<std::string, double>> Simulation::timings() const {
   std::vector<std::pair<std::string, double>> out;
   for (int s = 0; s < kNumStages; ++s)
-    if (built_[s]) out.emplace_back(kStageNames[s], clock_.seconds(Stage(s)));
+    if (built_[s]) out.emplace_back(name_of(Stage(s)), clock_.seconds(Stage(s)));
   return out;
 }
 

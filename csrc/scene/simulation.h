@@ -87,9 +87,9 @@ class Simulation {
   const MatX3& air_at_masses() const { return u_; }
   /// (N x 3) geometry to export and render: with flapping.mode "visual" the positions displaced
   /// by eq. 5 along the normals (physics untouched), otherwise the positions themselves.
-  const MatX3& render_positions() const { return visual_ ? render_x_ : x_; }
+  const MatX3& render_positions() const { return built(Stage::kFlapVisual) ? render_x_ : x_; }
   /// (N x 3) unit vertex normals of render_positions().
-  const MatX3& render_normals() const { return visual_ ? render_n_ : n_; }
+  const MatX3& render_normals() const { return built(Stage::kFlapVisual) ? render_n_ : n_; }
   /// (N) eq. 5 displacement z of each vertex at the current time, m (zero with flapping off).
   const VecX& flap_displacement() const {
     return built(Stage::kFlap) || built(Stage::kFlapVisual) ? flap_.z() : flap_off_z_;
@@ -182,7 +182,6 @@ class Simulation {
   VecX flap_off_z_;               // (N) zeros: flap_displacement() with flapping off
   MatX3 edge_points_, edge_air_;  // (P x 3) where u_p is sampled, and the air there
   double u_p_ = 0;
-  bool visual_ = false;
   MatX3 render_x_, render_n_;  // (N x 3) "visual" geometry
 
   // Energy bookkeeping (docs/energy.md): the ledger (gravity filled in on demand), its value at

@@ -39,6 +39,6 @@ TEST(StageClock, NestedStagesAreChargedExclusively) {
 
 TEST(StageClock, ANullClockTimesNothingAndNamesCoverEveryStage) {
   { StageClock::Scope s(nullptr, Stage::kDrag); }  // kernels called outside a Simulation
-  for (const char* name : kStageNames) EXPECT_NE(std::string(name), "");
-  EXPECT_STREQ(kStageNames[std::size_t(Stage::kSelfCollision)], "self_collision");
+  for (const char* name : EnumNames<Stage>::names) EXPECT_NE(std::string(name), "");
+  EXPECT_STREQ(name_of(Stage::kSelfCollision), "self_collision");
 }
