@@ -22,7 +22,9 @@ _PR_SET_PDEATHSIG = 1
 
 
 def die_with_parent(parent_pid: int | None = None) -> bool:
-    """Ask for SIGKILL when the parent process dies; True when the kernel took the request.
+    """Ask for SIGKILL when the parent process dies; True when the kernel took the request. The
+    pool's worker initializer, and the ``preexec_fn`` of the processes a (single-threaded)
+    worker starts.
 
     ``parent_pid``: the pid the caller expects as its parent; if the parent is already gone
     (it died before the request was made), exit at once.
@@ -39,22 +41,12 @@ def die_with_parent(parent_pid: int | None = None) -> bool:
     return ok
 
 
-def _worker_init(parent_pid: int) -> None:
-    die_with_parent(parent_pid)
-
-
 def worker_pool(max_workers: int | None = None) -> ProcessPoolExecutor:
     """A ProcessPoolExecutor (spawn start method: the parent may run OpenMP threads, and fork
     after threads is unsafe) whose workers die with this process."""
     return ProcessPoolExecutor(
         max_workers=max_workers,
         mp_context=multiprocessing.get_context("spawn"),
-        initializer=_worker_init,
+        initializer=die_with_parent,
         initargs=(os.getpid(),),
     )
-
-
-def child_dies_with_us() -> None:
-    """``preexec_fn`` for subprocesses started from a single-threaded worker: the child gets
-    SIGKILL when the worker dies."""
-    die_with_parent()

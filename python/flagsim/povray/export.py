@@ -51,7 +51,7 @@ def frame_steps(seconds, fps, dt):
         raise ValueError(f"dt should be finite and > 0, got {dt}")
     if fps * dt > 1.0 + 1e-9:
         raise ValueError(
-            f"fps should be <= 1 / dt = {1.0 / dt:g} (one frame per step at most), " f"got {fps}"
+            f"fps should be <= 1 / dt = {1.0 / dt:g} (one frame per step at most), got {fps}"
         )
     if not seconds / dt <= MAX_STEPS:
         raise ValueError(

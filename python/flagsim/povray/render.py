@@ -134,9 +134,9 @@ def _povray_preexec():
 
     if multiprocessing.parent_process() is None:
         return None
-    from .._pool import child_dies_with_us
+    from .._pool import die_with_parent
 
-    return child_dies_with_us
+    return die_with_parent
 
 
 def render_frame(job):
