@@ -19,6 +19,12 @@ namespace flagsim::bindings {
 
 namespace {
 
+/// Each message as a Python UserWarning (an error when the warnings filter says so).
+void warn_all(const std::vector<std::string>& messages) {
+  for (const std::string& m : messages)
+    if (PyErr_WarnEx(PyExc_UserWarning, m.c_str(), 2) != 0) throw py::error_already_set();
+}
+
 py::array component_view(py::object self, int c) {
   Fluid& f = self.cast<Fluid&>();
   const Shape3 sh = f.component_shape(c);
@@ -80,6 +86,26 @@ void def_fluid_fields(py::class_<AirParams>& cls, const std::string& section) {
                                "relative max-norm residual of the pcg solves");
   def_field<AirParams, int>(cls, "pcg_max_iterations", &AirParams::pcg_max_iterations, section,
                             "iteration cap of each pcg solve");
+  def_field<AirParams, Slip>(cls, "wall_y_min", &AirParams::wall_y_min, section,
+                             "tunnel wall at y-min: 'free_slip' | 'no_slip'");
+  def_field<AirParams, Slip>(cls, "wall_y_max", &AirParams::wall_y_max, section,
+                             "tunnel wall at y-max: 'free_slip' | 'no_slip'");
+  def_field<AirParams, Slip>(cls, "wall_z_min", &AirParams::wall_z_min, section,
+                             "tunnel wall at z-min: 'free_slip' | 'no_slip'");
+  def_field<AirParams, Slip>(cls, "wall_z_max", &AirParams::wall_z_max, section,
+                             "tunnel wall at z-max: 'free_slip' | 'no_slip'");
+  def_field<AirParams, InflowProfile>(
+      cls, "inflow_profile", &AirParams::inflow_profile, section,
+      "tunnel inflow: 'uniform' | 'parabolic' (between the no-slip walls, same mean as the wind)");
+  cls.def_property(
+      "obstacles", [](const AirParams& a) { return a.obstacles; },
+      [section](AirParams& a, const py::object& obstacles) {
+        AirParams copy = a;
+        copy.obstacles = from_py<std::vector<ObstacleParams>>(section + ".obstacles", obstacles);
+        copy.validate(section);
+        a = copy;
+      },
+      "[ObstacleParams, ...]: static solids in the air ('grid'); a list copy: assign to change");
   cls.def_property(
       "fans", [](const AirParams& a) { return a.fans; },
       [section](AirParams& a, const py::object& fans) {
@@ -138,6 +164,48 @@ void bind_fluid(py::module_& m) {
          "(time s, factor) keyframes; empty = always 1")
       .def("validate", &FanParams::validate, py::arg("prefix") = "");
 
+  py::class_<ObstacleParams> obs(
+      m, "ObstacleParams",
+      "A static solid in the air: a box, a sphere or a capped cylinder, free-slip or no-slip. "
+      "The cells whose centres lie inside it are solid.");
+  obs.def(py::init([](const py::object& shape, const py::object& center,
+                      const py::object& half_size, const py::object& radius, const py::object& axis,
+                      const py::object& length, const py::object& slip) {
+            ObstacleParams o;
+            o.shape = from_py<ObstacleShape>("shape", shape);
+            o.center = from_py<Vec3>("center", center);
+            o.half_size = from_py<Vec3>("half_size", half_size);
+            o.radius = from_py<double>("radius", radius);
+            o.axis = from_py<Vec3>("axis", axis);
+            o.length = from_py<double>("length", length);
+            o.slip = from_py<Slip>("slip", slip);
+            o.validate("");
+            return o;
+          }),
+          py::kw_only(), py::arg("shape") = "box",
+          py::arg("center") = py::make_tuple(0.0, 0.0, 0.0),
+          py::arg("half_size") = py::make_tuple(0.1, 0.1, 0.1), py::arg("radius") = 0.1,
+          py::arg("axis") = py::make_tuple(0.0, 0.0, 1.0), py::arg("length") = 1.0,
+          py::arg("slip") = "no_slip");
+  def_field(obs, "shape", &ObstacleParams::shape, "obstacle", "'box' | 'sphere' | 'cylinder'");
+  def_field<ObstacleParams, Vec3>(obs, "center", &ObstacleParams::center, "obstacle", "m");
+  def_field<ObstacleParams, Vec3>(obs, "half_size", &ObstacleParams::half_size, "obstacle",
+                                  "m, box half extents");
+  def_field<ObstacleParams, double>(obs, "radius", &ObstacleParams::radius, "obstacle",
+                                    "m, sphere or cylinder radius");
+  def_field<ObstacleParams, Vec3>(obs, "axis", &ObstacleParams::axis, "obstacle",
+                                  "cylinder axis, normalised on use");
+  def_field<ObstacleParams, double>(obs, "length", &ObstacleParams::length, "obstacle",
+                                    "m, cylinder length between its caps");
+  def_field(obs, "slip", &ObstacleParams::slip, "obstacle", "'no_slip' | 'free_slip'");
+  obs.def("validate", &ObstacleParams::validate, py::arg("prefix") = "")
+      .def(
+          "contains",
+          [](const ObstacleParams& o, const py::object& x) {
+            return o.contains(from_py<Vec3>("point", x));
+          },
+          py::arg("point"), "True when the point (m) lies inside the solid.");
+
   py::class_<Fluid>(m, "Fluid", R"doc(
 Stable Fluids (Stam 1999) on a staggered MAC grid: the air solver alone.
 
@@ -152,7 +220,8 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
                        const py::object& advection, const py::object& pressure,
                        const py::object& precision, const py::object& pcg_tolerance,
                        const py::object& pcg_max_iterations, const py::object& wind,
-                       const py::object& fans) {
+                       const py::object& fans, const py::object& obstacles, const py::object& walls,
+                       const py::object& inflow_profile) {
              FluidParams p;
              p.resolution = resolution_from_py("resolution", resolution);
              p.cell_size = from_py<double>("cell_size", cell_size);
@@ -167,7 +236,32 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
              p.pcg_max_iterations = from_py<int>("pcg_max_iterations", pcg_max_iterations);
              p.wind = wind_from_py("wind", wind, true);
              p.fans = from_py<std::vector<FanParams>>("fans", fans);
-             return std::make_unique<Fluid>(p);
+             p.obstacles = from_py<std::vector<ObstacleParams>>("obstacles", obstacles);
+             if (!walls.is_none()) {
+               if (PyUnicode_Check(walls.ptr())) {  // one condition for the four walls
+                 p.wall_y_min = p.wall_y_max = p.wall_z_min = p.wall_z_max =
+                     from_py<Slip>("walls", walls);
+               } else {
+                 if (!py::isinstance<py::dict>(walls))
+                   fail_param("walls", "'free_slip', 'no_slip' or a dict {'y_min': ...}",
+                              repr_of(walls));
+                 for (auto item : py::reinterpret_borrow<py::dict>(walls)) {
+                   const std::string side = from_py<std::string>("walls", item.first);
+                   Slip* target = side == "y_min"   ? &p.wall_y_min
+                                  : side == "y_max" ? &p.wall_y_max
+                                  : side == "z_min" ? &p.wall_z_min
+                                  : side == "z_max" ? &p.wall_z_max
+                                                    : nullptr;
+                   if (!target)
+                     fail_param("walls", "keys among y_min, y_max, z_min, z_max", "'" + side + "'");
+                   *target = from_py<Slip>("walls." + side, item.second);
+                 }
+               }
+             }
+             p.inflow_profile = from_py<InflowProfile>("inflow_profile", inflow_profile);
+             auto f = std::make_unique<Fluid>(p);
+             warn_all(f->warnings());
+             return f;
            }),
            py::kw_only(), py::arg("resolution") = py::make_tuple(16, 16, 16),
            py::arg("cell_size") = 0.125, py::arg("origin") = py::make_tuple(-0.5, -1.0, -1.0),
@@ -176,9 +270,46 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
            py::arg("pressure") = name_of(FluidParams().pressure), py::arg("precision") = "double",
            py::arg("pcg_tolerance") = 1e-8, py::arg("pcg_max_iterations") = 500,
            py::arg("wind") = py::none(), py::arg("fans") = py::list(),
+           py::arg("obstacles") = py::list(), py::arg("walls") = py::none(),
+           py::arg("inflow_profile") = "uniform",
            "resolution (nx, ny, nz) cells; cell_size m; origin m (min corner); viscosity m^2/s; "
            "density kg/m^3; wind: None, a 3-vector (m/s) or [(time s, (vx, vy, vz)), ...]: the "
-           "periodic mean flow or the tunnel inflow; fans: [FanParams, ...].")
+           "periodic mean flow or the tunnel inflow; fans: [FanParams, ...]; obstacles: "
+           "[ObstacleParams, ...]; walls (tunnel): 'free_slip' (default) | 'no_slip' for all four, "
+           "or {'y_min': ..., 'y_max': ..., 'z_min': ..., 'z_max': ...}; inflow_profile (tunnel): "
+           "'uniform' | 'parabolic'. Obstacles thinner than the wake needs warn (UserWarning).")
+      .def(
+          "add_obstacle",
+          [](Fluid& f, const ObstacleParams& o) {
+            f.add_obstacle(o);
+            const auto w = f.warnings();
+            if (!w.empty()) warn_all({w.back()});
+          },
+          py::arg("obstacle"),
+          "Add a static solid (ObstacleParams): its cells turn solid and its faces are held at "
+          "once. Warns (UserWarning) when it is thinner than its wake needs.")
+      .def(
+          "obstacle_force",
+          [](const Fluid& f, const py::object& index) {
+            return vec3_to_tuple(f.obstacle_force(from_py<int>("index", index)));
+          },
+          py::arg("index"),
+          "The force (fx, fy, fz) N the air exerts on obstacle `index`: pressure plus viscous "
+          "shear (no-slip), from the last step. Drag coefficient: fx / (0.5 rho U^2 A).")
+      .def_property_readonly(
+          "obstacles", [](const Fluid& f) { return f.params().obstacles; },
+          "[ObstacleParams, ...] (copies)")
+      .def(
+          "solid_cells",
+          [](const Fluid& f) {
+            const GridGeometry& g = f.geometry();
+            py::array_t<uint16_t> out({g.nx, g.ny, g.nz});
+            std::copy(f.solid_owner().begin(), f.solid_owner().end(), out.mutable_data());
+            return out;
+          },
+          "Per cell (nx, ny, nz): 0 = air, 1 + index of the obstacle that owns it.")
+      .def("warnings", &Fluid::warnings,
+           "What the solids' resolution leaves out, one sentence each (empty when all is well).")
       .def(
           "step",
           [](Fluid& f, const py::object& dt_, const py::object& n_) {

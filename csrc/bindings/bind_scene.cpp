@@ -90,6 +90,9 @@ void bind_scene(py::module_& m) {
   def_field<AirParams, double>(air, "viscosity", &AirParams::viscosity, "air",
                                "m^2/s, kinematic ('grid'; 0 = no diffusion)");
   def_fluid_fields(air, "air");
+  def_field<AirParams, bool>(
+      air, "pole_obstacle", &AirParams::pole_obstacle, "air",
+      "the pole is a no-slip solid of the air grid too, so it sheds a wake ('grid', pole.enabled)");
 
   py::class_<Scene> scene(m, "Scene", R"doc(Everything a Simulation needs, in SI units.
 
@@ -157,8 +160,14 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
   sim.def(py::init([](const py::object& scene) {
             const Scene s = from_py<Scene>("scene", scene);
             std::unique_ptr<Simulation> out;
-            py::gil_scoped_release release;  // a large flag takes seconds to build
-            out = std::make_unique<Simulation>(s);
+            {
+              py::gil_scoped_release release;  // a large flag takes seconds to build
+              out = std::make_unique<Simulation>(s);
+            }
+            if (out->fluid())
+              for (const std::string& w : out->fluid()->warnings())
+                if (PyErr_WarnEx(PyExc_UserWarning, w.c_str(), 1) != 0)
+                  throw py::error_already_set();
             return out;
           }),
           py::arg("scene"));

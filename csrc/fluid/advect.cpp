@@ -243,14 +243,14 @@ struct RowVelocity {
 /// the inflow upstream of a tunnel's inflow face.
 template <class Row>
 FLAGSIM_INLINE auto semi_lagrangian(const Row& w, const Trace& t, int k) {
-  return w.upstream(t.back) ? w.inflow : w.sample(t, k);
+  return w.upstream(t.back) ? w.inflow_at(t.back) : w.sample(t, k);
 }
 
 /// MacCormack value of node k of a row from its predictor hat (Selle et al. 2008 eq. 9, §4).
 template <class Row, class T>
 FLAGSIM_INLINE T maccormack(const Row& w, const Trace& t, int k, T hat) {
   if (w.upstream(t.back)) return hat;  // inflow value: nothing to correct
-  const T bar = w.upstream(t.fwd) ? w.inflow : w.sample_hat(t, k);
+  const T bar = w.upstream(t.fwd) ? w.inflow_at(t.fwd) : w.sample_hat(t, k);
   T v[8];
   w.nodes(t, k, v);
   return maccormack_clamp(v, maccormack_correct(hat, w.own(k), bar));
@@ -265,6 +265,7 @@ struct GenericRow {
   int c, k_end;
   double x0, y0;
   T inflow;
+  InflowShape shape;
   bool tunnel;
   GenericRow(const MacGrid<T>& u, const MacGrid<T>& hat, int c, int i, int j,
              const SampleBoundary& bc)
@@ -276,7 +277,9 @@ struct GenericRow {
         x0(i + q.o0),
         y0(j + q.o1),
         inflow(T(bc.inflow[c])),
+        shape(bc.shape),
         tunnel(!u.geo.periodic) {}
+  T inflow_at(const double p[3]) const { return T(double(inflow) * shape.at(p)); }
   void node(int k, double x[3]) const {
     x[0] = x0;
     x[1] = y0;
@@ -680,7 +683,6 @@ struct PaddedRow {
   std::ptrdiff_t stride[3];
   int i, j;
   std::size_t idx0;  // padded index of (i, j, 0)
-  T inflow = T(0);   // never taken: a periodic grid has no inflow
   PaddedRow(const PeriodicAdvectScratch<T>& sc, int i, int j)
       : sc(sc), q(sc.u[C]), qhat(sc.hat[C]), i(i), j(j), idx0(sc.u[C].index(i, j, 0)) {
     stride[0] = std::ptrdiff_t(sc.u[C].p1) * sc.u[C].p2;
@@ -695,6 +697,7 @@ struct PaddedRow {
   void velocity(int k, double vel[3]) const { padded_velocity<C>(sc.u, idx0 + k, stride, vel); }
   T own(int k) const { return sc.u[C].data[idx0 + k]; }
   bool upstream(const double*) const { return false; }
+  T inflow_at(const double*) const { return T(0); }  // never taken: a periodic grid has no inflow
   typename PaddedSampler<T>::Corner corner(const PaddedSampler<T>& s, const PaddedComponent<T>& p,
                                            const Trace& t, const double g[3], int k) const {
     return s.any_corner(p, idx0 + k, i, j, k, t.d[0], t.d[1], t.d[2], g[0] - kO0, g[1] - kO1,

@@ -3,14 +3,17 @@
 // (Selle, Fedkiw, Kim, Liu, Rossignac 2008, §3 and §4).
 #pragma once
 #include "fluid/grid.h"
+#include "fluid/solids.h"
 
 namespace flagsim {
 
 /// Boundary data for sampling. Periodic grids wrap. Bounded grids hold each component's nearest
 /// node value beyond its last node (zero-gradient: free slip on walls, outflow); in advection a
-/// departure point upstream of the inflow face (x < origin.x) takes `inflow` (m/s) instead.
+/// departure point upstream of the inflow face (x < origin.x) takes `inflow` (m/s) times the
+/// profile's factor at that point instead.
 struct SampleBoundary {
   Vec3 inflow{0, 0, 0};  ///< m/s, tunnel inflow velocity (ignored when periodic)
+  InflowShape shape;     ///< the inflow profile's factor at the departure point (1: uniform)
 };
 
 /// Trilinear value of component c at point p given in cell units, p = (x - origin) / h.

@@ -14,6 +14,7 @@
 #include "fluid/advect.h"
 #include "fluid/forces.h"
 #include "fluid/pressure.h"
+#include "fluid/solids.h"
 
 namespace flagsim {
 
@@ -33,6 +34,11 @@ struct Fluid::Solver {
   virtual long sample(const double* points, long m, double* out) const = 0;
   virtual void divergence(double* out) const = 0;
   virtual double max_divergence() const = 0;
+  /// Rebuilds the solid map (and what the pressure solve precomputes) from params.obstacles.
+  virtual void rebuild_solids() = 0;
+  virtual Vec3 obstacle_force(int index) const = 0;
+  SolidMap solids;
+  double last_dt = 0;  ///< s, the last step's dt (pressure = rho phi / dt)
 };
 
 namespace {
@@ -51,6 +57,9 @@ struct TypedSolver final : Fluid::Solver {
   PeriodicAdvectScratch<T> padded;  // periodic grids: ghost-padded u^n and MacCormack predictor
   double tol = 0;
   bool maccormack = false, use_fft = false;
+  std::vector<double> inflow_w;  // tunnel: the inflow profile per (j, k) of the x-min face
+  InflowShape inflow_profile;    // and at departure points upstream of it
+  bool explicit_viscosity = false;
 
   explicit TypedSolver(const FluidParams& p) {
     params = p;
@@ -85,20 +94,49 @@ struct TypedSolver final : Fluid::Solver {
     for (int c = 0; c < 3; ++c) largest = std::max(largest, u.shape[c].size());
     cg.resize(largest);
     fans = build_fan_stencils<T>(geo, p.fans, p.density);
+    if (!geo.periodic) {
+      inflow_w = inflow_weights(geo, p);
+      inflow_profile = inflow_shape(geo, p);
+    }
+    rebuild_solids();
     const Vec3 w0 = p.wind.at(0.0);
     set_uniform(geo.periodic ? w0 : Vec3(w0.x(), 0, 0));
   }
 
+  void rebuild_solids() override {
+    solids.build(geo, params);
+    pressure_op.solid = solids.any_solid ? solids.solid.data() : nullptr;
+    if (!use_fft) mic.build(pressure_op);
+    // Walls and solids make their own viscous step (ghost mirrors); without them the implicit
+    // solves (spectral or CG) stay.
+    explicit_viscosity = solids.any_solid || solids.any_no_slip;
+    enforce_solids(solids, u);
+  }
+
+  Vec3 obstacle_force(int index) const override {
+    if (last_dt <= 0) return Vec3::Zero();
+    return flagsim::obstacle_force(solids, index, u, phi.data(), last_dt, params.density,
+                                   params.viscosity);
+  }
+
+  void apply_boundary(const Vec3& wind) {
+    if (!geo.periodic) apply_tunnel_boundary(wind, inflow_w.data(), u);
+    enforce_solids(solids, u);
+  }
+
   void set_uniform(const Vec3& v) {
     for (int c = 0; c < 3; ++c) std::fill(u.comp[c].begin(), u.comp[c].end(), T(v[c]));
-    if (!geo.periodic) apply_tunnel_boundary(Vec3(v.x(), 0, 0), u);
+    apply_boundary(Vec3(v.x(), 0, 0));
   }
 
   void step(double dt) override {
     const double t0 = time, t1 = time + dt;
     const FluidParams& p = params;
     SampleBoundary bc;
-    if (!geo.periodic) bc.inflow = p.wind.at(t0);
+    if (!geo.periodic) {
+      bc.inflow = p.wind.at(t0);
+      bc.shape = inflow_profile;
+    }
     // 1. self-advection of u^n (reads prev, writes u)
     {
       ScopedTimer timer(stats.seconds_advect);
@@ -118,8 +156,8 @@ struct TypedSolver final : Fluid::Solver {
       apply_fans(fans, t0, dt, u);
     }
     ScopedTimer timer(stats.seconds_project);
-    // 3. boundary values at the new time: tunnel faces, or the periodic mean flow
-    if (!geo.periodic) apply_tunnel_boundary(p.wind.at(t1), u);
+    // 3. boundary values at the new time: tunnel faces and solids, or the periodic mean flow
+    if (!geo.periodic || solids.any_solid) apply_boundary(p.wind.at(t1));
     const bool drive_mean = geo.periodic && !p.wind.keys.empty();
     const Vec3 mean = drive_mean ? p.wind.at(t1) : Vec3::Zero();
     // 4-5. diffusion and projection
@@ -133,10 +171,22 @@ struct TypedSolver final : Fluid::Solver {
         fft->project(u, phi.data());
       }
     } else {
-      if (nu_dt > 0) diffuse_iterative(nu_dt);
-      if (drive_mean) set_mean_flow(mean, u);
+      if (nu_dt > 0) {
+        if (explicit_viscosity)
+          diffuse_explicit(solids, nu_dt, u, hat);
+        else
+          diffuse_iterative(nu_dt);
+      }
+      if (drive_mean) {
+        if (solids.any_solid)
+          set_air_mean_flow(solids, mean, u);
+        else
+          set_mean_flow(mean, u);
+      }
       project_pcg();
+      enforce_solids(solids, u);  // the gradient may not cross a solid face
     }
+    last_dt = dt;
     time = t1;
     ++stats.steps;
   }
@@ -288,6 +338,29 @@ MatX3 Fluid::face_positions(int c) const {
 }
 
 void Fluid::set_component(int c, const double* values) { s_->set_component(c, values); }
+
+void Fluid::add_obstacle(const ObstacleParams& obstacle) {
+  obstacle.validate("obstacle");
+  FluidParams next = s_->params;
+  next.obstacles.push_back(obstacle);
+  next.validate("");
+  next.validate_combination("");
+  s_->params = next;
+  s_->rebuild_solids();
+}
+
+Vec3 Fluid::obstacle_force(int index) const {
+  const int n = int(s_->params.obstacles.size());
+  if (index < 0 || index >= n)
+    fail_param("index", "an obstacle index in [0, " + std::to_string(n) + ")", index);
+  return s_->obstacle_force(index);
+}
+
+const std::vector<uint16_t>& Fluid::solid_owner() const { return s_->solids.owner; }
+
+std::vector<std::string> Fluid::warnings() const {
+  return s_->solids.warnings(s_->params.obstacles);
+}
 
 void Fluid::set_uniform(const Vec3& velocity) {
   check_finite_vec("velocity", velocity);

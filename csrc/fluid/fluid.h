@@ -1,13 +1,16 @@
 // The air solver: Stable Fluids (Stam 1999) on a staggered MAC grid. Owns the arrays and scratch
-// (allocated at construction, never resized) and sequences the kernels of advect.h, forces.h and
-// pressure.h. One step:
-//   advect (semi-Lagrangian | MacCormack) -> fans -> boundary values / mean flow ->
-//   diffuse (implicit; skipped when viscosity = 0) -> project (fft | pcg)
+// (allocated at construction, never resized) and sequences the kernels of advect.h, forces.h,
+// solids.h and pressure.h. One step:
+//   advect (semi-Lagrangian | MacCormack) -> fans -> boundary values (tunnel faces, solids) /
+//   mean flow -> diffuse (implicit; explicit substeps beside no-slip walls and solids; skipped
+//   when viscosity = 0) -> project (fft | pcg) -> solids' faces held again
 // Layout of the component arrays: csrc/fluid/grid.h. Scalar type: params.precision.
 #pragma once
 #include <array>
+#include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "common/types.h"
 #include "fluid/grid.h"
@@ -67,6 +70,18 @@ class Fluid {
   long sample(const MatX3& points, MatX3& out) const {
     return sample(points.data(), long(points.rows()), out.data());
   }
+  /// Adds a static solid (validated; errors name "obstacle.<field>") and rebuilds the solid cells
+  /// and the pressure solve's set-up; held faces are zeroed at once. Not during a step.
+  void add_obstacle(const ObstacleParams& obstacle);
+  /// The force the air exerts on obstacle `index` (N): pressure plus viscous (no-slip), from the
+  /// last step's pressure and the current velocity (csrc/fluid/solids.h). Zero before any step.
+  Vec3 obstacle_force(int index) const;
+  /// Per cell (nx*ny*nz, C order): 0 = air, 1 + index of the obstacle that owns it.
+  const std::vector<uint16_t>& solid_owner() const;
+  /// What the solids' resolution leaves out (obstacles thinner than the wake needs, or covering
+  /// no cell), one sentence each; empty when all is well.
+  std::vector<std::string> warnings() const;
+
   /// Cell divergence of the current field (nx*ny*nz, 1/s, C order) and its max |.|.
   void divergence(double* out) const;
   double max_divergence() const;

@@ -15,6 +15,36 @@ std::string join(const std::string& prefix, const std::string& field) {
 
 }  // namespace
 
+bool ObstacleParams::contains(const Vec3& x) const {
+  const Vec3 d = x - center;
+  switch (shape) {
+    case ObstacleShape::kBox: return (d.array().abs() <= half_size.array()).all();
+    case ObstacleShape::kSphere: return d.squaredNorm() <= radius * radius;
+    case ObstacleShape::kCylinder: {
+      const Vec3 a = axis.normalized();
+      const double along = d.dot(a);
+      return std::fabs(along) <= 0.5 * length && (d - along * a).squaredNorm() <= radius * radius;
+    }
+  }
+  return false;
+}
+
+double ObstacleParams::thickness() const {
+  return shape == ObstacleShape::kBox ? 2.0 * half_size.minCoeff() : 2.0 * radius;
+}
+
+void ObstacleParams::validate(const std::string& prefix) const {
+  check_position(join(prefix, "center"), center);
+  for (int d = 0; d < 3; ++d)
+    if (!(std::isfinite(half_size[d]) && half_size[d] > 0 && half_size[d] <= kMaxCoordinate))
+      fail_param(join(prefix, "half_size"), "in (0, 1e6] m in every component",
+                 detail::to_text(half_size.transpose()));
+  check_length(join(prefix, "radius"), radius);
+  check_finite_vec(join(prefix, "axis"), axis);
+  if (!(axis.norm() > 0)) fail_param(join(prefix, "axis"), "a non-zero vector", "(0 0 0)");
+  check_length(join(prefix, "length"), length);
+}
+
 void FanParams::validate(const std::string& prefix) const {
   check_position(join(prefix, "center"), center);
   for (int d = 0; d < 3; ++d)
@@ -53,6 +83,10 @@ void FluidParams::validate(const std::string& prefix) const {
   wind.validate(join(prefix, "wind"));
   for (size_t i = 0; i < fans.size(); ++i)
     fans[i].validate(join(prefix, "fans[" + std::to_string(i) + "]"));
+  if (obstacles.size() > 65535)
+    fail_param(join(prefix, "obstacles"), "at most 65535 obstacles", obstacles.size());
+  for (size_t i = 0; i < obstacles.size(); ++i)
+    obstacles[i].validate(join(prefix, "obstacles[" + std::to_string(i) + "]"));
 }
 
 double FluidParams::memory_bytes() const {
@@ -66,6 +100,29 @@ void FluidParams::validate_combination(const std::string& prefix) const {
                "\"pcg\" with boundary \"" + std::string(name_of(boundary)) +
                    "\" (fft needs a periodic domain)",
                "\"fft\"");
+  if (pressure == Pressure::kFft && !obstacles.empty())
+    fail_param(join(prefix, "pressure"), "\"pcg\" with obstacles (the fft solve cannot see solids)",
+               "\"fft\"");
+  if (boundary == Boundary::kPeriodic) {
+    // A periodic grid has no walls and no inflow face: a condition set there would be ignored.
+    static const char* kWalls[4] = {"wall_y_min", "wall_y_max", "wall_z_min", "wall_z_max"};
+    for (int w = 0; w < 4; ++w)
+      if (wall(1 + w / 2, w % 2) != Slip::kFreeSlip)
+        fail_param(join(prefix, kWalls[w]),
+                   "\"free_slip\" with boundary \"periodic\" (a periodic grid has no walls)",
+                   "\"no_slip\"");
+    if (inflow_profile != InflowProfile::kUniform)
+      fail_param(join(prefix, "inflow_profile"),
+                 "\"uniform\" with boundary \"periodic\" (a periodic grid has no inflow face)",
+                 "\"parabolic\"");
+  } else if (inflow_profile == InflowProfile::kParabolic &&
+             !(wall(1, 0) == Slip::kNoSlip && wall(1, 1) == Slip::kNoSlip) &&
+             !(wall(2, 0) == Slip::kNoSlip && wall(2, 1) == Slip::kNoSlip)) {
+    fail_param(join(prefix, "inflow_profile"),
+               "\"uniform\" unless both y walls or both z walls are \"no_slip\" (the parabola "
+               "runs between two no-slip walls)",
+               "\"parabolic\"");
+  }
 #ifndef FLAGSIM_HAVE_FFTW
   if (pressure == Pressure::kFft)
     throw MissingFeature(join(prefix, "pressure") +

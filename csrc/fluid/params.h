@@ -42,6 +42,49 @@ struct EnumNames<Precision> {
   static constexpr std::array<const char*, 2> names{"double", "float"};
 };
 
+/// The condition a solid (an obstacle or a tunnel wall) puts on the air beside it: both hold the
+/// normal velocity at 0; free-slip leaves the tangential velocity free, no-slip holds it at 0
+/// (the wall halfway between the last fluid node and its mirror, so the viscous stress is
+/// second-order).
+enum class Slip { kFreeSlip, kNoSlip };
+template <>
+struct EnumNames<Slip> {
+  static constexpr std::array<const char*, 2> names{"free_slip", "no_slip"};
+};
+
+enum class ObstacleShape { kBox, kSphere, kCylinder };
+template <>
+struct EnumNames<ObstacleShape> {
+  static constexpr std::array<const char*, 3> names{"box", "sphere", "cylinder"};
+};
+
+/// Velocity across the tunnel's inflow face (x-min): uniform, or parabolic across each axis
+/// whose two walls are no-slip (the laminar channel profile), with the same mean, so the flux is
+/// the wind's either way.
+enum class InflowProfile { kUniform, kParabolic };
+template <>
+struct EnumNames<InflowProfile> {
+  static constexpr std::array<const char*, 2> names{"uniform", "parabolic"};
+};
+
+/// A static solid in the air: a box, a sphere or a capped cylinder. The cells whose centres lie
+/// inside it are solid (csrc/fluid/solids.h).
+struct ObstacleParams {
+  ObstacleShape shape = ObstacleShape::kBox;
+  Vec3 center{0, 0, 0};           ///< m
+  Vec3 half_size{0.1, 0.1, 0.1};  ///< m, box half extents (shape "box")
+  double radius = 0.1;            ///< m (sphere, cylinder)
+  Vec3 axis{0, 0, 1};             ///< cylinder axis, normalised on use
+  double length = 1.0;            ///< m, cylinder length between its flat caps
+  Slip slip = Slip::kNoSlip;
+  /// True when point x (m) lies inside (closed).
+  bool contains(const Vec3& x) const;
+  /// The solid's thinnest extent, m: the smallest box edge, or the diameter.
+  double thickness() const;
+  /// Throws InvalidArgument naming "<prefix>.<field>" (e.g. "air.obstacles[0].radius").
+  void validate(const std::string& prefix) const;
+};
+
 /// A region that pushes the air: force density f (N/m^3) along `direction` inside a box or sphere.
 struct FanParams {
   FanShape shape = FanShape::kBox;
@@ -64,8 +107,9 @@ constexpr double kMinCellSize = 1e-6, kMaxCellSize = 1e4;
 
 /// Stable Fluids (Stam 1999) on a staggered MAC grid; see csrc/fluid/fluid.h for the layout.
 /// Periodic boundary: the mean flow (k = 0 mode) follows `wind` when it has keys (gusts are its
-/// keyframes) and is left free otherwise. Tunnel: inflow `wind` through the x-min face,
-/// zero-pressure outflow at x-max, free-slip walls on the y and z faces.
+/// keyframes) and is left free otherwise. Tunnel: inflow `wind` through the x-min face (shaped by
+/// inflow_profile), zero-pressure outflow at x-max, a wall on each y and z face (free-slip or
+/// no-slip, one condition per face). Obstacles: static solids in either kind of grid.
 struct FluidParams {
   std::array<int, 3> resolution{16, 16, 16};  ///< cells nx, ny, nz
   double cell_size = 0.125;                   ///< m
@@ -84,6 +128,15 @@ struct FluidParams {
   int pcg_max_iterations = 500;  ///< per solve (pressure and each diffusion solve)
   WindSchedule wind;             ///< periodic: mean flow (k = 0 mode); tunnel: inflow velocity
   std::vector<FanParams> fans;
+  std::vector<ObstacleParams> obstacles;
+  /// Tunnel walls, one condition per face: y-min, y-max, z-min, z-max.
+  Slip wall_y_min = Slip::kFreeSlip, wall_y_max = Slip::kFreeSlip;
+  Slip wall_z_min = Slip::kFreeSlip, wall_z_max = Slip::kFreeSlip;
+  InflowProfile inflow_profile = InflowProfile::kUniform;
+  /// The wall condition on side `hi` (0 = min, 1 = max) of axis d (1 = y, 2 = z).
+  Slip wall(int d, int hi) const {
+    return d == 1 ? (hi ? wall_y_max : wall_y_min) : (hi ? wall_z_max : wall_z_min);
+  }
   double cells() const { return double(resolution[0]) * resolution[1] * resolution[2]; }
   /// Bytes a Fluid of these parameters allocates, about (common/memory.h, measured).
   double memory_bytes() const;

@@ -27,6 +27,11 @@ inline double diag_k(const Laplace7& op, const int ijk[3]) {
     const int n = op.shape.n[a];
     for (int s = -1; s <= 1; s += 2) {
       const int m = neighbour(ijk[a], s, n, op.lo[a], op.hi[a]);
+      if (m >= 0 && op.solid) {
+        int nb[3] = {ijk[0], ijk[1], ijk[2]};
+        nb[a] = m;
+        if (op.solid[op.shape.index(nb[0], nb[1], nb[2])]) continue;  // no flux into a solid
+      }
       if (m >= 0)
         d += (m != ijk[a]) ? 1.0 : 0.0;
       else
@@ -46,10 +51,16 @@ double dot(const T* a, const T* b, std::size_t n) {
   return deterministic_sum(n, [&](std::size_t i) { return double(a[i]) * double(b[i]); });
 }
 
-/// Zeroes fixed nodes of x.
+/// Zeroes fixed nodes of x, and solid ones.
 template <class T>
 void zero_fixed(const Laplace7& op, T* x) {
   const Shape3& sh = op.shape;
+  if (op.solid) {
+    const uint8_t* solid = op.solid;
+    parallel_for_cells(long(sh.size()), [&](Index i) {
+      if (solid[i]) x[i] = T(0);
+    });
+  }
   for (int d = 0; d < 3; ++d) {
     for (int end = 0; end < 2; ++end) {
       if ((end == 0 ? op.lo[d] : op.hi[d]) != Side::kFixed) continue;
@@ -73,8 +84,50 @@ bool Laplace7::singular() const {
   return true;
 }
 
+namespace {
+
+/// apply_laplace7 with a solid mask: solid nodes give 0, and no coupling crosses to one.
+template <class T>
+void apply_laplace7_masked(const Laplace7& op, double alpha, double beta, const T* x, T* y) {
+  const Shape3& sh = op.shape;
+  const uint8_t* solid = op.solid;
+  const int n1 = sh.n[1], n2 = sh.n[2];
+  parallel_for_if(Index(sh.size()) > kGridParallelGrain, long(sh.n[0]) * n1, [&](Index r) {
+    const int i = int(r / n1), j = int(r % n1);
+    for (int k = 0; k < n2; ++k) {
+      const std::size_t q = sh.index(i, j, k);
+      const int ijk[3] = {i, j, k};
+      if (solid[q] || op.fixed(0, i) || op.fixed(1, j) || op.fixed(2, k)) {
+        y[q] = T(0);
+        continue;
+      }
+      const double xc = x[q];
+      double acc = 0;
+      for (int a = 0; a < 3; ++a)
+        for (int s = -1; s <= 1; s += 2) {
+          const int m = neighbour(ijk[a], s, sh.n[a], op.lo[a], op.hi[a]);
+          if (m < 0) {
+            if ((s < 0 ? op.lo[a] : op.hi[a]) == Side::kGhostZero) acc += xc;
+            continue;
+          }
+          int nb[3] = {i, j, k};
+          nb[a] = m;
+          const std::size_t qn = sh.index(nb[0], nb[1], nb[2]);
+          if (!solid[qn]) acc += xc - x[qn];
+        }
+      y[q] = T(alpha * xc + beta * acc);
+    }
+  });
+}
+
+}  // namespace
+
 template <class T>
 void apply_laplace7(const Laplace7& op, double alpha, double beta, const T* x, T* y) {
+  if (op.solid) {
+    apply_laplace7_masked(op, alpha, beta, x, y);
+    return;
+  }
   const Shape3& sh = op.shape;
   const int n0 = sh.n[0], n1 = sh.n[1], n2 = sh.n[2];
   const long rows = long(n0) * n1;
@@ -136,6 +189,7 @@ void MicPreconditioner<T>::build(const Laplace7& k) {
   const std::size_t stride[3] = {std::size_t(sh.n[1]) * sh.n[2], std::size_t(sh.n[2]), 1};
   // The factored matrix: K with wrap couplings moved to the diagonal (diag = 2 per periodic axis).
   auto adiag = [&](const int ijk[3]) {
+    if (op.solid) return diag_k(op, ijk);  // wraps kept on the diagonal, solids left out
     double d = 0;
     for (int a = 0; a < 3; ++a) {
       const int n = sh.n[a];
@@ -154,9 +208,15 @@ void MicPreconditioner<T>::build(const Laplace7& k) {
         const int ijk[3] = {i, j, kk};
         const std::size_t n = sh.index(i, j, kk);
         uint8_t bits = 0;
+        const bool solid_n = op.solid && op.solid[n];
         for (int a = 0; a < 3; ++a)
-          if (ijk[a] < sh.n[a] - 1) bits |= uint8_t(1u << a);
+          if (ijk[a] < sh.n[a] - 1 && !solid_n && !(op.solid && op.solid[n + stride[a]]))
+            bits |= uint8_t(1u << a);
         plus[n] = bits;
+        if (solid_n) {  // not an unknown: the preconditioner gives 0 there
+          inv_diag[n] = T(0);
+          continue;
+        }
         const double a_diag = adiag(ijk);
         double e = a_diag;
         for (int a = 0; a < 3; ++a) {
@@ -218,6 +278,18 @@ CgResult solve_cg(const Laplace7& op, double alpha, double beta, const T* b, T* 
   T* q = w.q.data();
   const bool singular = alpha == 0 && op.singular();
   CgResult res;
+  // Unknowns: every node, or the air nodes of a masked operator (means are taken over them).
+  const uint8_t* solid = op.solid;
+  const double unknowns =
+      solid ? deterministic_sum(n, [&](std::size_t i) { return solid[i] ? 0.0 : 1.0; }) : double(n);
+  auto remove_mean = [&](T* v, double mean) {
+    if (solid)
+      parallel_for_cells(long(n), [&](Index i) {
+        if (!solid[i]) v[i] = T(v[i] - mean);
+      });
+    else
+      parallel_for_cells(long(n), [&](Index i) { v[i] = T(v[i] - mean); });
+  };
 
   // r = b - A x on unknown nodes (fixed nodes of x couple in through A x), 0 on fixed ones.
   apply_laplace7(op, alpha, beta, x, q);
@@ -227,10 +299,12 @@ CgResult solve_cg(const Laplace7& op, double alpha, double beta, const T* b, T* 
   if (singular) {
     // Constants are K's null space: solve for the zero-mean part (b - A x sums to 0 exactly in
     // exact arithmetic; remove what round-off left). max|b| is measured on b - mean(b).
-    const double mr = deterministic_sum(n, [&](std::size_t i) { return double(r[i]); }) / double(n);
-    const double mb = deterministic_sum(n, [&](std::size_t i) { return double(b[i]); }) / double(n);
-    parallel_for_cells(long(n), [&](Index i) { r[i] = T(r[i] - mr); });
-    b_max = parallel_max(n, [&](std::size_t i) { return std::fabs(double(b[i]) - mb); });
+    auto air = [&](const T* v, std::size_t i) { return solid && solid[i] ? 0.0 : double(v[i]); };
+    const double mr = deterministic_sum(n, [&](std::size_t i) { return air(r, i); }) / unknowns;
+    const double mb = deterministic_sum(n, [&](std::size_t i) { return air(b, i); }) / unknowns;
+    remove_mean(r, mr);
+    b_max = parallel_max(
+        n, [&](std::size_t i) { return solid && solid[i] ? 0.0 : std::fabs(double(b[i]) - mb); });
   } else {
     // b on fixed nodes is not part of the system.
     std::copy(b, b + n, z);
@@ -256,8 +330,8 @@ CgResult solve_cg(const Laplace7& op, double alpha, double beta, const T* b, T* 
     zero_fixed(op, out);
     if (singular) {
       const double m =
-          deterministic_sum(n, [&](std::size_t i) { return double(out[i]); }) / double(n);
-      parallel_for_cells(long(n), [&](Index i) { out[i] = T(out[i] - m); });
+          deterministic_sum(n, [&](std::size_t i) { return double(out[i]); }) / unknowns;
+      remove_mean(out, m);
     }
   };
 

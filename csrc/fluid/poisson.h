@@ -22,6 +22,9 @@ struct Laplace7 {
   Shape3 shape;
   Side lo[3] = {Side::kPeriodic, Side::kPeriodic, Side::kPeriodic};
   Side hi[3] = {Side::kPeriodic, Side::kPeriodic, Side::kPeriodic};
+  /// Optional per-node mask (shape's size), 1 = solid: not an unknown (0 there), and no coupling
+  /// across a face to it (zero flux). nullptr: no solids.
+  const uint8_t* solid = nullptr;
   /// True when K is singular (no GhostZero and no Fixed side: constants are its null space).
   bool singular() const;
   /// True when node index i along axis d is a fixed (known) node.

@@ -109,10 +109,11 @@ void subtract_gradient(const T* phi, MacGrid<T>& u) {
 }
 
 template <class T>
-void apply_tunnel_boundary(const Vec3& inflow, MacGrid<T>& u) {
+void apply_tunnel_boundary(const Vec3& inflow, const double* weights, MacGrid<T>& u) {
   const GridGeometry& g = u.geo;
   for (int j = 0; j < g.ny; ++j)
-    for (int k = 0; k < g.nz; ++k) u.at(0, 0, j, k) = T(inflow.x());
+    for (int k = 0; k < g.nz; ++k)
+      u.at(0, 0, j, k) = T(weights ? inflow.x() * weights[std::size_t(j) * g.nz + k] : inflow.x());
   for (int i = 0; i < g.nx; ++i)
     for (int k = 0; k < g.nz; ++k) u.at(1, i, 0, k) = u.at(1, i, g.ny, k) = T(0);
   for (int i = 0; i < g.nx; ++i)
@@ -451,11 +452,11 @@ void FftProjector<T>::diffuse_and_project(MacGrid<T>&, double, const Vec3*) {}
 
 #endif
 
-#define FLAGSIM_INSTANTIATE_PRESSURE(T)                             \
-  template void divergence<T>(const MacGrid<T>&, T*);               \
-  template void subtract_gradient<T>(const T*, MacGrid<T>&);        \
-  template void apply_tunnel_boundary<T>(const Vec3&, MacGrid<T>&); \
-  template void set_mean_flow<T>(const Vec3&, MacGrid<T>&);         \
+#define FLAGSIM_INSTANTIATE_PRESSURE(T)                                            \
+  template void divergence<T>(const MacGrid<T>&, T*);                              \
+  template void subtract_gradient<T>(const T*, MacGrid<T>&);                       \
+  template void apply_tunnel_boundary<T>(const Vec3&, const double*, MacGrid<T>&); \
+  template void set_mean_flow<T>(const Vec3&, MacGrid<T>&);                        \
   template class FftProjector<T>;
 FLAGSIM_INSTANTIATE_PRESSURE(float)
 FLAGSIM_INSTANTIATE_PRESSURE(double)

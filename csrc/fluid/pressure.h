@@ -29,9 +29,10 @@ Laplace7 diffusion_operator(const GridGeometry& geo, int c);
 template <class T>
 void subtract_gradient(const T* phi, MacGrid<T>& u);
 
-/// Tunnel boundary values: u = inflow.x on the x-min face, 0 normal velocity on the y and z walls.
+/// Tunnel boundary values: u = inflow.x (times weights[j * nz + k], the inflow profile, when
+/// weights is not null) on the x-min face, 0 normal velocity on the y and z walls.
 template <class T>
-void apply_tunnel_boundary(const Vec3& inflow, MacGrid<T>& u);
+void apply_tunnel_boundary(const Vec3& inflow, const double* weights, MacGrid<T>& u);
 
 /// Adds (target - mean) to each component of a periodic grid, so its k = 0 mode is `target`.
 template <class T>

@@ -12,10 +12,30 @@ void AirParams::validate(const std::string& p) const {
   if (model == AirModel::kGrid) FluidParams::validate(p);
 }
 
+ObstacleParams AirParams::pole_solid(const PoleParams& pole) {
+  ObstacleParams o;
+  o.shape = ObstacleShape::kCylinder;
+  o.axis = Vec3(0, 1, 0);
+  o.radius = pole.radius;
+  o.length = pole.height;
+  o.center = pole.base + Vec3(0, 0.5 * pole.height, 0);
+  o.slip = Slip::kNoSlip;
+  return o;
+}
+
 void Scene::validate() const {
   flag.validate("flag");
   air.validate("air");
-  if (air.model == AirModel::kGrid) air.validate_combination("air");
+  if (air.pole_obstacle && !(air.model == AirModel::kGrid && pole.enabled))
+    fail_param("air.pole_obstacle",
+               "false unless air.model is \"grid\" and pole.enabled is true (the pole is a solid "
+               "of the air grid)",
+               "true");
+  if (air.model == AirModel::kGrid) {
+    AirParams with_pole = air;
+    if (air.pole_obstacle) with_pole.obstacles.push_back(AirParams::pole_solid(pole));
+    with_pole.validate_combination("air");
+  }
   drag.validate("drag");
   integrator.validate("integrator");
   // A strain beyond max_strain raises: at or below the strain limit's promise, so could a step

@@ -22,6 +22,11 @@ struct EnumNames<AirModel> {
 /// by the FluidParams fields, with `wind` as its mean flow (periodic) or inflow (tunnel).
 struct AirParams : FluidParams {
   AirModel model = AirModel::kUniform;
+  /// The scene's pole is a no-slip solid of the air too (a capped cylinder as pole.* gives it),
+  /// so the air flows around it and sheds its wake. Needs model "grid" and an enabled pole.
+  bool pole_obstacle = false;
+  /// The pole as an obstacle of the air (pole.radius, height, base; axis +y; no-slip).
+  static ObstacleParams pole_solid(const PoleParams& pole);
   AirParams() { wind = WindSchedule(Vec3(2.0, 0.0, 0.0)); }
   void validate(const std::string& prefix = "air") const;
 };

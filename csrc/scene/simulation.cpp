@@ -171,7 +171,9 @@ void Simulation::build_fluid() {
       throw InvalidArgument(s.str());
     }
   }
-  fluid_ = std::make_unique<Fluid>(static_cast<const FluidParams&>(a), "air");
+  FluidParams fp = a;
+  if (a.pole_obstacle) fp.obstacles.push_back(AirParams::pole_solid(scene_.pole));
+  fluid_ = std::make_unique<Fluid>(fp, "air");
 }
 
 void Simulation::update_normals() { compute_vertex_normals(topo_, x_, n_); }

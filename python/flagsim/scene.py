@@ -35,11 +35,14 @@ Scene = _core.Scene
 
 # Fields that hold lists of parameter structs: (owner type, field) -> item type. Areas register
 # theirs here (e.g. air.fans), so TOML arrays of tables map onto them.
-LIST_ITEM_TYPES: dict[tuple[type, str], type] = {(_core.AirParams, "fans"): _core.FanParams}
+LIST_ITEM_TYPES: dict[tuple[type, str], type] = {
+    (_core.AirParams, "fans"): _core.FanParams,
+    (_core.AirParams, "obstacles"): _core.ObstacleParams,
+}
 
 # The section a struct's own setters name in their errors when it stands alone (a FanParams says
 # "fan.center"); apply_dict renames it to the item's path ("air.fans[1].center").
-OWN_SECTION: dict[type, str] = {_core.FanParams: "fan"}
+OWN_SECTION: dict[type, str] = {_core.FanParams: "fan", _core.ObstacleParams: "obstacle"}
 
 
 def fields(obj_or_type: Any) -> list[str]:
@@ -182,6 +185,7 @@ def _install() -> None:
         _core.DragParams,
         _core.IntegratorParams,
         _core.FanParams,
+        _core.ObstacleParams,
         _core.FlappingParams,
         _core.SelfCollisionParams,
         _core.PoleParams,
