@@ -304,7 +304,11 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
           [](const Fluid& f) {
             const GridGeometry& g = f.geometry();
             py::array_t<uint16_t> out({g.nx, g.ny, g.nz});
-            std::copy(f.solid_owner().begin(), f.solid_owner().end(), out.mutable_data());
+            const std::vector<uint16_t>& owner = f.solid_owner();  // empty: no solids
+            if (owner.empty())
+              std::fill(out.mutable_data(), out.mutable_data() + out.size(), uint16_t(0));
+            else
+              std::copy(owner.begin(), owner.end(), out.mutable_data());
             return out;
           },
           "Per cell (nx, ny, nz): 0 = air, 1 + index of the obstacle that owns it.")

@@ -90,8 +90,13 @@ void FluidParams::validate(const std::string& prefix) const {
 }
 
 double FluidParams::memory_bytes() const {
-  return cells() * kValuesPerCell *
-         double(precision == Precision::kFloat ? sizeof(float) : sizeof(double));
+  const bool masks = !obstacles.empty() || wall_y_min == Slip::kNoSlip ||
+                     wall_y_max == Slip::kNoSlip || wall_z_min == Slip::kNoSlip ||
+                     wall_z_max == Slip::kNoSlip;
+  // The solid map (csrc/fluid/solids.h): 3 face kinds, an owner (2 bytes) and a mask per cell.
+  return cells() * (kValuesPerCell *
+                        double(precision == Precision::kFloat ? sizeof(float) : sizeof(double)) +
+                    (masks ? 6.0 : 0.0));
 }
 
 void FluidParams::validate_combination(const std::string& prefix) const {

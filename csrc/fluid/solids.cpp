@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
+#include <stdexcept>
 
 #include "common/parallel.h"
 
@@ -21,6 +22,7 @@ inline int step_index(int a, int step, int n, bool periodic) {
 }  // namespace
 
 uint16_t SolidMap::cell_owner(int i, int j, int k) const {
+  if (owner.empty()) return 0;  // nothing built: no solids, no no-slip walls
   const int ijk[3] = {i, j, k};
   int w[3];
   for (int d = 0; d < 3; ++d) {
@@ -38,8 +40,6 @@ uint16_t SolidMap::cell_owner(int i, int j, int k) const {
 void SolidMap::build(const GridGeometry& g, const FluidParams& p) {
   geo = g;
   const Shape3 sc = g.cells();
-  owner.assign(sc.size(), 0);
-  solid.assign(sc.size(), 0);
   cell_count.assign(p.obstacles.size(), 0);
   slip.clear();
   for (const ObstacleParams& o : p.obstacles) slip.push_back(o.slip);
@@ -50,6 +50,17 @@ void SolidMap::build(const GridGeometry& g, const FluidParams& p) {
       any_no_slip = any_no_slip || wall[d][hi] == Slip::kNoSlip;
     }
   any_solid = false;
+  if (p.obstacles.empty() && !any_no_slip) {  // nothing to hold: no masks (no memory, no work)
+    owner.clear();
+    solid.clear();
+    for (int c = 0; c < 3; ++c) {
+      face[c].clear();
+      closed[c].clear();
+    }
+    return;
+  }
+  owner.assign(sc.size(), 0);
+  solid.assign(sc.size(), 0);
   if (!p.obstacles.empty()) {
     for (int i = 0; i < g.nx; ++i)
       for (int j = 0; j < g.ny; ++j)
@@ -170,6 +181,8 @@ int diffuse_explicit(const SolidMap& map, double nu_dt, MacGrid<T>& u, MacGrid<T
   const GridGeometry& g = map.geo;
   const double r = nu_dt / (g.h * g.h);
   if (!(r > 0)) return 0;
+  if (map.face[0].empty())
+    throw std::logic_error("diffuse_explicit: the map holds no solids and no no-slip walls");
   const int substeps = std::max(1, int(std::ceil(r / 0.15)));
   const double a = r / substeps;
   for (int s = 0; s < substeps; ++s) {

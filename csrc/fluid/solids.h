@@ -32,7 +32,8 @@ constexpr double kWakeCellsAcross = 8;
 enum class FaceKind : uint8_t { kOpen = 0, kHeld = 1, kInside = 2, kDomain = 3 };
 
 /// Which cells and faces are solid, which obstacle owns them, and the walls; built once per set of
-/// obstacles (allocation only in build).
+/// obstacles (allocation only in build). Without obstacles and no-slip walls nothing is allocated
+/// (owner, solid and face stay empty).
 struct SolidMap {
   GridGeometry geo;
   std::vector<uint16_t> owner;                  ///< per cell: 0 = air, 1 + obstacle index
@@ -92,7 +93,8 @@ InflowShape inflow_shape(const GridGeometry& g, const FluidParams& p);
 /// Neighbour rules: open and held nodes by their values (held ones hold the wall's velocity);
 /// inside nodes and beyond a y or z wall by the mirror (-u no-slip, +u free-slip); beyond the x
 /// ends zero-gradient. Held, inside and domain nodes keep their values. scratch: u's geometry.
-/// Returns the substep count. No allocation.
+/// Returns the substep count. No allocation. The map must hold solids or no-slip walls (without
+/// them nothing is built, and the implicit solves serve).
 template <class T>
 int diffuse_explicit(const SolidMap& map, double nu_dt, MacGrid<T>& u, MacGrid<T>& scratch);
 

@@ -55,6 +55,9 @@ struct Scene {
   /// zero density only sets u_p), no gravity; instead every mass is pulled along +x (a uniform
   /// 9.81 m/s^2 field along the flag); eq. 5 "displace" on a 16 x 24 flag on its pole.
   static Scene flapping_demo();
+  /// The paper's flag behind its pole, the pole a solid of the air (air.pole_obstacle): a tunnel
+  /// at 2 m/s whose cells resolve the pole (kWakeCellsAcross across), eq. 5 off (issue 23).
+  static Scene pole_wake();
 };
 
 /// Built-in scenes: (name, one-line description), in display order.

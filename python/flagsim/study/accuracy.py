@@ -8,6 +8,9 @@ Parts (each point: settings, error, median wall time per step over repeats, step
   air         extruded 2-D Taylor-Green vortex at t = T against the exact solution (needs Fluid)
   coupled     paper scene in its air grid at t = 1 s against the finest grid and smallest dt
               (needs Fluid)
+  poiseuille  no-slip channel: developed profile against the analytic parabola (accuracy_solids)
+  cylinder    flow past a cylinder at Re = 100: Strouhal number and mean drag coefficient
+              against published values (accuracy_solids)
 Cases run as pure functions of their settings through the study runner; each case stores its
 final state (trajectory, coupled) so errors are computed after all cases finished.
 """
@@ -38,6 +41,8 @@ COLUMNS = [
     "refinement",
     "steps",
     "error",
+    "strouhal",
+    "drag_coefficient",
     "seconds_per_step",
     "steps_per_second",
     "state",
@@ -118,9 +123,10 @@ def cases(quick: bool = False) -> list[dict[str, Any]]:
     for m in ("implicit", "explicit_adaptive"):
         for dt in (0.02, 0.01) if quick else (0.04, 0.02, 0.01, 0.005):
             out.append(dict(id=f"banner-{m}-{dt:g}", part="banner", method=m, dt=dt, repeats=1))
-    from . import accuracy_air
+    from . import accuracy_air, accuracy_solids
 
     out += accuracy_air.cases(quick)
+    out += accuracy_solids.cases(quick)
     return out
 
 
@@ -139,6 +145,10 @@ def run_case(case: dict[str, Any], state_dir: str = "") -> dict[str, Any]:
         return _run_trajectory(case, state_dir)
     if part == "banner":
         return _run_banner(case)
+    if part in ("poiseuille", "cylinder"):
+        from . import accuracy_solids
+
+        return accuracy_solids.run_case(case)
     from . import accuracy_air
 
     return accuracy_air.run_case(case, state_dir)
@@ -280,6 +290,8 @@ PART_TITLES = {
     "banner": "Banner equilibrium angle error after 20 s (rad)",
     "air": "Taylor-Green vortex: RMS velocity error at t = T (m/s)",
     "coupled": "Paper scene in its air grid: RMS vertex error at t = 1 s (m)",
+    "poiseuille": "Plane Poiseuille flow: RMS profile error / U",
+    "cylinder": "Cylinder at Re = 100: larger relative error of St and mean C_D",
 }
 
 
@@ -375,9 +387,51 @@ def _cheapest_table(rows, part, title) -> list[str]:
     return lines + [""]
 
 
+def _solids_section(rows) -> list[str]:
+    """The cylinder against its references, resolution by resolution."""
+    cyl = [r for r in rows if r["part"] == "cylinder"]
+    if not cyl:
+        return []
+    from .accuracy_solids import CD_RANGE, ST_REF
+
+    lines = [
+        "## Solids in the air: the cylinder at Re = 100",
+        "",
+        f"References: Strouhal number {ST_REF:.4f} (Williamson's fit St(Re) = -3.3265/Re + 0.1816 "
+        f"+ 1.6e-4 Re), mean drag coefficient {CD_RANGE[0]}-{CD_RANGE[1]}. Within 5 % of both "
+        "is marked *.",
+        "",
+        "| advection | cells per D | pressure | St | St error | C_D | C_D error "
+        "| wall s per simulated s | |",
+        "|---|---:|---|---:|---:|---:|---:|---:|---|",
+    ]
+    for r in sorted(cyl, key=lambda r: (r["method"], int(r["resolution"]))):
+        if r["strouhal"] in ("", "nan"):
+            lines.append(
+                f"| {r['method']} | {r['resolution']} | {r['pressure']} | {r['state']} "
+                "| | | | | |"
+            )
+            continue
+        st, cd = float(r["strouhal"]), float(r["drag_coefficient"])
+        st_err = st / ST_REF - 1
+        cd_err = 0.0 if CD_RANGE[0] <= cd <= CD_RANGE[1] else min(
+            cd / CD_RANGE[0] - 1, cd / CD_RANGE[1] - 1, key=abs
+        )
+        ok = abs(st_err) <= 0.05 and abs(cd_err) <= 0.05
+        lines.append(
+            f"| {r['method']} | {r['resolution']} | {r['pressure']} | {st:.4f} | {st_err:+.1%} "
+            f"| {cd:.3f} | {cd_err:+.1%} | {_cost(r):.3g} | {'*' if ok else ''} |"
+        )
+    return lines + [""]
+
+
 def _describe(r) -> str:
     bits = [r["method"]]
-    if r.get("resolution"):
+    if r["part"] == "poiseuille":
+        bits.append(f"{r['resolution']} cells across the channel, {r['refinement']}")
+    elif r["part"] == "cylinder":
+        bits.append(f"{r['resolution']} cells per diameter, {r['pressure']}")
+    elif r.get("resolution"):
         bits.append(f"{r['resolution']}^3 grid")
     if r.get("dt"):
         bits.append(f"dt = {float(r['dt']):.4g} s")
@@ -434,7 +488,13 @@ def write_report(rows, path, plots, relative_to) -> None:
                 f"| coupled (dt = {dts[0]:g} s) | {m} | {-q:.2f} | "
                 "grid h, against the finest grid |"
             )
+    for adv in ("semi_lagrangian", "maccormack"):
+        for ref, label in (("cfl", "h, dt proportional to h"), ("dt~h^2", "h, dt ~ h^2")):
+            q = observed_order(rows, "poiseuille", adv, key="resolution", refinement=ref)
+            if not math.isnan(q):
+                lines.append(f"| poiseuille | {adv} | {-q:.2f} | {label} |")
     lines.append("")
+    lines += _solids_section(rows)
     if any(r["part"] == "coupled" for r in rows):
         lines += _cheapest_table(rows, "coupled", "Coupled paper scene")
         paper = [
