@@ -2,7 +2,7 @@
 motion in Scene.pole_wake() (the pole a solid of the air, eq. 5 off), with the pole's shedding
 frequency f = St U / D marked, against the same scene whose air cannot see the pole.
 
-usage: python examples/pole_wake_spectrum.py [--seconds 6] [--out docs/images/pole_wake_spectrum.png]
+usage: python examples/pole_wake_spectrum.py [--seconds 6] [--out PNG]
 """
 
 from __future__ import annotations
@@ -75,10 +75,11 @@ def main() -> None:
             f"{scene.name}: tip z RMS {rms * 100:.2f} cm, spectral peak {peak:.2f} Hz, "
             f"{cost:.1f} wall s per simulated s"
         )
-        ax.semilogy(f, np.maximum(a, 1e-7), style, lw=1, label=f"{scene.name} (RMS {rms*100:.2f} cm)")
+        label = f"{scene.name} (RMS {rms * 100:.2f} cm)"
+        ax.semilogy(f, np.maximum(a, 1e-7), style, lw=1, label=label)
     ax.axvline(f_shed, color="k", lw=0.8, ls=":")
-    ax.text(f_shed, ax.get_ylim()[1], f" St U/D = {f_shed:.1f} Hz\n (St {ST_SUBCRITICAL}, Re {re:,.0f})",
-            va="top", fontsize=7)
+    note = f" St U/D = {f_shed:.1f} Hz\n (St {ST_SUBCRITICAL}, Re {re:,.0f})"
+    ax.text(f_shed, ax.get_ylim()[1], note, va="top", fontsize=7)
     ax.set_xlim(0, 4 * f_shed)
     ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel("tip out-of-plane amplitude (m)")
