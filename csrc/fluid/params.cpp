@@ -94,9 +94,9 @@ double FluidParams::memory_bytes() const {
                      wall_y_max == Slip::kNoSlip || wall_z_min == Slip::kNoSlip ||
                      wall_z_max == Slip::kNoSlip;
   // The solid map (csrc/fluid/solids.h): 3 face kinds, an owner (2 bytes) and a mask per cell.
-  return cells() * (kValuesPerCell *
-                        double(precision == Precision::kFloat ? sizeof(float) : sizeof(double)) +
-                    (masks ? 6.0 : 0.0));
+  return cells() *
+         (kValuesPerCell * double(precision == Precision::kFloat ? sizeof(float) : sizeof(double)) +
+          (masks ? 6.0 : 0.0));
 }
 
 void FluidParams::validate_combination(const std::string& prefix) const {

@@ -414,8 +414,10 @@ def _solids_section(rows) -> list[str]:
             continue
         st, cd = float(r["strouhal"]), float(r["drag_coefficient"])
         st_err = st / ST_REF - 1
-        cd_err = 0.0 if CD_RANGE[0] <= cd <= CD_RANGE[1] else min(
-            cd / CD_RANGE[0] - 1, cd / CD_RANGE[1] - 1, key=abs
+        cd_err = (
+            0.0
+            if CD_RANGE[0] <= cd <= CD_RANGE[1]
+            else min(cd / CD_RANGE[0] - 1, cd / CD_RANGE[1] - 1, key=abs)
         )
         ok = abs(st_err) <= 0.05 and abs(cd_err) <= 0.05
         lines.append(
