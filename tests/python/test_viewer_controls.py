@@ -3,6 +3,8 @@ pause, step, reset, the wind, flapping and integrator controls, the keys, the re
 and the panel's figures. No OpenGL needed."""
 
 import math
+import subprocess
+import sys
 
 import flagsim
 import numpy as np
@@ -231,3 +233,15 @@ def test_shift_keys_holds_the_ends_and_interpolates_between():
     assert shift_keys(keys, 5.0) == [(0.0, (3.0, 0.0, 0.0))]
     assert shift_keys([(1.0, 2.0), (3.0, 4.0)], 0.5) == [(0.5, 2.0), (2.5, 4.0)]
 
+
+def test_the_viewer_and_usd_modules_load_polyscope_and_pxr_only_when_drawing_or_writing():
+    # `import flagsim` loads neither (tests/python/test_scene.py); neither do the controls, the
+    # USD module, or `flagsim view --help`, in a fresh interpreter
+    code = (
+        "import sys, flagsim, flagsim.viewer, flagsim.usd; from flagsim import cli\n"
+        "flagsim.viewer.Controller(flagsim.Simulation(flagsim.Scene.paper())).advance(0.02)\n"
+        "try:\n    cli.main(['view', '--help'])\nexcept SystemExit:\n    pass\n"
+        "print([m for m in ('polyscope', 'polyscope_bindings', 'pxr') if m in sys.modules])"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert r.stdout.strip().splitlines()[-1] == "[]"
