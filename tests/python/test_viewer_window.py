@@ -9,7 +9,7 @@ import os
 import flagsim
 import numpy as np
 import pytest
-from _optional import require
+from _optional import missing, require
 from flagsim import cli, viewer
 
 WIDTH, HEIGHT = 480, 360
@@ -192,3 +192,14 @@ def test_a_texture_is_mapped_by_uv_with_its_top_row_at_the_top(gl, tmp_path):
             checked += 1
     assert checked > 10
     assert not red(picture).any()
+
+
+def test_every_shortcut_names_keys_polyscope_has():
+    # the live window looks them up by name (polyscope.imgui.ImGuiKey_<name>); a typo would only
+    # show when the window runs
+    require(missing("polyscope", "viewer"))
+    import polyscope.imgui as psim
+
+    for _, _, _, names in viewer.KEYS:
+        for name in names:
+            assert isinstance(getattr(psim, "ImGuiKey_" + name), psim.ImGuiKey)
