@@ -151,6 +151,27 @@ def test_wind_keys_step_speed_and_direction_and_bad_values_are_refused():
         c.press("q")
 
 
+def test_a_control_whose_scene_is_refused_changes_nothing(monkeypatch):
+    c = paper_controller()
+    sim = c.sim
+
+    def refuse(scene):
+        raise ValueError(f"air.wind refused: {scene.air.wind}")
+
+    monkeypatch.setattr(flagsim, "Simulation", refuse)
+    with pytest.raises(ValueError, match="air.wind refused"):
+        c.set_wind(speed=3.0, direction=90.0)
+    with pytest.raises(ValueError, match="refused"):
+        c.set_flapping("off")
+    assert (c.sim, c.wind_speed, c.wind_direction, c.wind_set, c.flapping) == (
+        sim,
+        1.5,
+        0.0,
+        False,
+        "displace",
+    )
+
+
 def test_flapping_and_integrator_controls_rebuild_with_the_chosen_stage():
     c = paper_controller()
     c.advance(0.2)

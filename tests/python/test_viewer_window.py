@@ -143,6 +143,12 @@ def test_view_refuses_bad_input_before_any_work(tmp_path, capsys):
     assert code == 2 and "--frames should be >= 1, got 0" in capsys.readouterr().err
     code = cli.main(["view", "nowhere", "--screenshot", str(tmp_path / "a.png")])
     assert code == 2 and "unknown scene 'nowhere'" in capsys.readouterr().err
+    code = cli.main(["view", "paper", "--frames", "0"])
+    assert code == 2 and "--frames applies to --screenshot only" in capsys.readouterr().err
+    code = cli.main(["view", "paper", "--screenshot", str(tmp_path / "a.png"), "--width", "500"])
+    assert code == 2 and "width should be >= 660 pixels with the panel, got 500" in (
+        capsys.readouterr().err
+    )
     assert list(tmp_path.iterdir()) == []
 
 

@@ -41,14 +41,12 @@ def configure(p):
     p.add_argument(
         "--frames",
         type=int,
-        default=50,
         metavar="N",
         help="frames to draw before the screenshot (default 50: 2 s at 25 frames/s)",
     )
     p.add_argument(
         "--fps",
         type=float,
-        default=25.0,
         metavar="F",
         help="screenshot frames per simulated second (default 25)",
     )
@@ -75,8 +73,10 @@ def run(args):
 
     scenefiles.check_texture(args.texture)
     if args.screenshot is None:
-        if args.no_panel:
-            raise ValueError("--no-panel applies to --screenshot only")
+        given = {"--no-panel": args.no_panel, "--frames": args.frames is not None}
+        given["--fps"] = args.fps is not None
+        for option in (k for k, v in given.items() if v):
+            raise ValueError(f"{option} applies to --screenshot only")
         viewer.check_size(args.width or 1280, args.height or 720)
         scene, _ = load_scene(args.scene)
         ctrl = viewer.Controller(flagsim.Simulation(scene))
@@ -89,6 +89,8 @@ def run(args):
             raise CommandError(str(e)) from None
         return 0
     path = viewer.check_png_path(args.screenshot)
+    args.frames = 50 if args.frames is None else args.frames
+    args.fps = 25.0 if args.fps is None else args.fps
     if args.frames < 1:
         raise ValueError(f"--frames should be >= 1, got {args.frames}")
     viewer.check_size(args.width or 960, args.height or 540, panel=not args.no_panel)

@@ -230,8 +230,7 @@ class Controller:
         direction = (direction + 180.0) % 360.0 - 180.0
         if self.wind_set and (speed, direction) == (self.wind_speed, self.wind_direction):
             return
-        self.wind_speed, self.wind_direction, self.wind_set = speed, direction, True
-        self._rebuild()
+        self._change(wind_speed=speed, wind_direction=direction, wind_set=True)
 
     def set_flapping(self, mode):
         """Flapping mode, one of FLAPPING_MODES (docs/flapping.md). The state carries over."""
@@ -240,8 +239,7 @@ class Controller:
                 f"flapping mode should be one of {', '.join(FLAPPING_MODES)}, got {mode!r}"
             )
         if mode != self.flapping:
-            self.flapping = mode
-            self._rebuild()
+            self._change(flapping=mode)
 
     def set_integrator(self, method):
         """Integrator, 'implicit' or 'explicit'. The state carries over."""
@@ -250,8 +248,7 @@ class Controller:
                 f"integrator should be one of {', '.join(INTEGRATORS)}, got {method!r}"
             )
         if method != self.integrator:
-            self.integrator = method
-            self._rebuild()
+            self._change(integrator=method)
 
     def wind_up(self):
         self.set_wind(speed=min(self.wind_speed + WIND_SPEED_STEP, MAX_WIND_SPEED))
@@ -281,6 +278,19 @@ class Controller:
 
     def other_integrator(self):
         self.set_integrator(INTEGRATORS[1 - INTEGRATORS.index(self.integrator)])
+
+    def _change(self, **controls):
+        """Set the controls and rebuild; if the changed scene is refused (a ValueError naming
+        what), the controls and the simulation stay as they were."""
+        before = {k: getattr(self, k) for k in controls}
+        for k, v in controls.items():
+            setattr(self, k, v)
+        try:
+            self._rebuild()
+        except Exception:
+            for k, v in before.items():
+                setattr(self, k, v)
+            raise
 
     def _rebuild(self):
         """A Simulation of the current controls that goes on from the current state."""
