@@ -7,7 +7,10 @@ VENV := .venv
 PY := $(VENV)/bin/python
 BUILD := build
 CTEST := $(VENV)/bin/ctest
-APT_PACKAGES := g++ make python3-venv python3-dev libeigen3-dev libfftw3-dev libgtest-dev povray
+# libegl1 ... libgl1-mesa-dri: off-screen OpenGL for the viewer's tests and screenshots (polyscope
+# through EGL on Mesa's software rasteriser; each one found needed in a bare Debian 12 chroot).
+APT_PACKAGES := g++ make python3-venv python3-dev libeigen3-dev libfftw3-dev libgtest-dev povray \
+    libegl1 libegl-mesa0 libgl1 libgl1-mesa-dri
 JOBS ?= 2
 
 .PHONY: all demo test test-cpp test-python build bench bench-deps study clean system-deps lint format
@@ -34,7 +37,7 @@ $(VENV)/.deps: pyproject.toml tools/requirements.py | system-deps
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q "tomli>=2.0; python_version < '3.11'" cmake ninja
-	$(PY) -m pip install -q -r <($(PY) tools/requirements.py build project test lint)
+	$(PY) -m pip install -q -r <($(PY) tools/requirements.py build project test lint viewer usd)
 	@touch $@
 
 # Incremental: scikit-build-core reuses build/ and ninja rebuilds only what changed.

@@ -65,9 +65,10 @@ __all__ = [
 
 
 def __getattr__(name):
-    # flagsim.povray (POV-Ray export and rendering) loads on first use: simulating needs none of it.
-    if name == "povray":
+    # flagsim.povray (POV-Ray export and rendering), flagsim.viewer (polyscope) and flagsim.usd
+    # (usd-core) load on first use: simulating needs none of them.
+    if name in ("povray", "viewer", "usd"):
         import importlib
 
-        return importlib.import_module(".povray", __name__)
+        return importlib.import_module(f".{name}", __name__)
     raise AttributeError(f"module 'flagsim' has no attribute {name!r}")

@@ -25,6 +25,10 @@ COMMANDS = {
         "simulate a scene and export it for POV-Ray (--render: render it to a GIF/MP4)",
     ),
     "render": ("flagsim.commands.render", "render an existing export with POV-Ray"),
+    "view": (
+        "flagsim.commands.view",
+        "watch a scene live in a window (--screenshot: a picture drawn off-screen)",
+    ),
     "scenes": ("flagsim.commands.scenes", "list the built-in scenes"),
     "study": (
         "flagsim.commands.study",

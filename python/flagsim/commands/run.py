@@ -3,6 +3,10 @@
 With --render, POV-Ray renders the frames on every core and they are assembled into an animated
 GIF (or MP4); its path is printed at the end.
 
+With --usd FILE (`pip install 'flagsim[usd]'`), the same frames also go into one USD file for
+Blender, Houdini and other USD readers: the flag as a mesh with time-sampled points and
+normals, its uv, and the pole (docs/usd.md). --usd alone needs no --out.
+
 Running the same command again resumes an interrupted run: frames already exported or rendered
 are kept. DIR must be new, empty, or a flagsim export; flagsim never deletes or overwrites a file
 it did not create, and refuses a second process writing into DIR at the same time
@@ -11,6 +15,7 @@ it did not create, and refuses a second process writing into DIR at the same tim
 examples:
   flagsim run paper --seconds 4 --fps 25 --out out/demo --render --gif
   flagsim run my_scene.toml --out out/mine --render --width 800 --height 600 --texture flag.png
+  flagsim run paper --seconds 4 --fps 25 --usd out/flag.usdc
 """
 
 from __future__ import annotations
@@ -27,7 +32,14 @@ def configure(p):
         metavar="SCENE",
         help="a built-in scene name ('flagsim scenes' lists them) or a TOML scene file",
     )
-    p.add_argument("--out", "-o", required=True, metavar="DIR", help="output folder")
+    p.add_argument(
+        "--out", "-o", metavar="DIR", help="output folder of the POV-Ray export (or use --usd)"
+    )
+    p.add_argument(
+        "--usd",
+        metavar="FILE",
+        help="also (or only) write the frames as USD: a .usdc (binary), .usda (text) or .usd file",
+    )
     p.add_argument(
         "--seconds", type=float, default=4.0, metavar="S", help="simulated time, s (default 4)"
     )
@@ -68,14 +80,42 @@ def run(args):
     import flagsim
 
     from .. import povray
+    from ..cli import CommandError
     from ..povray import scenefiles
 
     render = args.render or args.gif or args.mp4
+    if args.out is None and args.usd is None:
+        raise ValueError("give --out DIR (POV-Ray export), --usd FILE, or both")
+    if args.out is None and render:
+        raise ValueError("--render needs --out DIR: POV-Ray renders the export there")
     scenefiles.check_texture(args.texture)
     scene, description = load_scene(args.scene)
+    recorder = None
+    if args.usd is not None:
+        from .. import usd
+
+        usd.check_path(args.usd)
+        try:
+            usd.require()
+        except usd.UsdUnavailable as e:
+            raise CommandError(str(e)) from None
     if render:
         check_animation_tools(args)
     sim = flagsim.Simulation(scene)
+    if args.out is None:
+        result = usd.write(
+            sim, args.usd, seconds=args.seconds, fps=args.fps, scene=scene, progress=not args.quiet
+        )
+        if not args.quiet:
+            print(
+                f"wrote {result.frames} frames to {result.path} ({result.bytes / 1e3:,.0f} kB; "
+                f"{result.steps} steps in {result.wall_seconds:.1f} s)",
+                file=sys.stderr,
+            )
+        print(result.path)
+        return 0
+    if args.usd is not None:
+        recorder = usd.Recorder(sim, fps=args.fps, scene=scene)
     key = {"scene": description, "fps": float(args.fps), "dt": float(scene.dt)}
     result = povray.export(
         sim,
@@ -89,6 +129,7 @@ def run(args):
         key=key,
         overwrite=args.overwrite,
         progress=not args.quiet,
+        on_frame=None if recorder is None else recorder.add_frame,
     )
     out = Path(args.out)
     if not args.quiet:
@@ -97,6 +138,13 @@ def run(args):
             f"{result.kept} kept; {result.steps} steps in {result.wall_seconds:.1f} s)",
             file=sys.stderr,
         )
+    if recorder is not None:
+        size = recorder.save(args.usd)
+        if not args.quiet:
+            print(
+                f"wrote {recorder.frames} frames to {args.usd} ({size / 1e3:,.0f} kB)",
+                file=sys.stderr,
+            )
     if not render:
         if not args.quiet:
             print(f"render it with:  flagsim render {out}", file=sys.stderr)

@@ -180,6 +180,7 @@ def export(
     overwrite=False,
     progress=True,
     povray_binary=None,
+    on_frame=None,
 ):
     """Simulate ``seconds`` of ``sim`` and write a POV-Ray animation into ``out_dir``.
 
@@ -193,6 +194,8 @@ def export(
     key        JSON-able description of what determines the frames (scene, fps, dt): a folder
                holding an export with another key raises ExportConflict unless overwrite
     progress   tqdm bar on stderr with simulated time, steps per second and ETA
+    on_frame   called as on_frame(sim) after each frame is taken (another exporter, e.g.
+               flagsim.usd.Recorder.add_frame, records the same frames)
 
     Writes flag.pov, flag.ini, frames/flag_NNNNN.inc, export.json (and render/, .povray/).
     An interrupted call can be repeated: frames already written identically are kept.
@@ -222,7 +225,19 @@ def export(
             old_frames = 0  # a damaged count: every stale frame and picture goes
         _remove_stale(out, old_frames, len(steps))
         return _export_frames(
-            sim, out, steps, dt, key, pole, width, height, texture, progress, povray_binary, fps
+            sim,
+            out,
+            steps,
+            dt,
+            key,
+            pole,
+            width,
+            height,
+            texture,
+            progress,
+            povray_binary,
+            fps,
+            on_frame,
         )
 
 
@@ -238,7 +253,7 @@ def output_folder(out_dir) -> Path:
 
 
 def _export_frames(
-    sim, out, steps, dt, key, pole, width, height, texture, progress, povray_binary, fps
+    sim, out, steps, dt, key, pole, width, height, texture, progress, povray_binary, fps, on_frame
 ):
     manifest = {
         "format": MANIFEST_FORMAT,
@@ -293,6 +308,8 @@ def _export_frames(
                 written += 1
             else:
                 kept += 1
+            if on_frame is not None:
+                on_frame(sim)
             if bar is not None:
                 bar.n = round(target * dt, 6)
                 done = sim.step_count - start_step

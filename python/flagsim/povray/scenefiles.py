@@ -37,13 +37,34 @@ IMAGE_TYPES = {
     ".hdr": "hdr",
 }
 
-# A red flag with an off-centre white cross (u = 0 is the pole side, v = 1 the top): its colour is
-# easy to tell from sky, ground and pole, and the cross shows the flag's orientation.
-BUILTIN_PIGMENT = """pigment {
+# The built-in flag: red with an off-centre white cross (u = 0 is the pole side, v = 1 the top);
+# its colour is easy to tell from sky, ground and pole, and the cross shows the flag's
+# orientation. POV-Ray draws it as a function pigment, the viewer as an image (builtin_flag_image).
+FLAG_RED = (0.72, 0.03, 0.05)
+FLAG_WHITE = (0.96, 0.96, 0.93)
+CROSS_U = (0.36, 0.07)  # the vertical bar: centre and half width, in u
+CROSS_V = (0.5, 0.09)  # the horizontal bar: centre and half width, in v
+
+
+def _rgb(c):
+    return f"<{c[0]:.2f}, {c[1]:.2f}, {c[2]:.2f}>"
+
+
+BUILTIN_PIGMENT = f"""pigment {{
       uv_mapping
-      function { max(select(abs(x - 0.36) - 0.07, 1, 0), select(abs(y - 0.5) - 0.09, 1, 0)) }
-      color_map { [0.5 color rgb <0.72, 0.03, 0.05>] [0.5 color rgb <0.96, 0.96, 0.93>] }
-    }"""
+      function {{ max(select(abs(x - {CROSS_U[0]}) - {CROSS_U[1]}, 1, 0), \
+select(abs(y - {CROSS_V[0]}) - {CROSS_V[1]}, 1, 0)) }}
+      color_map {{ [0.5 color rgb {_rgb(FLAG_RED)}] [0.5 color rgb {_rgb(FLAG_WHITE)}] }}
+    }}"""
+
+
+def builtin_flag_image(size=256):
+    """The built-in flag as an (size, size, 3) float image, row 0 at the top (v = 1)."""
+    c = (np.arange(size) + 0.5) / size
+    u, v = np.meshgrid(c, c[::-1])
+    white = (np.abs(u - CROSS_U[0]) < CROSS_U[1]) | (np.abs(v - CROSS_V[0]) < CROSS_V[1])
+    return np.where(white[..., None], FLAG_WHITE, FLAG_RED)
+
 
 FRAME_DIR = "frames"
 RENDER_DIR = "render"
