@@ -37,7 +37,7 @@ $(VENV)/.deps: pyproject.toml tools/requirements.py | system-deps
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q "tomli>=2.0; python_version < '3.11'" cmake ninja
-	$(PY) -m pip install -q -r <($(PY) tools/requirements.py build project test lint viewer usd)
+	$(PY) -m pip install -q -r <($(PY) tools/requirements.py build project test lint viewer usd distributed)
 	@touch $@
 
 # Incremental: scikit-build-core reuses build/ and ninja rebuilds only what changed.
