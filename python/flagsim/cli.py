@@ -105,7 +105,9 @@ def run_guarded(fn, args):
     """Run a command, turning the errors a user can act on into one line and an exit code."""
     import flagsim
 
+    from ._pool import DaskNotInstalled
     from .povray.render import FfmpegNotFound, PovrayNotFound, RenderError
+    from .study.runner import TaskFailed
 
     try:
         return fn(args)
@@ -114,7 +116,14 @@ def run_guarded(fn, args):
         return EXIT_INTERRUPTED
     except flagsim.DivergenceError as e:
         return error(f"the simulation diverged: {e}", EXIT_FAILURE)
-    except (PovrayNotFound, FfmpegNotFound, RenderError, CommandError) as e:
+    except (
+        PovrayNotFound,
+        FfmpegNotFound,
+        RenderError,
+        CommandError,
+        TaskFailed,
+        DaskNotInstalled,
+    ) as e:
         return error(str(e), EXIT_FAILURE)
     except ValueError as e:  # invalid scene, TOML key, argument value, export conflict
         return error(str(e), EXIT_USAGE)

@@ -1,4 +1,4 @@
-"""Helpers shared by the sub-commands: scene lookup, animation options."""
+"""Helpers shared by the sub-commands: scene lookup, animation and cluster options."""
 
 from __future__ import annotations
 
@@ -62,13 +62,57 @@ def add_animation_options(parser):
     )
 
 
+def add_cluster_options(parser):
+    """--scheduler and --workers: run the command's tasks on a Dask cluster (docs/distributed.md;
+    needs the optional extra: pip install 'flagsim[distributed]')."""
+    group = parser.add_argument_group(
+        "cluster", "run the tasks on a Dask cluster (docs/distributed.md; needs Dask distributed)"
+    )
+    group.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="a running Dask scheduler (tcp://host:8786); its workers run the tasks, and see "
+        "the output folder if it is shared (else they return their files to this process)",
+    )
+    group.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="start a local Dask cluster of N worker processes (one thread each) for this run",
+    )
+
+
+def cluster_executor(args):
+    """Context manager yielding the Dask executor that --scheduler / --workers ask for, or None
+    (the command's local process pool)."""
+    from .._pool import cluster
+
+    return cluster(
+        scheduler=getattr(args, "scheduler", None), workers=getattr(args, "workers", None)
+    )
+
+
+def local_jobs(args):
+    """--jobs (the local pool's size; default 1), refused beside --scheduler / --workers."""
+    if args.jobs is not None and (args.scheduler is not None or args.workers is not None):
+        raise ValueError(
+            "--jobs should not be given with --scheduler or --workers: it sizes the local "
+            "process pool, and the cluster's workers run the tasks"
+        )
+    jobs = 1 if args.jobs is None else args.jobs
+    if jobs < 1:
+        raise ValueError(f"--jobs should be >= 1, got {jobs}")
+    return jobs
+
+
 def check_animation_tools(args):
     """Fail before any work if the requested output cannot be made."""
     import shutil
 
     from ..povray import FfmpegNotFound, find_povray
 
-    find_povray()
+    if getattr(args, "scheduler", None) is None and getattr(args, "workers", None) is None:
+        find_povray()  # on a cluster the workers render: each finds its own
     if args.mp4 and shutil.which("ffmpeg") is None:
         raise FfmpegNotFound(
             "--mp4 needs ffmpeg, which is not installed: install the Debian "
@@ -85,9 +129,16 @@ def render_and_assemble(out_dir, args, *, width=None, height=None, force=False):
     from .. import povray
 
     quiet = args.quiet
-    result = povray.render(
-        out_dir, width=width, height=height, jobs=args.jobs, progress=not quiet, force=force
-    )
+    with cluster_executor(args) as executor:
+        result = povray.render(
+            out_dir,
+            width=width,
+            height=height,
+            jobs=args.jobs,
+            executor=executor,
+            progress=not quiet,
+            force=force,
+        )
     for frame, lines in sorted(result.diagnostics.items()):
         print(f"flagsim: POV-Ray said for frame {frame}: " + " | ".join(lines), file=sys.stderr)
     manifest = povray.read_manifest(out_dir)

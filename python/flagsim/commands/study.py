@@ -8,17 +8,22 @@
              strain within the scene's promise), diverged (reported), implausible or non-finite
              (the last two must never happen: the command then exits 1)
 
-Cases run through a process pool (--jobs N) and an interrupted study resumes from its CSV.
-Timings are most meaningful with --jobs 1 on a quiet machine.
+Cases run through a process pool (--jobs N) or on a Dask cluster (--scheduler ADDRESS, or
+--workers N for a local one; docs/distributed.md), and an interrupted study resumes from its CSV.
+DIR/tasks.csv says where each case ran, how many attempts it took and how long. Timings are most
+meaningful with --jobs 1 on a quiet machine.
 
 examples:
   flagsim study stability --out out/stability --jobs 2
+  flagsim study stability --out out/stability --scheduler tcp://scheduler:8786
   flagsim study accuracy --out out/accuracy --docs docs/reports   # docs/reports/accuracy.md
 """
 
 from __future__ import annotations
 
 import os
+
+from ._common import add_cluster_options, cluster_executor, local_jobs
 
 
 def configure(p):
@@ -29,9 +34,9 @@ def configure(p):
     p.add_argument(
         "--jobs",
         type=int,
-        default=1,
         metavar="N",
-        help="worker processes (default 1: timings undisturbed)",
+        help="local worker processes (default 1: timings undisturbed); not with --scheduler "
+        "or --workers",
     )
     p.add_argument(
         "--quick",
@@ -44,19 +49,25 @@ def configure(p):
         help="also write the report (and plots) into DIR as accuracy.md / stability.md",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_cluster_options(p)
 
 
 def run(args):
     from .. import study
 
-    if args.jobs < 1:  # a ValueError: the CLI's one error funnel prints it and exits 2
-        raise ValueError(f"--jobs should be >= 1, got {args.jobs}")
+    jobs = local_jobs(args)  # a ValueError: the CLI's one error funnel prints it and exits 2
     report = os.path.join(args.docs, f"{args.study}.md") if args.docs else None
+    with cluster_executor(args) as executor:
+        return _run(args, study, report, jobs, executor)
+
+
+def _run(args, study, report, jobs, executor):
     if args.study == "stability":
         rows = study.run_stability(
             args.out,
             reduced=args.quick,
-            jobs=args.jobs,
+            jobs=jobs,
+            executor=executor,
             progress=not args.quiet,
             report_path=report,
         )
@@ -72,7 +83,8 @@ def run(args):
         study.run_accuracy(
             args.out,
             quick=args.quick,
-            jobs=args.jobs,
+            jobs=jobs,
+            executor=executor,
             progress=not args.quiet,
             report_path=report,
             plot_dir=plot_dir,

@@ -93,6 +93,15 @@ def write_text(path, text, *, only_if_changed=True):
     return True
 
 
+def write_bytes(path, data, *, only_if_changed=True):
+    """write_text for bytes (an image, a file a task returned)."""
+    path = Path(path)
+    if only_if_changed and path.is_file() and path.read_bytes() == data:
+        return False
+    _core.write_file_atomic(os.fspath(path), bytes(data))
+    return True
+
+
 def pov_vector(v, *, point=True):
     """POV-Ray vector text for a flagsim vector: z negated (left-handed frame)."""
     x, y, z = (float(c) for c in v)

@@ -1,18 +1,25 @@
 """Studies users asked for: error against run time (`accuracy`) and stability on stiff and
 extreme cases (`stability`). Both run their cases through a concurrent.futures.Executor
-(local processes by default), resume from their CSV, and write CSV + markdown (+ PNG plots).
+(local processes by default; a Dask cluster's, docs/distributed.md), resume from their CSV, and
+write CSV + markdown (+ PNG plots), and tasks.csv: where each case ran and how long it took.
 
     python -m flagsim.study stability --out DIR [--reduced] [--jobs N]
     python -m flagsim.study accuracy --out DIR [--quick] [--jobs N]
+
+    from distributed import Client
+    with Client("tcp://scheduler:8786") as client:
+        run_stability("out/stab", executor=client.get_executor())
 """
 
 from __future__ import annotations
 
-import functools
 import os
 
 from .report import machine_description
 from .runner import run_cases
+
+#: the study's task index (runner.INDEX_COLUMNS): which worker ran each case, attempts, seconds
+TASK_INDEX = "tasks.csv"
 
 
 def run_stability(
@@ -35,6 +42,7 @@ def run_stability(
         executor=executor,
         progress=progress,
         desc="stability",
+        index=os.path.join(out, TASK_INDEX),
     )
     stability.write_report(
         rows, report_path or os.path.join(out, "stability.md"), machine_description()
@@ -55,16 +63,17 @@ def run_accuracy(
     from . import accuracy
 
     state_dir = os.path.join(out, "states")
-    fn = functools.partial(accuracy.run_case, state_dir=state_dir)
     rows = run_cases(
         accuracy.cases(quick),
-        fn,
+        accuracy.run_case,
         os.path.join(out, "runs.csv"),
         accuracy.COLUMNS,
         jobs=jobs,
         executor=executor,
         progress=progress,
         desc="accuracy",
+        index=os.path.join(out, TASK_INDEX),
+        files_dir=state_dir,  # the final states the cases return
     )
     rows = [dict(r) for r in rows]
     accuracy.fill_state_errors(rows, state_dir)

@@ -26,7 +26,7 @@ import numpy as np
 
 import flagsim
 
-from .common import save_state, set_method
+from .common import set_method, state_result
 from .report import machine_description, write_text
 
 COLUMNS = [
@@ -136,13 +136,13 @@ def _timed_run(sim: flagsim.Simulation, steps: int) -> float:
     return time.perf_counter() - t0
 
 
-def run_case(case: dict[str, Any], state_dir: str = "") -> dict[str, Any]:
+def run_case(case: dict[str, Any]) -> dict[str, Any]:
     """Pure function of the case's settings (apart from the wall times it measures)."""
     part = case["part"]
     if part == "pair":
         return _run_pair(case)
     if part in ("trajectory", "trajectory-reference"):
-        return _run_trajectory(case, state_dir)
+        return _run_trajectory(case)
     if part == "banner":
         return _run_banner(case)
     if part in ("poiseuille", "cylinder"):
@@ -151,7 +151,7 @@ def run_case(case: dict[str, Any], state_dir: str = "") -> dict[str, Any]:
         return accuracy_solids.run_case(case)
     from . import accuracy_air
 
-    return accuracy_air.run_case(case, state_dir)
+    return accuracy_air.run_case(case)
 
 
 def _run_pair(case: dict[str, Any]) -> dict[str, Any]:
@@ -176,7 +176,7 @@ def _run_pair(case: dict[str, Any]) -> dict[str, Any]:
     return dict(dt=dt, steps=div, error=err, seconds_per_step=spp, steps_per_second=1 / spp)
 
 
-def _run_trajectory(case: dict[str, Any], state_dir: str) -> dict[str, Any]:
+def _run_trajectory(case: dict[str, Any]) -> dict[str, Any]:
     dt = float(case["dt"])
     steps = round(1.0 / dt)
     times = []
@@ -210,7 +210,7 @@ def _run_trajectory(case: dict[str, Any], state_dir: str) -> dict[str, Any]:
         steps=steps,
         seconds_per_step=spp,
         steps_per_second=1 / spp,
-        state=save_state(state_dir, case["id"], sim.positions.copy()),
+        **state_result(case["id"], sim.positions.copy()),
     )
 
 

@@ -20,7 +20,7 @@ import numpy as np
 
 import flagsim
 
-from .common import save_state, set_method
+from .common import set_method, state_result
 
 U, L, NU, T_END, CFL = 1.0, 1.0, 0.01, 0.25, 0.5
 
@@ -115,10 +115,10 @@ def taylor_green(points: np.ndarray, t: float = 0.0) -> np.ndarray:
     )
 
 
-def run_case(case: dict[str, Any], state_dir: str) -> dict[str, Any]:
+def run_case(case: dict[str, Any]) -> dict[str, Any]:
     if case["part"] == "air":
         return _run_tg(case)
-    return _run_coupled(case, state_dir)
+    return _run_coupled(case)
 
 
 def _run_tg(case: dict[str, Any]) -> dict[str, Any]:
@@ -168,7 +168,7 @@ def coupled_scene(method: str, resolution: int, dt: float) -> flagsim.Scene:
     return s
 
 
-def _run_coupled(case: dict[str, Any], state_dir: str) -> dict[str, Any]:
+def _run_coupled(case: dict[str, Any]) -> dict[str, Any]:
     dt = float(case["dt"])
     steps = round(1.0 / dt)
     sim = flagsim.Simulation(coupled_scene(case["method"], int(case["resolution"]), dt))
@@ -183,7 +183,7 @@ def _run_coupled(case: dict[str, Any], state_dir: str) -> dict[str, Any]:
         steps=steps,
         seconds_per_step=spp,
         steps_per_second=1 / spp,
-        state=save_state(state_dir, case["id"], sim.positions.copy()),
+        **state_result(case["id"], sim.positions.copy()),
     )
 
 

@@ -3,13 +3,13 @@ accuracy_air.py): integrator method names and the final states kept for the erro
 
 from __future__ import annotations
 
-import os
+import io
 
 import numpy as np
 
 import flagsim
 
-from .report import save_npy
+from .runner import FILES
 
 
 def set_method(scene: flagsim.Scene, method: str) -> None:
@@ -19,8 +19,11 @@ def set_method(scene: flagsim.Scene, method: str) -> None:
     scene.integrator.substeps = int(method.split("sub")[1]) if "sub" in method else 1
 
 
-def save_state(state_dir: str, case_id: str, x: np.ndarray) -> str:
-    """Write a case's final positions under state_dir; returns the file name."""
+def state_result(case_id: str, x: np.ndarray) -> dict:
+    """A case's final positions as result fields: the file name (``state``), and the .npy bytes
+    among the files the study's head writes into its states/ folder (runner.FILES), so the case
+    may run on a worker that does not see the head's folders."""
     name = case_id.replace("/", "_") + ".npy"
-    save_npy(os.path.join(state_dir, name), x)
-    return name
+    buf = io.BytesIO()
+    np.save(buf, x)
+    return {"state": name, FILES: {name: buf.getvalue()}}

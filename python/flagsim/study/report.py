@@ -46,13 +46,3 @@ def machine_description() -> str:
         f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, "
         f"flagsim {flagsim.__version__} (git {rev})"
     )
-
-
-def save_npy(path: str, array) -> None:
-    """np.save, whole or not at all."""
-    import numpy as np
-
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-    tmp = f"{path}.tmp{os.getpid()}.npy"
-    np.save(tmp, array)
-    os.replace(tmp, path)
