@@ -7,6 +7,7 @@ import shutil
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
 
 import flagsim
 import flagsim.povray as pov
@@ -151,6 +152,42 @@ def test_up_to_date_frames_are_kept_and_a_gif_is_assembled(rendered):
     frames = iio.imread(gif, index=None)
     assert frames.shape[:3] == (4, 60, 80)
     assert iio.immeta(gif, index=0).get("duration") == 100  # ms per frame at 10 fps
+
+
+@needs_povray
+def test_a_worker_that_does_not_see_the_folder_asks_for_inputs_and_returns_the_image(
+    rendered, tmp_path
+):
+    # A frame job names the head's lock record; a worker whose folder of that name holds no such
+    # record (another machine) asks for the inputs, then renders them in a folder of its own and
+    # returns the image: the same bytes as the image rendered in place. Images carry no render
+    # time, so rendering a frame again gives the same file.
+    from flagsim.povray import scenefiles
+    from flagsim.povray.render import render_frame
+
+    out, first = rendered
+    record = {"pid": -1, "host": "another-machine", "started": "then", "command": "flagsim"}
+    job = pov.FrameJob(
+        frame=2,
+        out_dir=str(out),
+        image="render/elsewhere.png",
+        povray="povray",
+        width=80,
+        height=60,
+        share=record,
+    )
+    asked = render_frame(job)
+    assert asked.needs_inputs and not asked.ok and not (out / job.image).exists()
+    inputs = {
+        name: (out / name).read_bytes()
+        for name in (scenefiles.SCENE_FILE, scenefiles.frame_file(2))
+    }
+    done = render_frame(replace(job, inputs=inputs))
+    assert done.ok and not (out / job.image).exists(), done.error
+    in_place = render_frame(replace(job, image="render/again.png", share=None))
+    assert in_place.ok and in_place.image is None
+    assert done.image == (out / "render/again.png").read_bytes() == first.images[2].read_bytes()
+    assert b"tIME" not in done.image and b"Render Date" not in done.image
 
 
 def fake_worker(job):

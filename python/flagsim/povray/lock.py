@@ -1,6 +1,8 @@
 """One writer per export folder: a lock file naming its holder, created whole (link(2)).
 
-`flagsim run` (export) and `flagsim render` hold ``DIR/.flagsim.lock`` while they write into DIR.
+`flagsim run` (export), `flagsim render` and `flagsim sweep` hold ``DIR/.flagsim.lock`` while they
+write into DIR. The lock's record also tells a task on another machine whether it sees DIR
+(sees_folder): a folder of the same name elsewhere does not hold the same record.
 A second writer is refused with a message naming the holder (pid, host, start time, command).
 A lock left by a process that no longer runs on this host (kill -9, OOM) is taken over. A lock
 from another host is never taken over: remove the file by hand once that process is gone.
@@ -38,6 +40,26 @@ def _describe(holder: dict) -> str:
         f"pid {holder.get('pid')} on {holder.get('host')} since {holder.get('started')} "
         f"({holder.get('command')})"
     )
+
+
+#: set to 0 in a worker's environment and it never writes into the head's folders, even when it
+#: sees them (a read-only or slow mount): it returns its files to the head instead
+SHARED_ENV = "FLAGSIM_SHARED_FOLDERS"
+
+
+def sees_folder(out_dir, record) -> bool:
+    """True when ``out_dir/.flagsim.lock`` holds ``record``, the lock record of the process that
+    handed out the task: this process sees that process's folder (the same machine, or a shared
+    file system), not merely a folder of the same name. False also where $FLAGSIM_SHARED_FOLDERS
+    is 0."""
+    if record.get("pid") == os.getpid() and record.get("host") == socket.gethostname():
+        return True  # this process's own lock (a task rendering the export it just made)
+    if os.environ.get(SHARED_ENV, "1").strip() == "0":
+        return False
+    try:
+        return json.loads((Path(out_dir) / LOCK_NAME).read_text(encoding="utf-8")) == record
+    except (OSError, ValueError):
+        return False
 
 
 class ExportLock:

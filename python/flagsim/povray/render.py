@@ -1,18 +1,28 @@
 """Render an export with POV-Ray, one process per frame, through a concurrent.futures.Executor.
 
 The default executor is a local process pool (three single-threaded POV-Ray runs per core);
-anything with the Executor interface (a cluster's, a thread pool) can take its place without
+anything with the Executor interface (a Dask cluster's, a thread pool) can take its place without
 touching this code: a frame is a picklable ``FrameJob`` and ``render_frame`` a module-level
 function. A failed frame is retried once, then reported by number in ``RenderError``.
+
+A frame job carries the record of the lock the head holds on the export (``share``): a worker
+that reads the same record in the folder sees the head's folder (shared, or the same machine)
+and renders into it; one that does not says so, and gets the job again with the files POV-Ray
+reads (``inputs``), renders in a folder of its own and returns the image, which the head writes.
+Images are reproducible: POV-Ray's time stamp and render-date comment are dropped, so a frame is
+the same file whichever worker rendered it, and when.
 """
 
 from __future__ import annotations
 
 import os
 import shutil
+import socket
 import struct
 import subprocess
+import tempfile
 import time
+import zlib
 from concurrent.futures import FIRST_COMPLETED, wait
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -63,6 +73,11 @@ class FrameJob:
     threads: int = 1
     antialias: float = 0.3  # POV-Ray +A threshold; 0 turns antialiasing off
     timeout: float = 600.0
+    # the head's lock record on out_dir (lock.py): a worker whose out_dir/.flagsim.lock holds it
+    # sees the head's folder; None: the worker does (a local pool)
+    share: dict | None = None
+    # what POV-Ray reads (relative path -> bytes), for a worker that does not see the folder
+    inputs: dict | None = None
 
 
 @dataclass
@@ -72,6 +87,8 @@ class FrameResult:
     error: str = ""
     diagnostics: list = field(default_factory=list)  # POV-Ray warnings and errors, one per line
     seconds: float = 0.0
+    image: bytes | None = None  # the PNG, from a worker that does not see the head's folder
+    needs_inputs: bool = False  # that worker had no inputs: submit the job again with them
 
 
 def povray_diagnostics(stderr):
@@ -128,11 +145,13 @@ def povray_command(job):
 
 
 def _povray_preexec():
-    # In a pool worker (single-threaded) POV-Ray is tied to the worker's life; in the head
-    # process, which may run threads, preexec_fn is unsafe and the head's own exit handles it.
+    # In a single-threaded pool worker POV-Ray is tied to the worker's life. In the head, or in
+    # a threaded worker (Dask's), preexec_fn is unsafe (fork after threads) and is not used:
+    # there the process's own exit, or POV-Ray's frame timeout, ends it.
     import multiprocessing
+    import threading
 
-    if multiprocessing.parent_process() is None:
+    if multiprocessing.parent_process() is None or threading.active_count() > 1:
         return None
     from .._pool import die_with_parent
 
@@ -141,9 +160,39 @@ def _povray_preexec():
 
 def render_frame(job):
     """Render one frame into a temporary image, renamed into place only when POV-Ray succeeded
-    (so an image in render/ is always whole). Never raises for a POV-Ray failure: returns it."""
+    (so an image in render/ is always whole). Never raises for a POV-Ray failure: returns it.
+    A worker that does not see the head's folder renders from ``job.inputs`` in a folder of its
+    own and returns the image's bytes (or, without inputs, asks for them)."""
+    from .lock import sees_folder
+
     t0 = time.perf_counter()
-    out = Path(job.out_dir)
+    exe = shutil.which(job.povray)
+    if exe is None:
+        return FrameResult(
+            job.frame,
+            False,
+            f"POV-Ray ('{job.povray}') is not installed on {socket.gethostname()}: install "
+            f"the Debian package '{DEBIAN_PACKAGE}' on every worker",
+        )
+    job = replace(job, povray=exe)
+    if job.share is None or sees_folder(job.out_dir, job.share):
+        return _render_in(job, Path(job.out_dir), t0)
+    if job.inputs is None:
+        return FrameResult(job.frame, False, needs_inputs=True)
+    with tempfile.TemporaryDirectory(prefix="flagsim-frame-") as tmp:
+        here = Path(tmp)
+        files = {**scenefiles.povray_home_files(exe), **job.inputs}
+        for rel, data in files.items():
+            (here / rel).parent.mkdir(parents=True, exist_ok=True)
+            (here / rel).write_bytes(data.encode() if isinstance(data, str) else data)
+        (here / job.image).parent.mkdir(parents=True, exist_ok=True)
+        result = _render_in(replace(job, out_dir=str(here)), here, t0)
+        if result.ok:
+            result.image = (here / job.image).read_bytes()
+        return result
+
+
+def _render_in(job, out, t0):
     final = out / job.image
     tmp_rel = str(Path(job.image).with_name(f".{Path(job.image).stem}.{os.getpid()}.tmp.png"))
     tmp = out / tmp_rel
@@ -176,8 +225,37 @@ def render_frame(job):
             diagnostics,
             time.perf_counter() - t0,
         )
-    os.replace(tmp, final)
+    try:
+        reproducible_png(tmp)
+        os.replace(tmp, final)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        return FrameResult(job.frame, False, f"{type(e).__name__}: {e}", diagnostics)
     return FrameResult(job.frame, True, "", diagnostics, time.perf_counter() - t0)
+
+
+#: PNG chunks that say when and where an image was made, not what it shows: POV-Ray writes its
+#: render time (tIME) and a "Render Date ... Platform ..." comment
+_UNREPRODUCIBLE = (b"tIME", b"tEXtComment\0", b"iTXtComment\0", b"zTXtComment\0")
+
+
+def reproducible_png(path):
+    """Drop from a PNG file the chunks that record when and where it was rendered, so the same
+    frame is the same bytes whoever renders it; other chunks and the pixels are untouched (a
+    file that is not a PNG is left as it is)."""
+    data = Path(path).read_bytes()
+    if data[:8] != b"\x89PNG\r\n\x1a\n":
+        return
+    out, i = [data[:8]], 8
+    while i + 12 <= len(data):
+        (n,) = struct.unpack(">I", data[i : i + 4])
+        chunk = data[i : i + 12 + n]
+        if zlib.crc32(chunk[4:-4]) != struct.unpack(">I", chunk[-4:])[0]:
+            return  # damaged: left for the reader to reject
+        if not any(chunk[4:].startswith(tag) for tag in _UNREPRODUCIBLE):
+            out.append(chunk)
+        i += 12 + n
+    Path(path).write_bytes(b"".join(out))
 
 
 def png_size(path):
@@ -275,6 +353,7 @@ def render(
     height=None,
     executor=None,
     jobs=None,
+    threads=None,
     retries=1,
     antialias=0.3,
     progress=True,
@@ -288,19 +367,21 @@ def render(
 
     if not Path(out_dir).is_dir():
         load_export(out_dir)  # the clear error for a folder that is not there
-    with ExportLock(out_dir):
+    with ExportLock(out_dir) as lock:
         return _render_frames(
             out_dir,
             width=width,
             height=height,
             executor=executor,
             jobs=jobs,
+            threads=threads,
             retries=retries,
             antialias=antialias,
             progress=progress,
             povray_binary=povray_binary,
             worker=worker,
             force=force,
+            share=lock.record,
         )
 
 
@@ -311,34 +392,48 @@ def _render_frames(
     height,
     executor,
     jobs,
+    threads,
     retries,
     antialias,
     progress,
     povray_binary,
     worker,
     force,
+    share,
 ):
     """Render every frame of the export in ``out_dir`` to render/frame_NNN.png.
 
     width, height  default: the export's (export.json)
     executor       a concurrent.futures.Executor running ``worker(FrameJob)``; default a
                    process pool of ``jobs`` workers (default: three per core)
+    threads        POV-Ray threads per frame; default the cores shared among the local pool's
+                   workers, 1 on a Dask cluster (whose workers' cores this process cannot see)
     retries        a failed frame is submitted again this many times
     force          re-render frames whose images are up to date
+    share          the head's lock record on the folder (FrameJob.share)
     Raises PovrayNotFound, IncompleteExport, or RenderError naming the frames that failed
     (after every other frame has been rendered).
     """
+    from .. import _pool
+
     t0 = time.perf_counter()
     out = Path(out_dir).resolve()
     manifest = load_export(out)
-    povray = find_povray(povray_binary)
+    cluster = _pool.is_dask(executor)
+    if cluster:  # each worker finds its own POV-Ray; this process need not have one
+        povray = povray_binary or os.environ.get("FLAGSIM_POVRAY") or "povray"
+        local_povray = shutil.which(povray)
+    else:
+        povray = local_povray = find_povray(povray_binary)
     width = int(width or manifest["width"])
     height = int(height or manifest["height"])
     for name, v in (("width", width), ("height", height)):
         if not 16 <= v <= 8192:
             raise ValueError(f"{name} should be in [16, 8192] pixels, got {v}")
+    if threads is not None and (isinstance(threads, bool) or int(threads) < 1):
+        raise ValueError(f"threads should be >= 1, got {threads}")
     # The private POV-Ray config follows the binary actually used (its include folders).
-    for name, text in scenefiles.povray_home_files(povray).items():
+    for name, text in scenefiles.povray_home_files(local_povray).items():
         (out / name).parent.mkdir(parents=True, exist_ok=True)
         scenefiles.write_text(out / name, text)
     (out / scenefiles.RENDER_DIR).mkdir(exist_ok=True)
@@ -363,12 +458,17 @@ def _render_frames(
     # POV-Ray 3.7 idles ~0.6 s per run in its polling loops (strace: 10-100 ms sleeps), longer
     # than a small frame takes to trace: three single-threaded workers per core overlap it.
     workers = max(1, min(jobs or 3 * cores, len(todo) or 1))
-    threads = max(1, cores // workers)
+    if threads is None:
+        threads = 1 if cluster else max(1, cores // workers)
     own_executor = executor is None and bool(todo)
     if own_executor:
         executor = _default_executor(workers)
 
-    def job(k):
+    def job(k, with_inputs=False):
+        inputs = None
+        if with_inputs:
+            inputs = {str(p.relative_to(out)): p.read_bytes() for p in shared}
+            inputs[scenefiles.frame_file(k)] = (out / scenefiles.frame_file(k)).read_bytes()
         return FrameJob(
             frame=k,
             out_dir=str(out),
@@ -376,9 +476,17 @@ def _render_frames(
             povray=povray,
             width=width,
             height=height,
-            threads=threads,
+            threads=int(threads),
             antialias=antialias,
+            share=share,
+            inputs=inputs,
         )
+
+    def key(k):  # a hash of what the image depends on: the job and its inputs' stamps
+        sources = shared + [out / scenefiles.frame_file(k)]
+        stamps = [(str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in sources]
+        settings = {f: v for f, v in vars(job(k)).items() if f not in ("share", "inputs")}
+        return _pool.task_key("frame", settings, stamps)
 
     bar = None
     if progress and todo:
@@ -390,9 +498,11 @@ def _render_frames(
     rendered = []
     pending = {}
 
-    def submit(k, attempt):
+    def submit(k, attempt, with_inputs=False):
         try:
-            pending[executor.submit(worker, job(k))] = (k, attempt)
+            task = job(k, with_inputs)
+            name = key(k) if attempt == 0 and not with_inputs else None  # else pure=False
+            pending[_pool.submit(executor, worker, task, key=name)] = (k, attempt, with_inputs)
             return True
         except Exception as e:  # a broken executor: the frame is failed, not dropped
             failed[k] = f"could not be submitted: {type(e).__name__}: {e}"
@@ -405,17 +515,22 @@ def _render_frames(
         while pending:
             done, _ = wait(pending, return_when=FIRST_COMPLETED)
             for fut in done:
-                k, attempt = pending.pop(fut)
+                k, attempt, with_inputs = pending.pop(fut)
                 try:
                     res = fut.result()
                 except Exception as e:  # a worker or executor failure counts as a failed try
                     res = FrameResult(k, False, f"{type(e).__name__}: {e}")
+                if res.needs_inputs and not with_inputs:  # a worker that cannot see `out`
+                    if submit(k, attempt, with_inputs=True):
+                        continue
+                if res.ok and res.image is not None:  # rendered elsewhere: written here
+                    scenefiles.write_bytes(images[k], res.image, only_if_changed=False)
                 if res.diagnostics:
                     diagnostics[k] = res.diagnostics
                 if res.ok:
                     rendered.append(k)
                 elif attempt < retries:
-                    if submit(k, attempt + 1):
+                    if submit(k, attempt + 1, with_inputs):
                         continue
                 else:
                     failed[k] = res.error
@@ -424,6 +539,8 @@ def _render_frames(
     finally:
         if bar is not None:
             bar.close()
+        for fut in pending:  # interrupted: nothing more is queued for this run
+            fut.cancel()
         if own_executor:
             executor.shutdown(wait=True, cancel_futures=True)
     if failed:
