@@ -34,6 +34,10 @@ COMMANDS = {
         "flagsim.commands.study",
         "accuracy (error against run time) or stability (stiff and extreme cases) study",
     ),
+    "sweep": (
+        "flagsim.commands.sweep",
+        "run a scene under every combination of some settings (--render: render each)",
+    ),
 }
 
 EXIT_OK = 0
