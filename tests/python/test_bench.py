@@ -2,6 +2,7 @@
 the selection, the peers' cloth and the feature detection behave. No wall-clock figure is
 asserted anywhere."""
 
+import csv
 import json
 import math
 import os
@@ -427,3 +428,34 @@ def test_cloth_workloads_build_at_every_size_with_self_collision(rows, cols):
         pytest.skip("self-collision not in this build")
     sim = flagsim.Simulation(engines.cloth_scene(rows, cols, "implicit", self_collision=True))
     assert "self_collision" in sim.stages and "fluid" not in sim.stages
+
+
+def test_cluster_smoke_run_reports_times_and_ratios(tmp_path, capsys):
+    pytest.importorskip(
+        "distributed",
+        reason="Dask distributed is not installed: pip install 'flagsim[distributed]' "
+        "(make test installs it)",
+    )
+    from benchmarks import cluster
+
+    out = tmp_path / "bench"
+    assert cluster.main(["--smoke", "--out", str(out)]) == 0
+    capsys.readouterr()
+    with open(out / "cluster.csv", encoding="utf-8") as f:
+        lines = f.read().splitlines()
+    machine = dict(line[2:].split(": ", 1) for line in lines if line.startswith("#"))
+    assert machine["cpu"] and machine["load_average_end"]
+    rows = list(csv.DictReader(line for line in lines if not line.startswith("#")))
+    assert [(r["executor"], r["workers"]) for r in rows] == [
+        ("here", "1"),
+        ("pool", "2"),
+        ("dask", "1"),
+        ("dask", "2"),
+        ("dask", "1"),
+    ]
+    for r in rows:
+        assert float(r["wall_s_min"]) > 0
+    assert float(rows[3]["speedup_2v1"]) == pytest.approx(
+        float(rows[2]["wall_s_min"]) / float(rows[3]["wall_s_min"]), rel=0.02
+    )
+    assert float(rows[3]["dask_over_pool"]) > 0 and rows[4]["workload"].endswith("start-up")
