@@ -132,7 +132,9 @@ def cluster(scheduler: str | None = None, workers: int | None = None):
                     threads_per_worker=1,
                     processes=True,
                     dashboard_address=":0",  # any free port: 8787 may be another cluster's
-                    silence_logs=logging.ERROR,  # not the warnings of tasks cancelled by Ctrl-C
+                    # quiet: a task's failure reaches the head, which names it; on Ctrl-C a worker
+                    # still busy would log the scheduler's going (heartbeat errors, tracebacks)
+                    silence_logs=logging.CRITICAL,
                 )
             )
         else:
