@@ -314,3 +314,18 @@ def test_forces_module_examples_run():
     import doctest
 
     assert doctest.testmod(forces).failed == 0
+
+
+# The CI-sized cylinder (6 cells per diameter, blockage 12.5 %, 60 D / U), measured: St 0.1645,
+# C_D 1.71. St lands within 5 % of Williamson's 0.164; the narrow domain's blockage raises the
+# drag above the unconfined 1.32-1.34 (the full study, docs/reports/accuracy.md, shows it fall
+# as the domain widens and the grid refines), so C_D's band here is the blocked one.
+CI_CYLINDER_BANDS = {"strouhal": (0.95, 1.05), "drag_coefficient": (1.33, 1.85)}
+
+
+def test_a_ci_sized_cylinder_sheds_at_the_published_strouhal_number():
+    r = accuracy_solids.run_cylinder(6, "maccormack", **accuracy_solids.QUICK_CYLINDER)
+    st_lo, st_hi = CI_CYLINDER_BANDS["strouhal"]
+    assert st_lo * accuracy_solids.ST_REF <= r["strouhal"] <= st_hi * accuracy_solids.ST_REF, r
+    cd_lo, cd_hi = CI_CYLINDER_BANDS["drag_coefficient"]
+    assert cd_lo <= r["drag_coefficient"] <= cd_hi, r
