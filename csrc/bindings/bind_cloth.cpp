@@ -27,6 +27,16 @@ void bind_cloth(py::module_& m) {
   def_field(flag, "pin", &FlagParams::pin, "flag", "'pole' | 'grommets' | 'top' | 'none'");
   def_field(flag, "pinned_vertices", &FlagParams::pinned_vertices, "flag",
             "explicit pinned vertex indices; replaces `pin` when non-empty");
+  def_field(flag, "imperfection", &FlagParams::imperfection, "flag",
+            "m, largest seeded offset of an unpinned mass out of the flag's plane at the start "
+            "(0 = flat; breaks the mirror symmetry a flat flag in still air rests on)");
+  flag.def_property(
+      "imperfection_seed", [](const FlagParams& p) { return p.imperfection_seed; },
+      [](FlagParams& p, const py::object& seed) {
+        p.imperfection_seed = checked_seed("flag.imperfection_seed",
+                                           from_py<int64_t>("flag.imperfection_seed", seed));
+      },
+      "seed of the imperfection's offsets, an integer in [0, 2**32)");
 
   py::class_<DragParams> drag(m, "DragParams",
                               "Air drag: 'paper' (eq. 3), 'relative' or 'triangle'.");

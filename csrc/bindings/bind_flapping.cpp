@@ -17,15 +17,6 @@ using namespace pybind11::literals;
 
 namespace flagsim::bindings {
 
-namespace {
-
-uint32_t checked_seed(const std::string& name, int64_t seed) {
-  if (seed < 0 || seed > 0xFFFFFFFFll) fail_param(name, "in [0, 4294967295]", seed);
-  return static_cast<uint32_t>(seed);
-}
-
-}  // namespace
-
 void bind_flapping(py::module_& m) {
   py::class_<FlappingParams> fp(
       m, "FlappingParams",

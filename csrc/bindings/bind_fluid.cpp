@@ -11,6 +11,7 @@
 #include "common/errors.h"
 #include "fluid/fluid.h"
 #include "fluid/params.h"
+#include "fluid/turbulence.h"
 #include "scene/scene.h"
 
 namespace py = pybind11;
@@ -57,7 +58,77 @@ std::array<int, 3> resolution_from_py(const std::string& name, py::handle o) {
 
 }  // namespace
 
+// A turbulence schedule from Python: a number (constant) or keyframes [(time s, value), ...].
+ScalarSchedule schedule_from_py(const std::string& name, const py::object& o) {
+  ScalarSchedule s;
+  if (py::isinstance<py::float_>(o) || py::isinstance<py::int_>(o))
+    s.keys = {{0.0, from_py<double>(name, o)}};
+  else
+    s.keys = from_py<std::vector<std::pair<double, double>>>(name, o);
+  return s;
+}
+
+void def_schedule(py::class_<TurbulenceParams>& cls, const char* name,
+                  ScalarSchedule TurbulenceParams::*member, const char* doc) {
+  cls.def_property(
+      name, [member](const TurbulenceParams& t) { return (t.*member).keys; },
+      [member, name](TurbulenceParams& t, const py::object& o) {
+        TurbulenceParams copy = t;
+        copy.*member = schedule_from_py(std::string("air.turbulence.") + name, o);
+        copy.validate("air.turbulence");
+        t = copy;
+      },
+      doc);
+}
+
+void bind_turbulence(py::module_& m) {
+  py::class_<TurbulenceParams> t(
+      m, "TurbulenceParams",
+      "Curl-noise turbulence (Bridson et al. 2007): u = curl psi, psi three noise channels, "
+      "ramped to 0 near solids. Schedules take a number or keyframes [(time s, value), ...] and "
+      "read back as keyframes.");
+  t.def(py::init<>());
+  def_schedule(t, "intensity", &TurbulenceParams::intensity,
+               "m/s, velocity scale of the noise (empty or 0: off)");
+  def_schedule(t, "length_scale", &TurbulenceParams::length_scale,
+               "m, noise lattice spacing, about the eddies' size (empty: 0.3)");
+  def_schedule(t, "evolution", &TurbulenceParams::evolution,
+               "1/s, noise slices per second: how fast the eddies change (empty: 0.5)");
+  def_field(t, "ramp_distance", &TurbulenceParams::ramp_distance, "air.turbulence",
+            "m, width of Bridson's ramp beside solids (the pole, obstacles)");
+  t.def_property(
+      "seed", [](const TurbulenceParams& p) { return p.seed; },
+      [](TurbulenceParams& p, const py::object& seed) {
+        p.seed = checked_seed("air.turbulence.seed", from_py<int64_t>("air.turbulence.seed", seed));
+      },
+      "noise seed, an integer in [0, 2**32)");
+  t.def("validate", &TurbulenceParams::validate, py::arg("prefix") = "air.turbulence");
+  t.def(
+      "velocity",
+      [](const TurbulenceParams& p, const MatX3& x, double time,
+         const std::vector<ObstacleParams>& solids) {
+        CurlNoise noise(p, solids);
+        MatX3 out(x.rows(), 3);
+        for (Index i = 0; i < x.rows(); ++i)
+          out.row(i) = noise.velocity(x.row(i).transpose(), time).transpose();
+        return out;
+      },
+      py::arg("points"), py::arg("time") = 0.0, py::arg("solids") = std::vector<ObstacleParams>(),
+      "The curl-noise velocity (M x 3, m/s) at points (M x 3, m) and time (s), ramped near the "
+      "solids ([ObstacleParams, ...]).");
+}
+
 void def_fluid_fields(py::class_<AirParams>& cls, const std::string& section) {
+  cls.def_property(
+      "turbulence", [](AirParams& a) -> TurbulenceParams& { return a.turbulence; },
+      [section](AirParams& a, const py::object& o) {
+        AirParams copy = a;
+        copy.turbulence = from_py<TurbulenceParams>(section + ".turbulence", o);
+        copy.validate(section);
+        a = copy;
+      },
+      py::return_value_policy::reference_internal,
+      "TurbulenceParams: curl noise on the wind ('uniform') or injected into the grid ('grid')");
   cls.def_property(
       "resolution",
       [](const AirParams& a) {
@@ -118,6 +189,7 @@ void def_fluid_fields(py::class_<AirParams>& cls, const std::string& section) {
 }
 
 void bind_fluid(py::module_& m) {
+  bind_turbulence(m);
   py::class_<FanParams> fan_cls(
       m, "FanParams",
       "A region pushing the air: force density (N/m^3) along direction inside a box "

@@ -38,6 +38,12 @@ inline std::string repr_of(py::handle o) {
   throw py::type_error(name + " should be " + expected + ", got " + repr_of(o));
 }
 
+/// A seed from Python: an integer in [0, 2**32), ValueError naming `name` otherwise.
+inline uint32_t checked_seed(const std::string& name, int64_t seed) {
+  if (seed < 0 || seed > 0xFFFFFFFFll) fail_param(name, "in [0, 4294967295]", seed);
+  return static_cast<uint32_t>(seed);
+}
+
 namespace conv {
 template <class T>
 struct is_vector : std::false_type {};

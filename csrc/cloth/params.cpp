@@ -17,6 +17,8 @@ void FlagParams::validate(const std::string& p) const {
   check_nonnegative(p + ".shear_stiffness", shear_stiffness);
   check_nonnegative(p + ".bend_stiffness", bend_stiffness);
   check_nonnegative(p + ".damping", damping);
+  check_nonnegative(p + ".imperfection", imperfection);
+  if (!(imperfection <= kMaxCoordinate)) fail_param(p + ".imperfection", "<= 1e6 m", imperfection);
   for (size_t k = 0; k < pinned_vertices.size(); ++k) {
     int i = pinned_vertices[k];
     if (i < 0 || i >= rows * cols)

@@ -1,5 +1,6 @@
 // Parameters of the mass-spring flag (paper §3), its drag (eq. 3) and its integrator.
 #pragma once
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -50,6 +51,13 @@ struct FlagParams {
   double damping = 0.02;             ///< N s/m, k_d of eq. 4, every spring
   Pin pin = Pin::kPole;
   std::vector<int> pinned_vertices;  ///< explicit pins; when non-empty, replaces `pin`
+  /// m, the largest offset of an unpinned mass out of the flag's plane at the start (seeded,
+  /// uniform in [-imperfection, imperfection]; docs/design.md "Still air"). Real cloth is never
+  /// flat to the last digit: a flat flag in still air or edge-on wind rests on an unstable
+  /// equilibrium (mirror symmetry about its plane) that nothing in the arithmetic breaks.
+  /// 0 = perfectly flat. The rest shape (spring lengths) stays flat either way.
+  double imperfection = 0.0;
+  uint32_t imperfection_seed = 0;  ///< seed of the imperfection's offsets
   void validate(const std::string& prefix = "flag") const;
 };
 

@@ -230,4 +230,26 @@ void compute_vertex_normals(const ClothTopology& topo, const MatX3& x, MatX3& n)
   }
 }
 
+namespace {
+// SplitMix64 (Steele, Lea, Flood 2014): a counter-based generator, one independent draw per key.
+uint64_t splitmix64(uint64_t z) {
+  z += 0x9e3779b97f4a7c15ull;
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+  return z ^ (z >> 31);
+}
+}  // namespace
+
+MatX3 initial_positions(const ClothTopology& topo, const FlagParams& p) {
+  MatX3 x = topo.rest_positions;
+  if (p.imperfection <= 0) return x;
+  for (Index i = 0; i < x.rows(); ++i) {
+    if (topo.pinned(i)) continue;
+    const uint64_t r = splitmix64((uint64_t(p.imperfection_seed) << 32) ^ uint64_t(i));
+    const double u = double(r >> 11) * 0x1.0p-53;  // [0, 1)
+    x(i, 2) += p.imperfection * (2.0 * u - 1.0);
+  }
+  return x;
+}
+
 }  // namespace flagsim

@@ -47,6 +47,12 @@ struct ClothTopology {
 /// Grid flag of params.rows x params.cols masses with structural, shear and bend springs.
 ClothTopology build_flag_topology(const FlagParams& params);
 
+/// The positions a Simulation starts from (N x 3, m): the rest positions, every unpinned mass
+/// moved along the plane's normal (+z) by params.imperfection times a uniform number in [-1, 1]
+/// from a counter-based hash of (imperfection_seed, vertex): the same bytes on every machine and
+/// thread count. Equal to the rest positions when imperfection is 0.
+MatX3 initial_positions(const ClothTopology& topo, const FlagParams& params);
+
 /// Area-weighted vertex normals of the mesh at positions x (N x 3) into n (N x 3), unit length.
 void compute_vertex_normals(const ClothTopology& topo, const MatX3& x, MatX3& n);
 

@@ -51,6 +51,25 @@ double ScalarSchedule::at(double t, double fallback) const {
   return (1 - s) * lo->second + s * hi->second;
 }
 
+double ScalarSchedule::integral(double t, double fallback) const {
+  if (t < 0) return -integral_from(t, 0.0, fallback);
+  return integral_from(0.0, t, fallback);
+}
+
+// a <= b: the constant ends outside the keys plus the trapezoids of the pieces overlapping [a, b].
+double ScalarSchedule::integral_from(double a, double b, double fallback) const {
+  if (keys.empty()) return fallback * (b - a);
+  double sum = 0;
+  const double t0 = keys.front().first, t1 = keys.back().first;
+  if (a < t0) sum += keys.front().second * (std::min(b, t0) - a);
+  if (b > t1) sum += keys.back().second * (b - std::max(a, t1));
+  for (size_t i = 0; i + 1 < keys.size(); ++i) {
+    const double lo = std::max(a, keys[i].first), hi = std::min(b, keys[i + 1].first);
+    if (hi > lo) sum += 0.5 * (at(lo) + at(hi)) * (hi - lo);
+  }
+  return sum;
+}
+
 void ScalarSchedule::validate(const std::string& name) const {
   for (size_t i = 0; i < keys.size(); ++i) {
     check_finite(name + "[" + std::to_string(i) + "].time", keys[i].first);

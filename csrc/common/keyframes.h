@@ -30,7 +30,13 @@ struct WindSchedule {
 struct ScalarSchedule {
   std::vector<std::pair<double, double>> keys;
   double at(double t, double fallback = 1.0) const;
+  /// Integral of at(., fallback) from 0 to t (exact for the piecewise-linear schedule; negative
+  /// for t < 0).
+  double integral(double t, double fallback = 1.0) const;
   void validate(const std::string& name) const;
+
+ private:
+  double integral_from(double a, double b, double fallback) const;
 };
 
 }  // namespace flagsim

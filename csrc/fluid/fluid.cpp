@@ -15,6 +15,7 @@
 #include "fluid/forces.h"
 #include "fluid/pressure.h"
 #include "fluid/solids.h"
+#include "fluid/turbulence.h"
 
 namespace flagsim {
 
@@ -60,6 +61,12 @@ struct TypedSolver final : Fluid::Solver {
   std::vector<double> inflow_w;  // tunnel: the inflow profile per (j, k) of the x-min face
   InflowShape inflow_profile;    // and at departure points upstream of it
   bool explicit_viscosity = false;
+  // Curl-noise turbulence (fluid/turbulence.h): psi on the edges at psi_time (psi_prev) and the
+  // step's end (psi_next); NaN psi_time: psi_prev must be recomputed (after an undo or rebuild).
+  CurlNoise noise{TurbulenceParams{}, {}};
+  std::array<AlignedVector<T>, 3> psi_prev, psi_next;
+  double psi_time = std::numeric_limits<double>::quiet_NaN();
+  bool turbulent = false;
 
   explicit TypedSolver(const FluidParams& p) {
     params = p;
@@ -98,13 +105,39 @@ struct TypedSolver final : Fluid::Solver {
       inflow_w = inflow_weights(geo, p);
       inflow_profile = inflow_shape(geo, p);
     }
+    turbulent = p.turbulence.enabled();
+    if (turbulent)
+      for (int a = 0; a < 3; ++a) {
+        psi_prev[a].assign(edge_shape(geo, a).size(), T(0));
+        psi_next[a].assign(edge_shape(geo, a).size(), T(0));
+      }
     rebuild_solids();
     const Vec3 w0 = p.wind.at(0.0);
     set_uniform(geo.periodic ? w0 : Vec3(w0.x(), 0, 0));
+    if (turbulent) {  // the noise at t = 0 on top of the mean flow
+      noise.potential_on_edges(geo, 0.0, psi_next);
+      for (int a = 0; a < 3; ++a) std::fill(psi_prev[a].begin(), psi_prev[a].end(), T(0));
+      add_discrete_curl(psi_next, psi_prev, u);
+      std::swap(psi_prev, psi_next);
+      psi_time = 0.0;
+      apply_boundary(Vec3(w0.x(), 0, 0));
+    }
+  }
+
+  /// u += curl (psi(t1) - psi(t0)): the change of the noise over the step, a divergence-free
+  /// forcing (a discrete curl), so without advection u stays the mean flow plus the noise.
+  void add_turbulence(double t0, double t1) {
+    if (!(psi_time == t0)) noise.potential_on_edges(geo, t0, psi_prev);
+    noise.potential_on_edges(geo, t1, psi_next);
+    add_discrete_curl(psi_next, psi_prev, u);
+    std::swap(psi_prev, psi_next);
+    psi_time = t1;
   }
 
   void rebuild_solids() override {
     solids.build(geo, params);
+    noise = CurlNoise(params.turbulence, params.obstacles);
+    psi_time = std::numeric_limits<double>::quiet_NaN();
     pressure_op.solid = solids.any_solid ? solids.solid.data() : nullptr;
     if (!use_fft) mic.build(pressure_op);
     // Walls and solids make their own viscous step (ghost mirrors); without them the implicit
@@ -154,6 +187,7 @@ struct TypedSolver final : Fluid::Solver {
     {
       ScopedTimer timer(stats.seconds_forces);
       apply_fans(fans, t0, dt, u);
+      if (turbulent) add_turbulence(t0, t1);
     }
     ScopedTimer timer(stats.seconds_project);
     // 3. boundary values at the new time: tunnel faces and solids, or the periodic mean flow

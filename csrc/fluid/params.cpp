@@ -87,6 +87,29 @@ void FluidParams::validate(const std::string& prefix) const {
     fail_param(join(prefix, "obstacles"), "at most 65535 obstacles", obstacles.size());
   for (size_t i = 0; i < obstacles.size(); ++i)
     obstacles[i].validate(join(prefix, "obstacles[" + std::to_string(i) + "]"));
+  turbulence.validate(join(prefix, "turbulence"));
+}
+
+bool TurbulenceParams::enabled() const {
+  for (const auto& k : intensity.keys)
+    if (k.second != 0) return true;
+  return false;
+}
+
+void TurbulenceParams::validate(const std::string& p) const {
+  intensity.validate(join(p, "intensity"));
+  length_scale.validate(join(p, "length_scale"));
+  evolution.validate(join(p, "evolution"));
+  for (size_t i = 0; i < intensity.keys.size(); ++i)
+    check_nonnegative(join(p, "intensity") + "[" + std::to_string(i) + "].value",
+                      intensity.keys[i].second);
+  for (size_t i = 0; i < length_scale.keys.size(); ++i)
+    check_length(join(p, "length_scale") + "[" + std::to_string(i) + "].value",
+                 length_scale.keys[i].second);
+  for (size_t i = 0; i < evolution.keys.size(); ++i)
+    check_nonnegative(join(p, "evolution") + "[" + std::to_string(i) + "].value",
+                      evolution.keys[i].second);
+  check_length(join(p, "ramp_distance"), ramp_distance);
 }
 
 double FluidParams::memory_bytes() const {
@@ -94,9 +117,11 @@ double FluidParams::memory_bytes() const {
                      wall_y_max == Slip::kNoSlip || wall_z_min == Slip::kNoSlip ||
                      wall_z_max == Slip::kNoSlip;
   // The solid map (csrc/fluid/solids.h): 3 face kinds, an owner (2 bytes) and a mask per cell.
-  return cells() *
-         (kValuesPerCell * double(precision == Precision::kFloat ? sizeof(float) : sizeof(double)) +
-          (masks ? 6.0 : 0.0));
+  // Turbulence: psi on the edges now and at the last step, 6 values per cell.
+  const double psi = turbulence.enabled() ? 6.0 : 0.0;
+  return cells() * ((kValuesPerCell + psi) *
+                        double(precision == Precision::kFloat ? sizeof(float) : sizeof(double)) +
+                    (masks ? 6.0 : 0.0));
 }
 
 void FluidParams::validate_combination(const std::string& prefix) const {

@@ -2,6 +2,7 @@
 // validate().
 #pragma once
 #include <array>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -101,6 +102,24 @@ struct FanParams {
   void validate(const std::string& prefix) const;
 };
 
+/// Curl-noise turbulence (Bridson, Hourihan, Nordenstam 2007, "Curl-Noise for Procedural Fluid
+/// Flow"): a vector potential psi from three gradient-noise channels, u = curl psi, so the
+/// velocity is divergence-free by construction; psi is ramped to 0 near solids (the pole,
+/// obstacles) so the normal velocity vanishes there. Each quantity is a keyframed schedule
+/// ((time s, value) pairs, linear between keys); empty takes the default in brackets.
+/// csrc/fluid/turbulence.h.
+struct TurbulenceParams {
+  ScalarSchedule intensity;     ///< m/s, velocity scale of the noise [0: off]
+  ScalarSchedule length_scale;  ///< m, noise lattice spacing, about the eddies' size [0.3]
+  ScalarSchedule evolution;     ///< 1/s, noise slices per second: how fast eddies change [0.5]
+  double ramp_distance = 0.1;   ///< m, d_0 of Bridson's ramp: full noise beyond it from a solid
+  uint32_t seed = 0;
+  static constexpr double kDefaultLength = 0.3, kDefaultEvolution = 0.5;
+  /// True when some key of intensity is non-zero.
+  bool enabled() const;
+  void validate(const std::string& prefix) const;
+};
+
 /// The cell sizes FluidParams accepts, m: below a micrometre h^3 and the pressure scale head for
 /// underflow; above 10 km a grid no longer describes wind around a flag.
 constexpr double kMinCellSize = 1e-6, kMaxCellSize = 1e4;
@@ -129,6 +148,9 @@ struct FluidParams {
   WindSchedule wind;             ///< periodic: mean flow (k = 0 mode); tunnel: inflow velocity
   std::vector<FanParams> fans;
   std::vector<ObstacleParams> obstacles;
+  /// Curl noise added to the air: the change of its velocity over a step is a forcing (after the
+  /// fans), so without advection the air is the mean flow plus the noise; advection carries it.
+  TurbulenceParams turbulence;
   /// Tunnel walls, one condition per face: y-min, y-max, z-min, z-max.
   Slip wall_y_min = Slip::kFreeSlip, wall_y_max = Slip::kFreeSlip;
   Slip wall_z_min = Slip::kFreeSlip, wall_z_max = Slip::kFreeSlip;

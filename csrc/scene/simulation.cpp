@@ -8,6 +8,7 @@
 #include "collision/pole.h"
 #include "common/errors.h"
 #include "common/memory.h"
+#include "common/parallel.h"
 #include "common/timer.h"
 #include "flapping/flapping.h"
 
@@ -43,7 +44,7 @@ Scene validated(const Scene& s) {
 Simulation::Simulation(const Scene& scene)
     : scene_(validated(scene)), topo_(build_flag_topology(scene_.flag)), scratch_(topo_) {
   const Index N = topo_.num_vertices();
-  x_ = topo_.rest_positions;
+  x_ = initial_positions(topo_, scene_.flag);
   v_.setZero(N, 3);
   u_.setZero(N, 3);
   x_start_ = x_;
@@ -62,6 +63,11 @@ Simulation::Simulation(const Scene& scene)
   built(Stage::kWind) = forces_.drag && scene_.air.model == AirModel::kUniform;
   built(Stage::kFluid) = forces_.drag && scene_.air.model == AirModel::kGrid;
   if (built(Stage::kFluid)) build_fluid();
+  if (scene_.air.model == AirModel::kUniform && scene_.air.turbulence.enabled()) {
+    std::vector<ObstacleParams> solids;  // no air flows into the pole
+    if (scene_.pole.enabled) solids.push_back(AirParams::pole_solid(scene_.pole));
+    noise_ = CurlNoise(scene_.air.turbulence, std::move(solids));
+  }
   built(Stage::kGravity) = forces_.gravity;
   built(Stage::kDrag) = forces_.drag;
   built(Stage::kSprings) = forces_.springs;
@@ -338,6 +344,10 @@ void Simulation::stage_air() {
     StageClock::Scope t(&clock_, Stage::kWind);
     const Vec3 w = scene_.air.wind.at(t_piece_);
     u_.rowwise() = w.transpose();
+    if (noise_.enabled())
+      parallel_for(u_.rows(), [&](Index i) {
+        u_.row(i) += noise_.velocity(x_.row(i).transpose(), t_piece_).transpose();
+      });
   }
   if (built(Stage::kFluid)) {
     StageClock::Scope t(&clock_, Stage::kFluid);
@@ -500,6 +510,9 @@ void Simulation::air_velocity(const MatX3& points, MatX3& out) const {
     return;
   }
   out.rowwise() = scene_.air.wind.at(time_).transpose();
+  if (noise_.enabled())
+    for (Index i = 0; i < points.rows(); ++i)
+      out.row(i) += noise_.velocity(points.row(i).transpose(), time_).transpose();
 }
 
 }  // namespace flagsim

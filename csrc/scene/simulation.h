@@ -13,6 +13,7 @@
 #include "collision/self_collision.h"
 #include "flapping/flap_stage.h"
 #include "fluid/fluid.h"
+#include "fluid/turbulence.h"
 #include "scene/scene.h"
 
 namespace flagsim {
@@ -175,7 +176,8 @@ class Simulation {
   bool built(Stage s) const { return built_[std::size_t(s)]; }
   StageClock clock_;  // seconds per stage (Simulation.timings)
   std::vector<std::string> stage_names_;
-  std::unique_ptr<Fluid> fluid_;  // the air grid, when the scene needs one
+  std::unique_ptr<Fluid> fluid_;             // the air grid, when the scene needs one
+  CurlNoise noise_{TurbulenceParams{}, {}};  // curl noise on the analytic wind (air "uniform")
 
   // Flapping (paper eq. 5), set up only when flapping.mode is not "off".
   FlapStage flap_;

@@ -189,6 +189,7 @@ def _install() -> None:
         _core.FlappingParams,
         _core.SelfCollisionParams,
         _core.PoleParams,
+        _core.TurbulenceParams,
     ):
         cls.__repr__ = _repr
 

@@ -17,6 +17,7 @@ def quiet_scene(mode="displace", wind=2.0, ramp=0.0):
     s.air.density = 0.0
     s.gravity = (0.0, 0.0, 0.0)
     s.integrator.strain_limit = 0.0
+    s.flag.imperfection = 0.0  # flat: eq. 5 alone moves it
     f = s.flapping
     f.mode, f.amplitude, f.l_max, f.speed, f.parabola, f.frequency, f.seed = (
         mode,

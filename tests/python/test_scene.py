@@ -5,6 +5,7 @@ import subprocess
 import sys
 
 import flagsim
+import numpy as np
 import pytest
 
 BAD_VALUES = [
@@ -52,6 +53,8 @@ BAD_VALUES = [
     ("integrator", "max_strain", -1.0, r"integrator.max_strain should be finite and > 0"),
     ("air", "model", "wind", r'air.model should be one of "none", "uniform", "grid", got "wind"'),
     ("air", "density", -1.2, r"air.density should be finite and >= 0, got -1.2"),
+    ("flag", "imperfection", -0.5, r"flag.imperfection should be finite and >= 0, got -0.5"),
+    ("flag", "imperfection_seed", -1, r"flag.imperfection_seed should be in \[0, 4294967295\]"),
     (
         "air",
         "wind",
@@ -190,3 +193,49 @@ def test_example_scene_files_load():
     assert files
     for f in files:
         flagsim.Simulation(flagsim.Scene.load(f)).step(2)
+
+
+def _droop_degrees(sim):
+    """Angle from the pole edge to the free edge below the horizontal (mean of each column)."""
+    x = sim.positions.reshape(sim.scene.flag.rows, sim.scene.flag.cols, 3)
+    d = x[:, -1].mean(axis=0) - x[:, 0].mean(axis=0)
+    return float(np.degrees(np.arctan2(-d[1], np.hypot(d[0], d[2]))))
+
+
+def _still_paper(imperfection=None):
+    s = flagsim.Scene.paper()
+    s.air.wind = (0.0, 0.0, 0.0)
+    s.air.fans = []
+    if imperfection is not None:
+        s.flag.imperfection = imperfection
+    return s
+
+
+def test_still_air_paper_flag_hangs_along_its_pole():
+    # Issue 24 item 6: wind and fans off, the flag must not stay sticking out on the unstable
+    # equilibrium of its mirror symmetry; a perfectly flat one does (the imperfection is what
+    # breaks the symmetry, docs/design.md "Still air").
+    hung = flagsim.Simulation(_still_paper())
+    hung.step(1000)
+    assert _droop_degrees(hung) > 60.0
+    flat = flagsim.Simulation(_still_paper(imperfection=0.0))
+    flat.step(1000)
+    assert _droop_degrees(flat) < 10.0
+    assert np.all(flat.positions[:, 2] == 0.0)  # nothing else breaks the symmetry
+
+
+def test_imperfection_offsets_unpinned_masses_out_of_plane_within_its_bound():
+    s = flagsim.Scene.paper()
+    rest = flagsim.Simulation(_still_paper(imperfection=0.0)).positions.copy()
+    sim = flagsim.Simulation(s)
+    dz = sim.positions[:, 2] - rest[:, 2]
+    pinned = np.arange(s.flag.rows) * s.flag.cols  # pin "pole": the first column
+    assert np.all(dz[pinned] == 0.0)
+    free = np.setdiff1d(np.arange(len(dz)), pinned)
+    assert np.all(np.abs(dz) <= s.flag.imperfection)
+    assert np.abs(dz[free]).max() > 0.5 * s.flag.imperfection
+    assert np.all(sim.positions[:, :2] == rest[:, :2])
+    again = flagsim.Simulation(s).positions
+    assert again.tobytes() == sim.positions.tobytes()  # seeded: same bytes
+    s.flag.imperfection_seed = 7
+    assert not np.array_equal(flagsim.Simulation(s).positions, sim.positions)

@@ -168,7 +168,8 @@ def test_stages_leave_out_what_the_scene_does_not_need(paper):
 def test_energy_and_time(paper):
     sim = flagsim.Simulation(paper)
     e0 = sim.energy()
-    assert e0["kinetic"] == 0 and e0["spring"] == 0
+    # the seeded imperfection (0.1 mm out of plane) stretches the springs by ~1e-11 J
+    assert e0["kinetic"] == 0 and 0 <= e0["spring"] < 1e-9
     sim.step(100)
     assert sim.time == pytest.approx(1.0, abs=1e-12) and sim.step_count == 100
     assert sim.energy()["gravity"] < e0["gravity"]  # it sagged

@@ -38,6 +38,9 @@ Scene conservative(const std::string& method) {
   s.integrator.strain_limit = 0;
   s.pole.enabled = false;
   s.flapping.mode = FlapMode::kOff;
+  // Flat: the seeded imperfection would have the undamped flag fold and whip out of its plane,
+  // whose larger (still bounded) symplectic error is not what the bound below was set for.
+  s.flag.imperfection = 0;
   return s;
 }
 

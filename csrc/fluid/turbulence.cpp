@@ -1,0 +1,295 @@
+#include "fluid/turbulence.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include "common/parallel.h"
+
+namespace flagsim {
+
+namespace {
+
+// SplitMix64 (Steele, Lea, Flood 2014) finaliser: a well-mixed 64-bit hash of one word.
+inline uint64_t mix(uint64_t z) {
+  z += 0x9e3779b97f4a7c15ull;
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+  return z ^ (z >> 31);
+}
+
+// Perlin 2002's twelve gradients, the edge midpoints of a cube.
+constexpr double kGrad[12][3] = {{1, 1, 0}, {-1, 1, 0}, {1, -1, 0}, {-1, -1, 0},
+                                 {1, 0, 1}, {-1, 0, 1}, {1, 0, -1}, {-1, 0, -1},
+                                 {0, 1, 1}, {0, -1, 1}, {0, 1, -1}, {0, -1, -1}};
+
+// Gradient noise n(q) of one (channel, slice) key and its gradient dn/dq:
+//   n = sum over the 8 lattice corners o of w_o(f) g_o . (f - o),  w_o = prod_d (o_d ? s_d :
+//   1-s_d), s = fade(f) (Perlin 2002), f = q - floor(q).
+double gradient_noise(uint64_t key, const Vec3& q, Vec3& grad) {
+  double fl[3], f[3], s[3], ds[3];
+  int64_t i0[3];
+  for (int d = 0; d < 3; ++d) {
+    fl[d] = std::floor(q[d]);
+    f[d] = q[d] - fl[d];
+    i0[d] = static_cast<int64_t>(fl[d]);
+    s[d] = f[d] * f[d] * f[d] * (f[d] * (f[d] * 6.0 - 15.0) + 10.0);
+    ds[d] = 30.0 * f[d] * f[d] * (f[d] - 1.0) * (f[d] - 1.0);
+  }
+  double n = 0;
+  grad.setZero();
+  // corner hash mix(key ^ mix(i ^ mix(j ^ mix(k)))), the inner mixes shared between corners
+  const uint64_t mz[2] = {mix(uint64_t(i0[2])), mix(uint64_t(i0[2] + 1))};
+  uint64_t myz[4];
+  for (int o = 0; o < 4; ++o) myz[o] = mix(uint64_t(i0[1] + (o & 1)) ^ mz[o >> 1]);
+  for (int o = 0; o < 8; ++o) {
+    const int ox = o & 1, oy = (o >> 1) & 1, oz = (o >> 2) & 1;
+    const uint64_t h = mix(key ^ mix(uint64_t(i0[0] + ox) ^ myz[oy | (oz << 1)]));
+    const double* g = kGrad[h % 12];
+    const double r[3] = {f[0] - ox, f[1] - oy, f[2] - oz};
+    const double dot = g[0] * r[0] + g[1] * r[1] + g[2] * r[2];
+    const double w[3] = {ox ? s[0] : 1 - s[0], oy ? s[1] : 1 - s[1], oz ? s[2] : 1 - s[2]};
+    const double dw[3] = {ox ? ds[0] : -ds[0], oy ? ds[1] : -ds[1], oz ? ds[2] : -ds[2]};
+    const double W = w[0] * w[1] * w[2];
+    n += W * dot;
+    grad[0] += W * g[0] + dot * dw[0] * w[1] * w[2];
+    grad[1] += W * g[1] + dot * w[0] * dw[1] * w[2];
+    grad[2] += W * g[2] + dot * w[0] * w[1] * dw[2];
+  }
+  return n;
+}
+
+inline uint64_t channel_key(uint32_t seed, int channel, int64_t slice) {
+  return mix((uint64_t(seed) << 2 | uint64_t(channel)) ^ mix(uint64_t(slice)));
+}
+
+}  // namespace
+
+double noise_ramp(double r, double* derivative) {
+  if (r >= 1) {
+    if (derivative) *derivative = 0;
+    return 1;
+  }
+  if (r <= 0) {
+    if (derivative) *derivative = 0;
+    return 0;
+  }
+  const double r2 = r * r;
+  if (derivative) *derivative = 15.0 / 8.0 - 30.0 / 8.0 * r2 + 15.0 / 8.0 * r2 * r2;
+  return r * (15.0 / 8.0 - 10.0 / 8.0 * r2 + 3.0 / 8.0 * r2 * r2);
+}
+
+double obstacle_distance(const ObstacleParams& o, const Vec3& x, Vec3* gradient) {
+  const Vec3 p = x - o.center;
+  Vec3 g = Vec3::UnitX();
+  double d = 0;
+  switch (o.shape) {
+    case ObstacleShape::kSphere: {
+      const double r = p.norm();
+      d = r - o.radius;
+      if (r > 0) g = p / r;
+      break;
+    }
+    case ObstacleShape::kCylinder: {
+      const Vec3 a = o.axis.normalized();
+      const double h = p.dot(a);
+      const Vec3 rho = p - h * a;
+      const double rr = rho.norm();
+      const Vec3 radial = rr > 0 ? Vec3(rho / rr) : a.unitOrthogonal();
+      const Vec3 along = h >= 0 ? a : Vec3(-a);
+      const double dr = rr - o.radius, dh = std::fabs(h) - 0.5 * o.length;
+      if (dr > 0 && dh > 0) {
+        d = std::hypot(dr, dh);
+        g = (dr * radial + dh * along) / d;
+      } else if (dr >= dh) {
+        d = dr;
+        g = radial;
+      } else {
+        d = dh;
+        g = along;
+      }
+      break;
+    }
+    case ObstacleShape::kBox: {
+      const Vec3 q = p.cwiseAbs() - o.half_size;
+      const Vec3 sign = p.unaryExpr([](double v) { return v < 0 ? -1.0 : 1.0; });
+      const Vec3 out = q.cwiseMax(0.0);
+      const double outside = out.norm();
+      if (outside > 0) {
+        d = outside;
+        g = out.cwiseProduct(sign) / outside;
+      } else {
+        int m = 0;
+        d = q.maxCoeff(&m);
+        g = Vec3::Zero();
+        g[m] = sign[m];
+      }
+      break;
+    }
+  }
+  if (gradient) *gradient = g;
+  return d;
+}
+
+CurlNoise::CurlNoise(const TurbulenceParams& params, std::vector<ObstacleParams> solids)
+    : p_(params), solids_(std::move(solids)), enabled_(params.enabled()) {}
+
+CurlNoise::Frame CurlNoise::frame(double t) const {
+  return {p_.intensity.at(t, 0.0), p_.length_scale.at(t, TurbulenceParams::kDefaultLength),
+          p_.evolution.integral(t, TurbulenceParams::kDefaultEvolution)};
+}
+
+// psi_c = A L [(1 - b) n_{c,k}(x / L) + b n_{c,k+1}(x / L)], k = floor(phase), b = fade(phase - k):
+// d psi_c / dx = A [(1 - b) grad n_{c,k} + b grad n_{c,k+1}] (the L cancels).
+void CurlNoise::raw(const Vec3& x, const Frame& f, Vec3& psi, Mat3* jacobian) const {
+  const double k = std::floor(f.phase), fr = f.phase - k;
+  const double b = fr * fr * fr * (fr * (fr * 6.0 - 15.0) + 10.0);
+  const auto slice = static_cast<int64_t>(k);
+  const Vec3 q = x / f.length;
+  for (int c = 0; c < 3; ++c) {
+    Vec3 g0, g1;
+    const double n0 = gradient_noise(channel_key(p_.seed, c, slice), q, g0);
+    const double n1 = gradient_noise(channel_key(p_.seed, c, slice + 1), q, g1);
+    psi[c] = f.intensity * f.length * ((1 - b) * n0 + b * n1);
+    if (jacobian) jacobian->row(c) = f.intensity * ((1 - b) * g0 + b * g1).transpose();
+  }
+}
+
+double CurlNoise::raw_channel(int c, const Vec3& x, const Frame& f) const {
+  const double k = std::floor(f.phase), fr = f.phase - k;
+  const double b = fr * fr * fr * (fr * (fr * 6.0 - 15.0) + 10.0);
+  const auto slice = static_cast<int64_t>(k);
+  const Vec3 q = x / f.length;
+  Vec3 g;
+  const double n0 = gradient_noise(channel_key(p_.seed, c, slice), q, g);
+  const double n1 = b > 0 ? gradient_noise(channel_key(p_.seed, c, slice + 1), q, g) : 0.0;
+  return f.intensity * f.length * ((1 - b) * n0 + b * n1);
+}
+
+double CurlNoise::ramp(const Vec3& x, Vec3* gradient) const {
+  if (gradient) gradient->setZero();
+  if (solids_.empty()) return 1.0;
+  double d = std::numeric_limits<double>::infinity();
+  Vec3 g = Vec3::Zero();
+  for (const ObstacleParams& o : solids_) {
+    Vec3 gi;
+    const double di = obstacle_distance(o, x, &gi);
+    if (di < d) {
+      d = di;
+      g = gi;
+    }
+  }
+  double dr = 0;
+  const double a = noise_ramp(d / p_.ramp_distance, &dr);
+  if (gradient) *gradient = (dr / p_.ramp_distance) * g;
+  return a;
+}
+
+// u = curl(alpha psi) = alpha curl psi + grad alpha x psi (Bridson 2007 §2.3, without the
+// tangential-flow term): psi = 0 on the solid, so u there is grad alpha x psi, tangential.
+Vec3 CurlNoise::velocity(const Vec3& x, double t) const {
+  if (!enabled_) return Vec3::Zero();
+  const Frame f = frame(t);
+  if (f.intensity == 0) return Vec3::Zero();
+  Vec3 psi;
+  Mat3 J;
+  raw(x, f, psi, &J);
+  const Vec3 curl(J(2, 1) - J(1, 2), J(0, 2) - J(2, 0), J(1, 0) - J(0, 1));
+  Vec3 ga;
+  const double a = ramp(x, &ga);
+  return a * curl + ga.cross(psi);
+}
+
+double CurlNoise::potential(int axis, const Vec3& x, double t) const {
+  if (!enabled_) return 0.0;
+  const Frame f = frame(t);
+  if (f.intensity == 0) return 0.0;
+  Vec3 psi;
+  raw(x, f, psi, nullptr);
+  return ramp(x, nullptr) * psi[axis];
+}
+
+Shape3 edge_shape(const GridGeometry& geo, int a) {
+  Shape3 s = geo.cells();
+  if (!geo.periodic)
+    for (int d = 0; d < 3; ++d)
+      if (d != a) s.n[d] += 1;
+  return s;
+}
+
+Vec3 edge_position(const GridGeometry& geo, int a, int i, int j, int k) {
+  return geo.origin +
+         geo.h * Vec3(i + (a == 0 ? 0.5 : 0.0), j + (a == 1 ? 0.5 : 0.0), k + (a == 2 ? 0.5 : 0.0));
+}
+
+template <class T>
+void CurlNoise::potential_on_edges(const GridGeometry& geo, double t,
+                                   std::array<AlignedVector<T>, 3>& psi) const {
+  const Frame f = frame(t);
+  for (int a = 0; a < 3; ++a) {
+    const Shape3 s = edge_shape(geo, a);
+    T* out = psi[a].data();
+    parallel_for(Index(s.n[0]), [&](Index i) {
+      for (int j = 0; j < s.n[1]; ++j)
+        for (int k = 0; k < s.n[2]; ++k) {
+          const Vec3 x = edge_position(geo, a, int(i), j, k);
+          double value = 0;
+          if (enabled_ && f.intensity != 0) value = ramp(x, nullptr) * raw_channel(a, x, f);
+          out[s.index(int(i), j, k)] = T(value);
+        }
+    });
+  }
+}
+
+// Face values from the four edges around each face (Stokes on the face):
+//   u(i,j,k) = [Z(i,j+1,k) - Z(i,j,k) - Y(i,j,k+1) + Y(i,j,k)] / h
+//   v(i,j,k) = [X(i,j,k+1) - X(i,j,k) - Z(i+1,j,k) + Z(i,j,k)] / h
+//   w(i,j,k) = [Y(i+1,j,k) - Y(i,j,k) - X(i,j+1,k) + X(i,j,k)] / h
+// with X, Y, Z the differences psi1 - psi0 on the x-, y-, z-edges (periodic: indices wrap).
+template <class T>
+void add_discrete_curl(const std::array<AlignedVector<T>, 3>& psi1,
+                       const std::array<AlignedVector<T>, 3>& psi0, MacGrid<T>& u) {
+  const GridGeometry& geo = u.geo;
+  const double inv_h = 1.0 / geo.h;
+  const std::array<Shape3, 3> es{edge_shape(geo, 0), edge_shape(geo, 1), edge_shape(geo, 2)};
+  auto d = [&](int a, int i, int j, int k) -> double {
+    if (geo.periodic) {
+      i %= geo.nx;
+      j %= geo.ny;
+      k %= geo.nz;
+    }
+    const std::size_t e = es[a].index(i, j, k);
+    return double(psi1[a][e]) - double(psi0[a][e]);
+  };
+  // (the two edge axes p, q of face axis c, as in the formulas above: c = 0 -> Z, Y; ...)
+  for (int c = 0; c < 3; ++c) {
+    const Shape3 s = u.shape[c];
+    T* q = u.comp[c].data();
+    parallel_for(Index(s.n[0]), [&](Index ii) {
+      const int i = int(ii);
+      for (int j = 0; j < s.n[1]; ++j)
+        for (int k = 0; k < s.n[2]; ++k) {
+          double curl;
+          if (c == 0)
+            curl = d(2, i, j + 1, k) - d(2, i, j, k) - d(1, i, j, k + 1) + d(1, i, j, k);
+          else if (c == 1)
+            curl = d(0, i, j, k + 1) - d(0, i, j, k) - d(2, i + 1, j, k) + d(2, i, j, k);
+          else
+            curl = d(1, i + 1, j, k) - d(1, i, j, k) - d(0, i, j + 1, k) + d(0, i, j, k);
+          const std::size_t e = s.index(i, j, k);
+          q[e] = T(double(q[e]) + curl * inv_h);
+        }
+    });
+  }
+}
+
+#define FLAGSIM_INSTANTIATE_TURBULENCE(T)                                                 \
+  template void CurlNoise::potential_on_edges<T>(const GridGeometry&, double,             \
+                                                 std::array<AlignedVector<T>, 3>&) const; \
+  template void add_discrete_curl<T>(const std::array<AlignedVector<T>, 3>&,              \
+                                     const std::array<AlignedVector<T>, 3>&, MacGrid<T>&);
+FLAGSIM_INSTANTIATE_TURBULENCE(float)
+FLAGSIM_INSTANTIATE_TURBULENCE(double)
+
+}  // namespace flagsim
