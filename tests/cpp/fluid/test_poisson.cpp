@@ -3,7 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <random>
+
+#include "poisson_cases.h"
 
 namespace flagsim {
 
@@ -108,6 +111,104 @@ TEST(Cg, DiffusionWithFixedEndsKeepsThemAndSolvesTheRest) {
   EXPECT_EQ(x[op.shape.index(0, 2, 1)], 3.0);
   EXPECT_EQ(x[op.shape.index(7, 4, 3)], -1.0);
   EXPECT_LE(residual(op, 1.0, 0.7, x, b), 1e-11 * 3.0);
+}
+
+// ---- solids: the masked operator -----------------------------------------------------------
+
+namespace {
+using namespace poisson_cases;
+}  // namespace
+
+TEST(MaskedLaplace7, IsSymmetricOnRandomVectors) {
+  for (bool tunnel : {false, true}) {
+    Laplace7 op = pressure_like(9, 7, 6, tunnel);
+    const AlignedVector<uint8_t> mask = random_mask(op.shape, 0.25, 4);
+    op.solid = mask.data();
+    const std::size_t n = op.shape.size();
+    AlignedVector<double> x = random_vector<double>(n, 1), y = random_vector<double>(n, 2);
+    for (std::size_t i = 0; i < n; ++i)
+      if (mask[i]) x[i] = y[i] = 0;  // the unknowns only: K is not defined on solid cells
+    AlignedVector<double> kx(n), ky(n);
+    apply_laplace7(op, 0.0, 1.0, x.data(), kx.data());
+    apply_laplace7(op, 0.0, 1.0, y.data(), ky.data());
+    const double a = dot(x, ky), b = dot(y, kx);
+    EXPECT_NEAR(a, b, 1e-12 * std::fabs(a)) << (tunnel ? "tunnel" : "periodic");
+    EXPECT_GT(dot(x, kx), 0.0);  // positive on a non-constant vector
+  }
+}
+
+TEST(MaskedLaplace7, NoFluxCrossesASolidFace) {
+  // K x on the fluid cells does not read x on solid cells (no coupling across their faces), and
+  // on a periodic grid constants over the fluid cells are still K's null space: a face to a
+  // solid neighbour adds no term to the diagonal either.
+  Laplace7 op = pressure_like(8, 6, 7, false);
+  const AlignedVector<uint8_t> mask = random_mask(op.shape, 0.3, 9);
+  op.solid = mask.data();
+  const std::size_t n = op.shape.size();
+  AlignedVector<double> x = random_vector<double>(n, 3), x2 = x, kx(n), kx2(n);
+  for (std::size_t i = 0; i < n; ++i)
+    if (mask[i]) x2[i] = 1e6 * (i % 7 + 1);
+  apply_laplace7(op, 0.0, 1.0, x.data(), kx.data());
+  apply_laplace7(op, 0.0, 1.0, x2.data(), kx2.data());
+  for (std::size_t i = 0; i < n; ++i) {
+    EXPECT_EQ(kx[i], kx2[i]) << i;
+    if (mask[i]) {
+      EXPECT_EQ(kx[i], 0.0) << i;
+    }
+  }
+  AlignedVector<double> one(n, 1.0), k1(n);
+  apply_laplace7(op, 0.0, 1.0, one.data(), k1.data());
+  for (double v : k1) EXPECT_EQ(v, 0.0);
+}
+
+TEST(MaskedLaplace7, AnAllFluidMaskGivesTheSameBitsAsNoMask) {
+  // The masked paths of apply_laplace7, MIC(0) and solve_cg reduce to the unmasked ones.
+  for (bool tunnel : {false, true}) {
+    Laplace7 op = pressure_like(10, 7, 9, tunnel);
+    const std::size_t n = op.shape.size();
+    const AlignedVector<uint8_t> fluid(n, 0);
+    Laplace7 masked = op;
+    masked.solid = fluid.data();
+    const AlignedVector<double> b = consistent_rhs<double>(op, 5);
+    AlignedVector<double> y1(n), y2(n);
+    apply_laplace7(op, 0.0, 1.0, b.data(), y1.data());
+    apply_laplace7(masked, 0.0, 1.0, b.data(), y2.data());
+    EXPECT_EQ(std::memcmp(y1.data(), y2.data(), n * sizeof(double)), 0);
+    MicPreconditioner<double> m1, m2;
+    m1.build(op);
+    m2.build(masked);
+    EXPECT_EQ(std::memcmp(m1.inv_diag.data(), m2.inv_diag.data(), n * sizeof(double)), 0);
+    EXPECT_EQ(m1.plus, m2.plus);
+    CgScratch<double> w;
+    w.resize(n);
+    AlignedVector<double> x1(n, 0.0), x2(n, 0.0);
+    const CgResult r1 = solve_cg(op, 0.0, 1.0, b.data(), x1.data(), 1e-10, 500, &m1, w);
+    const CgResult r2 = solve_cg(masked, 0.0, 1.0, b.data(), x2.data(), 1e-10, 500, &m2, w);
+    EXPECT_EQ(r1.iterations, r2.iterations);
+    EXPECT_EQ(std::memcmp(x1.data(), x2.data(), n * sizeof(double)), 0);
+  }
+}
+
+TEST(MaskedLaplace7, PcgSolvesWithSolidsAndLeavesThemZero) {
+  for (bool tunnel : {false, true}) {
+    Laplace7 op = pressure_like(12, 9, 8, tunnel);
+    const AlignedVector<uint8_t> mask = box_mask(op.shape);
+    op.solid = mask.data();
+    const std::size_t n = op.shape.size();
+    const AlignedVector<double> b = consistent_rhs<double>(op, 6);
+    AlignedVector<double> x(n, 1.0);  // a guess that is wrong on the solid cells too
+    MicPreconditioner<double> mic;
+    mic.build(op);
+    CgScratch<double> w;
+    w.resize(n);
+    const CgResult r = solve_cg(op, 0.0, 1.0, b.data(), x.data(), 1e-10, 500, &mic, w);
+    EXPECT_TRUE(r.converged);
+    EXPECT_LE(residual(op, x, b), 1e-10 * max_abs(b) * 1.01);
+    for (std::size_t i = 0; i < n; ++i)
+      if (mask[i]) {
+        EXPECT_EQ(x[i], 0.0);
+      }
+  }
 }
 
 }  // namespace flagsim
