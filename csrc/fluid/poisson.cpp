@@ -1,5 +1,6 @@
 #include "fluid/poisson.h"
 #include "common/parallel.h"
+#include "fluid/multigrid.h"
 
 #include <algorithm>
 #include <cmath>
@@ -447,11 +448,20 @@ CgResult solve_cg(const Laplace7& op, double alpha, double beta, const T* b, T* 
   return conjugate_gradient(op, alpha, b, x, tol, max_iter, product, precondition, w);
 }
 
-#define FLAGSIM_INSTANTIATE_POISSON(T)                                                      \
-  template void apply_laplace7<T>(const Laplace7&, double, double, const T*, T*);           \
-  template struct MicPreconditioner<T>;                                                     \
-  template CgResult solve_cg<T>(const Laplace7&, double, double, const T*, T*, double, int, \
-                                const MicPreconditioner<T>*, CgScratch<T>&);
+template <class T>
+CgResult solve_cg(const Laplace7& op, const T* b, T* x, double tol, int max_iter,
+                  PoissonMultigrid<T>& mg, CgScratch<T>& w) {
+  (void)op;  // mg was built for it
+  return mg.solve(b, x, tol, max_iter, w);
+}
+
+#define FLAGSIM_INSTANTIATE_POISSON(T)                                                            \
+  template void apply_laplace7<T>(const Laplace7&, double, double, const T*, T*);                 \
+  template struct MicPreconditioner<T>;                                                           \
+  template CgResult solve_cg<T>(const Laplace7&, double, double, const T*, T*, double, int,       \
+                                const MicPreconditioner<T>*, CgScratch<T>&);                      \
+  template CgResult solve_cg<T>(const Laplace7&, const T*, T*, double, int, PoissonMultigrid<T>&, \
+                                CgScratch<T>&);
 FLAGSIM_INSTANTIATE_POISSON(float)
 FLAGSIM_INSTANTIATE_POISSON(double)
 

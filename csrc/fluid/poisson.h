@@ -1,6 +1,7 @@
 // Matrix-free 7-point Laplacian on a 3-D array with per-side boundary conditions and an optional
 // solid mask, and the (preconditioned) conjugate gradient solver used by the pressure and
-// diffusion solves (Bridson, "Fluid Simulation for Computer Graphics", 2nd ed., §5.3-5.4: MIC(0)).
+// diffusion solves (Bridson, "Fluid Simulation for Computer Graphics", 2nd ed., §5.3-5.4: MIC(0);
+// the multigrid preconditioner is in fluid/multigrid.h).
 #pragma once
 #include <cstdint>
 
@@ -83,5 +84,14 @@ struct CgResult {
 template <class T>
 CgResult solve_cg(const Laplace7& op, double alpha, double beta, const T* b, T* x, double tol,
                   int max_iter, const MicPreconditioner<T>* mic, CgScratch<T>& w);
+
+template <class T>
+class PoissonMultigrid;
+
+/// The same for K x = b (alpha = 0, beta = 1), preconditioned by one multigrid V-cycle per
+/// iteration (MGPCG; mg built for this op, fluid/multigrid.h). No allocation.
+template <class T>
+CgResult solve_cg(const Laplace7& op, const T* b, T* x, double tol, int max_iter,
+                  PoissonMultigrid<T>& mg, CgScratch<T>& w);
 
 }  // namespace flagsim

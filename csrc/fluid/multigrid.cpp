@@ -1,0 +1,1254 @@
+#include "fluid/multigrid.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "common/errors.h"
+#include "common/parallel.h"
+#include "common/simd.h"
+
+namespace flagsim {
+
+namespace {
+
+/// The other two axes of axis d, in order: a face of axis d is indexed (i_a * n_b + i_b).
+inline void other_axes(int d, int& a, int& b) {
+  a = d == 0 ? 1 : 0;
+  b = d == 2 ? 1 : 2;
+}
+
+/// Build-time companion of a level: which cells are fluid and the Dirichlet (GhostZero)
+/// conductance of each cell on the six domain sides, ghost[2 d + hi] over that side's face.
+struct LevelGeometry {
+  std::vector<uint8_t> fluid;
+  std::array<std::vector<double>, 6> ghost;
+};
+
+inline std::size_t face_index(const Shape3& sh, int d, const int ijk[3]) {
+  int a, b;
+  other_axes(d, a, b);
+  return std::size_t(ijk[a]) * sh.n[b] + ijk[b];
+}
+
+/// Index of m along an axis of n cells: wrapped when periodic, -1 beyond a bounded end.
+inline int wrap(int m, int n, bool periodic) {
+  if (m >= 0 && m < n) return m;
+  if (!periodic) return -1;
+  return ((m % n) + n) % n;
+}
+
+/// diag = the six conductances + the Dirichlet ones; inv_diag = 1 / diag on fluid cells.
+template <class T>
+void finish_operator(MultigridLevel<T>& L, const LevelGeometry& g) {
+  const Shape3& sh = L.shape;
+  const std::size_t n = sh.size();
+  L.diag.assign(n, T(0));
+  L.inv_diag.assign(n, T(0));
+  for (int i = 0; i < sh.n[0]; ++i)
+    for (int j = 0; j < sh.n[1]; ++j)
+      for (int k = 0; k < sh.n[2]; ++k) {
+        const int ijk[3] = {i, j, k};
+        const std::size_t q = sh.index(i, j, k);
+        if (!g.fluid[q]) continue;
+        double d = 0;
+        for (int a = 0; a < 3; ++a) {
+          d += double(L.c[a][q]);
+          int m[3] = {i, j, k};
+          m[a] = wrap(ijk[a] - 1, sh.n[a], L.periodic[a]);
+          if (m[a] >= 0) d += double(L.c[a][sh.index(m[0], m[1], m[2])]);
+          if (ijk[a] == 0) d += g.ghost[2 * a][face_index(sh, a, ijk)];
+          if (ijk[a] == sh.n[a] - 1) d += g.ghost[2 * a + 1][face_index(sh, a, ijk)];
+        }
+        L.diag[q] = T(d);
+        L.inv_diag[q] = d > 0 ? T(1.0 / d) : T(0);
+      }
+}
+
+/// Level 0 from K: conductance 1 between two fluid cells that are distinct neighbours, ghost 1
+/// on a fluid cell beside a GhostZero side.
+template <class T>
+LevelGeometry fine_level(const Laplace7& op, MultigridLevel<T>& L) {
+  const Shape3& sh = op.shape;
+  L.shape = sh;
+  LevelGeometry g;
+  const std::size_t n = sh.size();
+  g.fluid.assign(n, 1);
+  if (op.solid)
+    for (std::size_t q = 0; q < n; ++q) g.fluid[q] = op.solid[q] ? 0 : 1;
+  for (int d = 0; d < 3; ++d) {
+    L.periodic[d] = op.lo[d] == Side::kPeriodic;
+    L.dirichlet[d][0] = op.lo[d] == Side::kGhostZero;
+    L.dirichlet[d][1] = op.hi[d] == Side::kGhostZero;
+    L.c[d].assign(n, T(0));
+    int a, b;
+    other_axes(d, a, b);
+    for (int s = 0; s < 2; ++s) {
+      g.ghost[2 * d + s].assign(std::size_t(sh.n[a]) * sh.n[b], 0.0);
+      if ((s == 0 ? op.lo[d] : op.hi[d]) != Side::kGhostZero) continue;
+      for (int ia = 0; ia < sh.n[a]; ++ia)
+        for (int ib = 0; ib < sh.n[b]; ++ib) {
+          int ijk[3];
+          ijk[d] = s == 0 ? 0 : sh.n[d] - 1;
+          ijk[a] = ia;
+          ijk[b] = ib;
+          if (g.fluid[sh.index(ijk[0], ijk[1], ijk[2])])
+            g.ghost[2 * d + s][std::size_t(ia) * sh.n[b] + ib] = 1.0;
+        }
+    }
+  }
+  for (int i = 0; i < sh.n[0]; ++i)
+    for (int j = 0; j < sh.n[1]; ++j)
+      for (int k = 0; k < sh.n[2]; ++k) {
+        const std::size_t q = sh.index(i, j, k);
+        if (!g.fluid[q]) continue;
+        const int ijk[3] = {i, j, k};
+        for (int d = 0; d < 3; ++d) {
+          if (sh.n[d] == 1) continue;  // its own neighbour: no coupling
+          int m[3] = {i, j, k};
+          m[d] = wrap(ijk[d] + 1, sh.n[d], L.periodic[d]);
+          if (m[d] >= 0 && g.fluid[sh.index(m[0], m[1], m[2])]) L.c[d][q] = T(1);
+        }
+      }
+  finish_operator(L, g);
+  return g;
+}
+
+/// Which axes of level F halve (see the header); false everywhere: F is the coarsest.
+void choose_halving(const Shape3& sh, const bool periodic[3], const int scale[3], bool halve[3]) {
+  int smallest = 1 << 30;
+  for (int d = 0; d < 3; ++d)
+    if (sh.n[d] > 1) smallest = std::min(smallest, scale[d]);
+  for (int d = 0; d < 3; ++d) {
+    const bool can = sh.n[d] > 1 && (!periodic[d] || sh.n[d] % 2 == 0);
+    halve[d] = can && scale[d] <= smallest;
+  }
+}
+
+/// Level C (coarse) from level F: fluid when a child is; conductance across a coarse face = the
+/// sum of the fine conductances across it times (fine distance / coarse distance) along the
+/// face's axis (1/2 when that axis halved). A Dirichlet side holds 0 half a fine cell beyond the
+/// domain's face (level 0's ghost cell centre), at (s + 1) / 2 fine cells from the centre of a
+/// boundary cell of size s: its conductance scales by (s_F + 1) / (s_C + 1).
+template <class T>
+LevelGeometry coarse_level(const MultigridLevel<T>& F, const LevelGeometry& gf,
+                           MultigridLevel<T>& C) {
+  const Shape3& fs = F.shape;
+  Shape3 cs;
+  for (int d = 0; d < 3; ++d) {
+    cs.n[d] = F.halved[d] ? (fs.n[d] + 1) / 2 : fs.n[d];
+    C.periodic[d] = F.periodic[d];
+    C.dirichlet[d][0] = F.dirichlet[d][0];
+    C.dirichlet[d][1] = F.dirichlet[d][1];
+    C.scale[d] = F.halved[d] ? 2 * F.scale[d] : F.scale[d];
+  }
+  C.shape = cs;
+  const std::size_t n = cs.size();
+  LevelGeometry g;
+  g.fluid.assign(n, 0);
+  // Children of coarse index I along axis d: [first, last] fine indices.
+  auto first = [&](int d, int I) { return F.halved[d] ? 2 * I : I; };
+  auto last = [&](int d, int I) { return F.halved[d] ? std::min(2 * I + 1, fs.n[d] - 1) : I; };
+  for (int I = 0; I < cs.n[0]; ++I)
+    for (int J = 0; J < cs.n[1]; ++J)
+      for (int K = 0; K < cs.n[2]; ++K) {
+        uint8_t any = 0;
+        for (int i = first(0, I); i <= last(0, I); ++i)
+          for (int j = first(1, J); j <= last(1, J); ++j)
+            for (int k = first(2, K); k <= last(2, K); ++k)
+              any |= F.inv_diag[fs.index(i, j, k)] != T(0) ? 1 : 0;
+        g.fluid[cs.index(I, J, K)] = any;
+      }
+  for (int d = 0; d < 3; ++d) {
+    C.c[d].assign(n, T(0));
+    const double ratio = F.halved[d] ? 0.5 : 1.0;
+    const double ghost_ratio = double(F.scale[d] + 1) / double(C.scale[d] + 1);
+    int a, b;
+    other_axes(d, a, b);
+    for (int s = 0; s < 2; ++s) g.ghost[2 * d + s].assign(std::size_t(cs.n[a]) * cs.n[b], 0.0);
+    for (int I = 0; I < cs.n[0]; ++I)
+      for (int J = 0; J < cs.n[1]; ++J)
+        for (int K = 0; K < cs.n[2]; ++K) {
+          const int IJK[3] = {I, J, K};
+          const std::size_t q = cs.index(I, J, K);
+          if (!g.fluid[q]) continue;
+          // The fine faces on C's +d side start from the children with the last index along d;
+          // on its -d (domain) side from those with the first.
+          int lo[3], hi[3];
+          for (int e = 0; e < 3; ++e) {
+            lo[e] = first(e, IJK[e]);
+            hi[e] = last(e, IJK[e]);
+          }
+          const bool own_neighbour = cs.n[d] == 1;  // periodic, one cell: the face is inside it
+          double cond = 0, ghost_lo = 0, ghost_hi = 0;
+          for (int i = lo[0]; i <= hi[0]; ++i)
+            for (int j = lo[1]; j <= hi[1]; ++j)
+              for (int k = lo[2]; k <= hi[2]; ++k) {
+                const int ijk[3] = {i, j, k};
+                if (ijk[d] == hi[d] && !own_neighbour) cond += double(F.c[d][fs.index(i, j, k)]);
+                if (IJK[d] == 0 && ijk[d] == 0) ghost_lo += gf.ghost[2 * d][face_index(fs, d, ijk)];
+                if (IJK[d] == cs.n[d] - 1 && ijk[d] == fs.n[d] - 1)
+                  ghost_hi += gf.ghost[2 * d + 1][face_index(fs, d, ijk)];
+              }
+          // Padded odd axis: the last coarse cell's +d face is the domain end (F.c is 0 there).
+          C.c[d][q] = T(cond * ratio);
+          if (IJK[d] == 0) g.ghost[2 * d][face_index(cs, d, IJK)] = ghost_lo * ghost_ratio;
+          if (IJK[d] == cs.n[d] - 1)
+            g.ghost[2 * d + 1][face_index(cs, d, IJK)] = ghost_hi * ghost_ratio;
+        }
+  }
+  finish_operator(C, g);
+  return g;
+}
+
+/// Transfer tables of the pair (F, C = next coarser level) along axis d. Restriction: for each
+/// coarse index, 4 (fine index, weight) entries when d halves (weights 1/4 3/4 3/4 1/4, cell
+/// centres at (2I + 1/2 +- 1/2 +- 1) fine cells), else 1 (I, 1). Prolongation: for each fine
+/// index, 2 (coarse index, weight) entries (3/4 parent, 1/4 its other neighbour), else 1.
+/// Entries beyond a bounded end get weight 0 (and a valid index). p_norm: the weight each
+/// prolongation entry adds to the normaliser: its own, or beyond a Dirichlet end the weight
+/// that makes the interpolation linear to 0 at the Dirichlet point, so the parent's share is
+/// (s_F + 1) / (s_C + 1) (see coarse_level); beyond a Neumann end 0 (constant extrapolation).
+struct AxisTransfer {
+  int r_count = 1, p_count = 1;
+  std::vector<int32_t> r_idx, p_idx;
+  std::vector<double> r_w, p_w, p_norm;
+};
+
+template <class T>
+AxisTransfer axis_transfer(const MultigridLevel<T>& F, int d, int nc, int scale_c) {
+  const int nf = F.shape.n[d];
+  const bool periodic = F.periodic[d];
+  AxisTransfer t;
+  if (!F.halved[d]) {
+    t.r_idx.resize(std::size_t(nc));
+    for (int I = 0; I < nc; ++I) t.r_idx[std::size_t(I)] = I;
+    t.p_idx = t.r_idx;
+    t.r_w.assign(std::size_t(nc), 1.0);
+    t.p_w.assign(std::size_t(nf), 1.0);
+    t.p_norm = t.p_w;
+    return t;
+  }
+  t.r_count = 4;
+  t.p_count = 2;
+  t.r_idx.resize(std::size_t(4 * nc));
+  t.r_w.resize(std::size_t(4 * nc));
+  const double w4[4] = {0.25, 0.75, 0.75, 0.25};
+  for (int I = 0; I < nc; ++I)
+    for (int e = 0; e < 4; ++e) {
+      const int f = wrap(2 * I - 1 + e, nf, periodic);
+      t.r_idx[std::size_t(4 * I + e)] = f >= 0 ? f : 0;
+      t.r_w[std::size_t(4 * I + e)] = f >= 0 ? w4[e] : 0.0;
+    }
+  const double parent_share = double(F.scale[d] + 1) / double(scale_c + 1);
+  const double dirichlet_weight = 0.75 * (1.0 / parent_share - 1.0);
+  t.p_idx.resize(std::size_t(2 * nf));
+  t.p_w.resize(std::size_t(2 * nf));
+  t.p_norm.resize(std::size_t(2 * nf));
+  for (int f = 0; f < nf; ++f) {
+    const int I = f / 2;
+    const int toward = f % 2 == 0 ? I - 1 : I + 1;
+    const int other = wrap(toward, nc, periodic);
+    t.p_idx[std::size_t(2 * f)] = I;
+    t.p_w[std::size_t(2 * f)] = 0.75;
+    t.p_norm[std::size_t(2 * f)] = 0.75;
+    t.p_idx[std::size_t(2 * f + 1)] = other >= 0 ? other : I;
+    t.p_w[std::size_t(2 * f + 1)] = other >= 0 ? 0.25 : 0.0;
+    t.p_norm[std::size_t(2 * f + 1)] =
+        other >= 0 ? 0.25 : (F.dirichlet[d][toward < 0 ? 0 : 1] ? dirichlet_weight : 0.0);
+  }
+  return t;
+}
+
+}  // namespace
+
+// ---- set-up
+// --------------------------------------------------------------------------------------
+
+template <class T>
+void PoissonMultigrid<T>::build(const Laplace7& op) {
+  for (int d = 0; d < 3; ++d) {
+    if (op.lo[d] == Side::kFixed || op.hi[d] == Side::kFixed)
+      throw InvalidArgument("multigrid: the operator should have no Fixed side (pressure only)");
+    if ((op.lo[d] == Side::kPeriodic) != (op.hi[d] == Side::kPeriodic))
+      throw InvalidArgument("multigrid: a periodic axis should be periodic on both sides");
+  }
+  using F32 = MgScalar;
+  levels_.clear();
+  levels_.emplace_back();
+  std::vector<LevelGeometry> geo;
+  geo.push_back(fine_level(op, levels_[0]));
+  while (true) {
+    MultigridLevel<F32>& F = levels_.back();
+    if (F.shape.size() <= kCoarsestCells) break;
+    choose_halving(F.shape, F.periodic, F.scale, F.halved);
+    if (!(F.halved[0] || F.halved[1] || F.halved[2])) break;
+    MultigridLevel<F32> C;
+    geo.push_back(coarse_level(F, geo.back(), C));
+    levels_.push_back(std::move(C));
+  }
+  std::size_t widest = 1;
+  for (std::size_t l = 0; l < levels_.size(); ++l) {
+    MultigridLevel<F32>& L = levels_[l];
+    const std::size_t n = L.shape.size();
+    widest = std::max(widest, std::size_t(L.shape.n[2]));
+    L.passes = 1;
+    for (int d = 0; d < 3; ++d)
+      if (L.periodic[d] && L.shape.n[d] > 1 && L.shape.n[d] % 2 == 1) ++L.passes;
+    L.x.assign(n, F32(0));
+    L.b.assign(n, F32(0));
+    if (l + 1 < levels_.size()) {
+      L.r.assign(n, F32(0));
+      const MultigridLevel<F32>& C = levels_[l + 1];
+      std::array<std::vector<double>, 3> p_norm;
+      for (int d = 0; d < 3; ++d) {
+        AxisTransfer t = axis_transfer(L, d, C.shape.n[d], C.scale[d]);
+        L.r_count[d] = t.r_count;
+        L.p_count[d] = t.p_count;
+        L.r_idx[d] = std::move(t.r_idx);
+        L.p_idx[d] = std::move(t.p_idx);
+        L.r_w[d].assign(t.r_w.begin(), t.r_w.end());
+        L.p_w[d].assign(t.p_w.begin(), t.p_w.end());
+        p_norm[d] = std::move(t.p_norm);
+      }
+      // inv_norm: 1 / sum of the prolongation weights from active coarse cells (and from the
+      // zero beyond a Dirichlet end).
+      L.inv_norm.assign(n, F32(0));
+      for (int i = 0; i < L.shape.n[0]; ++i)
+        for (int j = 0; j < L.shape.n[1]; ++j)
+          for (int k = 0; k < L.shape.n[2]; ++k) {
+            const std::size_t q = L.shape.index(i, j, k);
+            if (L.inv_diag[q] == F32(0)) continue;
+            double norm = 0;
+            for (int e0 = 0; e0 < L.p_count[0]; ++e0)
+              for (int e1 = 0; e1 < L.p_count[1]; ++e1)
+                for (int e2 = 0; e2 < L.p_count[2]; ++e2) {
+                  const std::size_t e[3] = {std::size_t(i * L.p_count[0] + e0),
+                                            std::size_t(j * L.p_count[1] + e1),
+                                            std::size_t(k * L.p_count[2] + e2)};
+                  const double w = p_norm[0][e[0]] * p_norm[1][e[1]] * p_norm[2][e[2]];
+                  if (w == 0) continue;
+                  bool beyond = false;
+                  for (int d = 0; d < 3; ++d) beyond = beyond || L.p_w[d][e[d]] == F32(0);
+                  const std::size_t Q =
+                      C.shape.index(L.p_idx[0][e[0]], L.p_idx[1][e[1]], L.p_idx[2][e[2]]);
+                  if (beyond || C.inv_diag[Q] != F32(0)) norm += w;
+                }
+            L.inv_norm[q] = norm > 0 ? F32(1.0 / norm) : F32(0);
+          }
+    }
+  }
+  zero_row_.assign(widest, F32(0));
+  parity_.resize(widest + 1);
+  for (std::size_t k = 0; k <= widest; ++k) parity_[k] = F32((k & 1) == 0 ? 1 : 0);
+  zero_row_t_.assign(widest, T(0));
+  product_ = MultigridLevel<T>();
+  product_.shape = levels_[0].shape;
+  for (int d = 0; d < 3; ++d) product_.periodic[d] = levels_[0].periodic[d];
+  product_.unit = true;
+  product_.diag.assign(levels_[0].diag.begin(), levels_[0].diag.end());
+  singular_ = op.singular();
+  n_active_ = 0;
+  for (MgScalar d : levels_[0].diag) n_active_ += d != MgScalar(0) ? 1 : 0;
+  any_inactive_ = n_active_ < product_.shape.size();
+  for (auto& p : part_) p.assign(std::size_t(product_.shape.n[0]), 0.0);
+
+  // Coarsest level: dense Cholesky of its active cells, one rank-one term per pocket without a
+  // Dirichlet side (its null vector is the pocket's constant: the term pins the pocket's mean).
+  MultigridLevel<F32>& L = levels_.back();
+  const Shape3& sh = L.shape;
+  cell_of_.clear();
+  chol_.clear();
+  rhs_.clear();
+  std::vector<int32_t> dense(sh.size(), -1);
+  for (std::size_t q = 0; q < sh.size(); ++q)
+    if (L.inv_diag[q] != F32(0)) {
+      dense[q] = int32_t(cell_of_.size());
+      cell_of_.push_back(int32_t(q));
+    }
+  const std::size_t m = cell_of_.size();
+  if (m == 0 || m > kMaxDirectCells) {
+    cell_of_.clear();
+    return finish_build();
+  }
+  std::vector<double> A(m * m, 0.0);
+  std::vector<int32_t> pocket(m, -1);
+  std::vector<double> ghost(m, 0.0);
+  for (std::size_t r = 0; r < m; ++r) {
+    const std::size_t q = std::size_t(cell_of_[r]);
+    const int ijk[3] = {int(q / (std::size_t(sh.n[1]) * sh.n[2])), int((q / sh.n[2]) % sh.n[1]),
+                        int(q % sh.n[2])};
+    A[r * m + r] = double(L.diag[q]);
+    double off = 0;
+    for (int d = 0; d < 3; ++d) {
+      for (int s = -1; s <= 1; s += 2) {
+        int nb[3] = {ijk[0], ijk[1], ijk[2]};
+        nb[d] = wrap(ijk[d] + s, sh.n[d], L.periodic[d]);
+        if (nb[d] < 0) continue;
+        const std::size_t Q = sh.index(nb[0], nb[1], nb[2]);
+        const double cond = double(s > 0 ? L.c[d][q] : L.c[d][Q]);
+        if (cond == 0 || dense[Q] < 0) continue;
+        A[r * m + std::size_t(dense[Q])] -= cond;
+        off += cond;
+      }
+    }
+    ghost[r] = A[r * m + r] - off;
+  }
+  // Pockets: connected components of the coupling graph (breadth first, in index order).
+  std::vector<int32_t> queue;
+  for (std::size_t s0 = 0; s0 < m; ++s0) {
+    if (pocket[s0] >= 0) continue;
+    const int32_t id = int32_t(s0);
+    queue.assign(1, int32_t(s0));
+    pocket[s0] = id;
+    double dirichlet = 0, top = 0;
+    std::vector<int32_t> members;
+    while (!queue.empty()) {
+      const std::size_t r = std::size_t(queue.back());
+      queue.pop_back();
+      members.push_back(int32_t(r));
+      dirichlet += ghost[r];
+      top = std::max(top, A[r * m + r]);
+      for (std::size_t c = 0; c < m; ++c)
+        if (c != r && A[r * m + c] != 0 && pocket[c] < 0) {
+          pocket[c] = id;
+          queue.push_back(int32_t(c));
+        }
+    }
+    if (dirichlet > 0) continue;
+    const double w = top / double(members.size());
+    for (int32_t r : members)
+      for (int32_t c : members) A[std::size_t(r) * m + std::size_t(c)] += w;
+  }
+  // A = L L^T, row-major lower factor in place.
+  for (std::size_t j = 0; j < m; ++j) {
+    double d = A[j * m + j];
+    for (std::size_t k = 0; k < j; ++k) d -= A[j * m + k] * A[j * m + k];
+    if (!(d > 0)) {  // not positive definite after all: sweep instead
+      cell_of_.clear();
+      return finish_build();
+    }
+    const double ljj = std::sqrt(d);
+    A[j * m + j] = ljj;
+    for (std::size_t i = j + 1; i < m; ++i) {
+      double v = A[i * m + j];
+      for (std::size_t k = 0; k < j; ++k) v -= A[i * m + k] * A[j * m + k];
+      A[i * m + j] = v / ljj;
+    }
+  }
+  for (std::size_t i = 0; i < m; ++i)
+    for (std::size_t j = i + 1; j < m; ++j) A[i * m + j] = 0;
+  chol_ = std::move(A);
+  rhs_.assign(m, 0.0);
+  finish_build();
+}
+
+template <class T>
+void PoissonMultigrid<T>::finish_build() {
+  // Level 0 runs on unit conductances (x = 0 on its solid cells): its c arrays go.
+  MultigridLevel<MgScalar>& L0 = levels_[0];
+  L0.unit = true;
+  for (int d = 0; d < 3; ++d) AlignedVector<MgScalar>().swap(L0.c[d]);
+}
+
+template <class T>
+std::size_t PoissonMultigrid<T>::bytes() const {
+  using F32 = MgScalar;
+  std::size_t b = 0;
+  for (const MultigridLevel<F32>& L : levels_) {
+    for (int d = 0; d < 3; ++d)
+      b += L.c[d].size() * sizeof(F32) + L.r_idx[d].size() * 4 + L.p_idx[d].size() * 4 +
+           (L.r_w[d].size() + L.p_w[d].size()) * sizeof(F32);
+    b += (L.diag.size() + L.inv_diag.size() + L.x.size() + L.b.size() + L.r.size() +
+          L.inv_norm.size()) *
+         sizeof(F32);
+  }
+  return b + product_.diag.size() * sizeof(T) + zero_row_.size() * sizeof(F32) +
+         zero_row_t_.size() * sizeof(T) + cell_of_.size() * 4 +
+         (chol_.size() + rhs_.size()) * sizeof(double);
+}
+
+// ---- the cycle
+// -----------------------------------------------------------------------------------
+
+/// What the row kernels read of one level, and the operation's inputs.
+template <class T>
+struct LevelArgs {
+  using Scalar = T;
+  const MultigridLevel<T>* L = nullptr;
+  const T* zero = nullptr;  // a zero row: the neighbour beyond a bounded end (or of a 1-cell axis)
+  const T* b = nullptr;
+  T* x = nullptr;
+  T* r = nullptr;  // residual (or product): out
+  int colour = 0, pass = 0;
+  const MultigridLevel<T>* coarse = nullptr;  // transfers: the next coarser level
+  T* b_coarse = nullptr;                      // restriction: out
+  // Level 0's entry and exit in the grid's precision (double or float): r in, z out.
+  const void* in = nullptr;
+  void* out = nullptr;
+  bool io_double = false;
+  bool first_half_sweep = false;  // entry: also the first half-sweep from x = 0
+  const T* parity = nullptr;      // 1, 0, 1, 0, ... (a row and one more)
+  // CG on level 0 (in the grid's precision), per-plane partial sums (fixed order in a plane):
+  double* sums = nullptr;   // product: s . q; exit: r . z; update: sum r
+  double* sums2 = nullptr;  // exit: sum z; update: max |r|
+  const T* cg_r = nullptr;  // exit: r (its dot with z); s update: z
+  T *cg_x = nullptr, *cg_s = nullptr, *cg_q = nullptr, *cg_rw = nullptr;
+  double alpha = 0, beta = 0, mean = 0;
+};
+
+namespace {
+
+/// The neighbours of row (i, j): x of rows (i-1, j), (i+1, j), (i, j-1), (i, j+1) and the
+/// conductances to them, c[2] of the row itself (ck[k] couples k and k+1).
+template <class T>
+struct RowPtrs {
+  const T *xim, *xip, *xjm, *xjp;
+  const T *cim, *cip, *cjm, *cjp, *ck;
+  std::size_t base;
+};
+
+template <class T>
+FLAGSIM_INLINE RowPtrs<T> row_ptrs(const LevelArgs<T>& a, int i, int j) {
+  const MultigridLevel<T>& L = *a.L;
+  const Shape3& sh = L.shape;
+  auto nb = [&](int m, int d) { return sh.n[d] > 1 ? wrap(m, sh.n[d], L.periodic[d]) : -1; };
+  const int im = nb(i - 1, 0), ip = nb(i + 1, 0), jm = nb(j - 1, 1), jp = nb(j + 1, 1);
+  RowPtrs<T> p;
+  p.base = sh.index(i, j, 0);
+  const T* x = a.x;
+  p.xim = im >= 0 ? x + sh.index(im, j, 0) : a.zero;
+  p.xip = ip >= 0 ? x + sh.index(ip, j, 0) : a.zero;
+  p.xjm = jm >= 0 ? x + sh.index(i, jm, 0) : a.zero;
+  p.xjp = jp >= 0 ? x + sh.index(i, jp, 0) : a.zero;
+  if (L.unit) {
+    p.cim = p.cip = p.cjm = p.cjp = p.ck = nullptr;
+  } else {
+    p.cim = im >= 0 ? L.c[0].data() + sh.index(im, j, 0) : a.zero;
+    p.cip = L.c[0].data() + p.base;
+    p.cjm = jm >= 0 ? L.c[1].data() + sh.index(i, jm, 0) : a.zero;
+    p.cjp = L.c[1].data() + p.base;
+    p.ck = L.c[2].data() + p.base;
+  }
+  return p;
+}
+
+/// sum over the six neighbours of conductance * x at cell k, S one lane type (T or a vector of
+/// T); xkm, xkp (and ckm, ckp) the k-neighbours. Unit: conductance 1 (level 0, where a solid
+/// neighbour holds x = 0 and the mask lives in the diagonal only). One expression for every lane
+/// width: the same bits.
+template <bool Unit, class S, class T>
+FLAGSIM_INLINE S neighbour_sum(const RowPtrs<T>& p, int k, const S& xkm, const S& xkp, const S& ckm,
+                               const S& ckp) {
+  const S xim = load_lanes<S>(p.xim + k), xip = load_lanes<S>(p.xip + k);
+  const S xjm = load_lanes<S>(p.xjm + k), xjp = load_lanes<S>(p.xjp + k);
+  if constexpr (Unit) {
+    (void)ckm;
+    (void)ckp;
+    return ((((xim + xip) + xjm) + xjp) + xkm) + xkp;
+  } else {
+    return ((((load_lanes<S>(p.cim + k) * xim + load_lanes<S>(p.cip + k) * xip) +
+              load_lanes<S>(p.cjm + k) * xjm) +
+             load_lanes<S>(p.cjp + k) * xjp) +
+            ckm * xkm) +
+           ckp * xkp;
+  }
+}
+
+/// The sum at a single cell k (any k: the row's ends wrap or see zero).
+template <bool Unit, class T>
+FLAGSIM_INLINE T cell_sum(const LevelArgs<T>& a, const RowPtrs<T>& p, const T* xr, int k) {
+  const MultigridLevel<T>& L = *a.L;
+  const int n2 = L.shape.n[2];
+  const bool wrap2 = L.periodic[2] && n2 > 1;
+  T xkm = T(0), xkp = T(0), ckm = T(0), ckp = T(0);
+  if (k > 0) {
+    xkm = xr[k - 1];
+    if (!Unit) ckm = p.ck[k - 1];
+  } else if (wrap2) {
+    xkm = xr[n2 - 1];
+    if (!Unit) ckm = p.ck[n2 - 1];
+  }
+  if (k + 1 < n2) {
+    xkp = xr[k + 1];
+    if (!Unit) ckp = p.ck[k];
+  } else if (wrap2) {
+    xkp = xr[0];
+    if (!Unit) ckp = p.ck[k];
+  }
+  return neighbour_sum<Unit, T>(p, k, xkm, xkp, ckm, ckp);
+}
+
+/// Interior cells [1, n2 - 1) of a row by vectors of L::W lanes: body(k, sum) for each chunk,
+/// then the rest one by one; returns the first k not done.
+template <bool Unit, class L, class T, class Body>
+FLAGSIM_INLINE int interior_chunks(const RowPtrs<T>& p, const T* xr, int n2, const Body& body) {
+  int k = 1;
+#ifdef FLAGSIM_HAVE_VECTORS
+  if constexpr (!std::is_void<L>::value) {
+    using S = typename L::V;
+    for (; k + L::W <= n2 - 1; k += L::W) {
+      S ckm{}, ckp{};
+      if constexpr (!Unit) {
+        ckm = load_lanes<S>(p.ck + k - 1);
+        ckp = load_lanes<S>(p.ck + k);
+      }
+      body(k, neighbour_sum<Unit, S>(p, k, load_lanes<S>(xr + k - 1), load_lanes<S>(xr + k + 1),
+                                     ckm, ckp));
+    }
+  }
+#endif
+  (void)p;
+  (void)xr;
+  (void)body;
+  return k;
+}
+
+/// Gauss-Seidel on the cells of one colour (parity of i + j + k) and one wrap pass, plane i:
+/// x_k <- (b_k + neighbour_sum) / diag_k. Vectors compute every cell of a chunk and keep the
+/// colour's (the other colour is only read, so the in-place update is the same as one by one).
+struct SmoothPlane {
+  template <class L, bool Unit, class T>
+  FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
+    const MultigridLevel<T>& Lv = *a.L;
+    const Shape3& sh = Lv.shape;
+    const int n0 = sh.n[0], n1 = sh.n[1], n2 = sh.n[2];
+    const bool odd0 = Lv.periodic[0] && n0 > 1 && n0 % 2 == 1;
+    const bool odd1 = Lv.periodic[1] && n1 > 1 && n1 % 2 == 1;
+    const bool odd2 = Lv.periodic[2] && n2 > 1 && n2 % 2 == 1;
+    for (int j = 0; j < n1; ++j) {
+      const int row_pass = (odd0 && i == n0 - 1 ? 1 : 0) + (odd1 && j == n1 - 1 ? 1 : 0);
+      if (row_pass > a.pass) continue;
+      const RowPtrs<T> p = row_ptrs(a, i, j);
+      T* xr = a.x + p.base;
+      const T* br = a.b + p.base;
+      const T* dr = Lv.inv_diag.data() + p.base;
+      const int want = (a.colour + i + j) & 1;  // parity of the k to update
+      auto update = [&](int k) FLAGSIM_INLINE_LAMBDA {
+        xr[k] = dr[k] * (br[k] + cell_sum<Unit>(a, p, xr, k));
+      };
+      if (row_pass == a.pass) {
+        int k = 1;
+        if (n2 > 2) {
+#ifdef FLAGSIM_HAVE_VECTORS
+          if constexpr (!std::is_void<L>::value) {
+            // Out of place into a row of scratch, then copied: a chunk stored into x and read
+            // back one cell shifted by the next chunk would stall the store forwarding.
+            using S = typename L::V;
+            T tmp[4096];
+            k = interior_chunks<Unit, L>(
+                p, xr, n2, [&](int k0, const S& sum) FLAGSIM_INLINE_LAMBDA {
+                  store_lanes(tmp + k0, load_lanes<S>(dr + k0) * (load_lanes<S>(br + k0) + sum));
+                });
+            for (int q = 1 + (want == 0); q < k; q += 2) xr[q] = tmp[q];
+          }
+#endif
+        }
+        for (k += ((k & 1) != want); k < n2 - 1; k += 2) update(k);
+        if (want == 0) update(0);
+        if (n2 > 1 && ((n2 - 1) & 1) == want && !odd2) update(n2 - 1);
+      } else if (odd2 && row_pass + 1 == a.pass && ((n2 - 1) & 1) == want) {
+        update(n2 - 1);
+      }
+    }
+  }
+};
+
+/// r = (b - A x) * inv_norm on plane i: the residual, weighted for the restriction.
+struct ResidualPlane {
+  template <class L, bool Unit, class T>
+  FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
+    const MultigridLevel<T>& Lv = *a.L;
+    const int n1 = Lv.shape.n[1], n2 = Lv.shape.n[2];
+    for (int j = 0; j < n1; ++j) {
+      const RowPtrs<T> p = row_ptrs(a, i, j);
+      const T* xr = a.x + p.base;
+      const T* br = a.b + p.base;
+      const T* dg = Lv.diag.data() + p.base;
+      const T* nr = Lv.inv_norm.data() + p.base;
+      T* rr = a.r + p.base;
+      int k = 1;
+      if (n2 > 2) {
+#ifdef FLAGSIM_HAVE_VECTORS
+        if constexpr (!std::is_void<L>::value) {
+          using S = typename L::V;
+          k = interior_chunks<Unit, L>(p, xr, n2, [&](int k0, const S& sum) FLAGSIM_INLINE_LAMBDA {
+            const S ax = load_lanes<S>(dg + k0) * load_lanes<S>(xr + k0) - sum;
+            store_lanes(rr + k0, load_lanes<S>(nr + k0) * (load_lanes<S>(br + k0) - ax));
+          });
+        }
+#endif
+      }
+      auto one = [&](int q) FLAGSIM_INLINE_LAMBDA {
+        const T ax = dg[q] * xr[q] - cell_sum<Unit>(a, p, xr, q);
+        rr[q] = nr[q] * (br[q] - ax);
+      };
+      for (; k < n2 - 1; ++k) one(k);
+      one(0);
+      if (n2 > 1) one(n2 - 1);
+    }
+  }
+};
+
+/// sum_k a_k b_k over a row in a fixed order: L::W lane sums in T, added lane by lane, then the
+/// tail in double.
+template <class L, class T>
+FLAGSIM_INLINE double row_dot(const T* a, const T* b, int n) {
+  int k = 0;
+  double s = 0;
+#ifdef FLAGSIM_HAVE_VECTORS
+  if constexpr (!std::is_void<L>::value) {
+    using S = typename L::V;
+    S acc{};
+    for (; k + L::W <= n; k += L::W) acc += load_lanes<S>(a + k) * load_lanes<S>(b + k);
+    for (int l = 0; l < L::W; ++l) s += double(acc[l]);
+  }
+#endif
+  for (; k < n; ++k) s += double(a[k]) * double(b[k]);
+  return s;
+}
+
+/// CG's update on plane i: x += alpha s, r -= alpha q; sums: sum r, sums2: max |r|.
+struct UpdatePlane {
+  template <class L, bool Unit, class T>
+  FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
+    const Shape3& sh = a.L->shape;
+    const std::size_t base = sh.index(i, 0, 0);
+    const int n = sh.n[1] * sh.n[2];
+    T* x = a.cg_x + base;
+    T* r = a.cg_rw + base;
+    const T* s = a.cg_s + base;
+    const T* q = a.cg_q + base;
+    const T al = T(a.alpha);
+    int k = 0;
+    double sum = 0, top = 0;
+#ifdef FLAGSIM_HAVE_VECTORS
+    if constexpr (!std::is_void<L>::value) {
+      using S = typename L::V;
+      S acc{}, big{};
+      for (; k + L::W <= n; k += L::W) {
+        store_lanes(x + k, load_lanes<S>(x + k) + al * load_lanes<S>(s + k));
+        const S rk = load_lanes<S>(r + k) - al * load_lanes<S>(q + k);
+        store_lanes(r + k, rk);
+        acc += rk;
+        const S m = rk < S{} ? -rk : rk;
+        big = m > big ? m : big;
+      }
+      for (int l = 0; l < L::W; ++l) {
+        sum += double(acc[l]);
+        top = std::max(top, double(big[l]));
+      }
+    }
+#endif
+    for (; k < n; ++k) {
+      x[k] = x[k] + al * s[k];
+      r[k] = r[k] - al * q[k];
+      sum += double(r[k]);
+      top = std::max(top, double(std::fabs(r[k])));
+    }
+    a.sums[i] = sum;
+    a.sums2[i] = top;
+  }
+};
+
+/// CG's new direction on plane i: s = (z - mean) + beta s, the mean only on unknowns (diag != 0).
+struct DirectionPlane {
+  template <class L, bool Unit, class T>
+  FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
+    const Shape3& sh = a.L->shape;
+    const std::size_t base = sh.index(i, 0, 0);
+    const int n = sh.n[1] * sh.n[2];
+    T* s = a.cg_s + base;
+    const T* z = a.cg_r + base;
+    const T* dg = a.L->diag.data() + base;
+    const T be = T(a.beta), m = T(a.mean);
+    int k = 0;
+#ifdef FLAGSIM_HAVE_VECTORS
+    if constexpr (!std::is_void<L>::value) {
+      using S = typename L::V;
+      const S zero{};
+      for (; k + L::W <= n; k += L::W) {
+        const S mk = load_lanes<S>(dg + k) == zero ? zero : zero + m;
+        store_lanes(s + k, (load_lanes<S>(z + k) - mk) + be * load_lanes<S>(s + k));
+      }
+    }
+#endif
+    for (; k < n; ++k) s[k] = (z[k] - (dg[k] == T(0) ? T(0) : m)) + be * s[k];
+  }
+};
+
+/// y = A x on plane i (0 on inactive cells, where diag is 0), x = 0 on solid cells: level 0's
+/// product for CG.
+struct ProductPlane {
+  template <class L, bool Unit, class T>
+  FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
+    const MultigridLevel<T>& Lv = *a.L;
+    const int n1 = Lv.shape.n[1], n2 = Lv.shape.n[2];
+    double plane_sum = 0;
+    for (int j = 0; j < n1; ++j) {
+      const RowPtrs<T> p = row_ptrs(a, i, j);
+      const T* xr = a.x + p.base;
+      const T* dg = Lv.diag.data() + p.base;
+      T* yr = a.r + p.base;
+      int k = 1;
+      if (n2 > 2) {
+#ifdef FLAGSIM_HAVE_VECTORS
+        if constexpr (!std::is_void<L>::value) {
+          using S = typename L::V;
+          const S zero{};
+          k = interior_chunks<Unit, L>(p, xr, n2, [&](int k0, const S& sum) FLAGSIM_INLINE_LAMBDA {
+            const S d = load_lanes<S>(dg + k0);
+            store_lanes(yr + k0, d == zero ? zero : d * load_lanes<S>(xr + k0) - sum);
+          });
+        }
+#endif
+      }
+      auto one = [&](int q) FLAGSIM_INLINE_LAMBDA {
+        yr[q] = dg[q] == T(0) ? T(0) : dg[q] * xr[q] - cell_sum<Unit>(a, p, xr, q);
+      };
+      for (; k < n2 - 1; ++k) one(k);
+      one(0);
+      if (n2 > 1) one(n2 - 1);
+      if (a.sums) plane_sum += row_dot<L>(xr, yr, n2);
+    }
+    if (a.sums) a.sums[i] = plane_sum;
+  }
+};
+
+/// Level 0's entry: b = r (to the V-cycle's precision) and x = 0, or with first_half_sweep (one
+/// wrap pass only) the first half-sweep from x = 0 too: colour 0 cells see no neighbour yet,
+/// x = b / diag there, colour 1 cells stay 0 (a fill and a stencil pass saved).
+struct EntryPlane {
+  template <class In, class T>
+  FLAGSIM_INLINE static void body(const LevelArgs<T>& a, int i) {
+    const MultigridLevel<T>& Lv = *a.L;
+    const int n1 = Lv.shape.n[1], n2 = Lv.shape.n[2];
+    for (int j = 0; j < n1; ++j) {
+      const std::size_t base = Lv.shape.index(i, j, 0);
+      const In* in = static_cast<const In*>(a.in) + base;
+      T* br = const_cast<T*>(a.b) + base;
+      T* xr = a.x + base;
+      const T* dr = Lv.inv_diag.data() + base;
+      if (a.first_half_sweep) {
+        // colour 0 at parity (i + j) & 1 of k: a 1/0 pattern, so the loop has no branch
+        const T* keep = a.parity + ((i + j) & 1);
+        for (int k = 0; k < n2; ++k) {
+          const T bk = T(in[k]);
+          br[k] = bk;
+          xr[k] = (dr[k] * bk) * keep[k];
+        }
+      } else {
+        for (int k = 0; k < n2; ++k) {
+          br[k] = T(in[k]);
+          xr[k] = T(0);
+        }
+      }
+    }
+  }
+  template <class L, bool Unit, class T>
+  FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
+    if (a.io_double)
+      body<double>(a, i);
+    else
+      body<float>(a, i);
+  }
+};
+
+/// Level 0's exit: z = x in the grid's precision; with sums, per plane r . z (sums) and sum z
+/// (sums2), r = a.in.
+struct ExitPlane {
+  template <class Out, class T>
+  FLAGSIM_INLINE static void body(const LevelArgs<T>& a, int i) {
+    const Shape3& sh = a.L->shape;
+    const std::size_t base = sh.index(i, 0, 0);
+    const int n = sh.n[1] * sh.n[2];
+    const T* x = a.x + base;
+    Out* z = static_cast<Out*>(a.out) + base;
+    for (int k = 0; k < n; ++k) z[k] = Out(x[k]);
+    if (!a.sums) return;
+    const Out* r = static_cast<const Out*>(a.in) + base;
+    // 8 interleaved partial sums (they vectorise), added pairwise, then the tail.
+    double lrz[8] = {0, 0, 0, 0, 0, 0, 0, 0}, lz[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    int k = 0;
+    for (; k + 8 <= n; k += 8)
+      for (int l = 0; l < 8; ++l) {
+        const double zk = double(x[k + l]);
+        lrz[l] += double(r[k + l]) * zk;
+        lz[l] += zk;
+      }
+    auto fold = [](const double* v) {
+      return ((v[0] + v[1]) + (v[2] + v[3])) + ((v[4] + v[5]) + (v[6] + v[7]));
+    };
+    double rz = fold(lrz), zs = fold(lz);
+    for (; k < n; ++k) {
+      rz += double(r[k]) * double(x[k]);
+      zs += double(x[k]);
+    }
+    a.sums[i] = rz;
+    a.sums2[i] = zs;
+  }
+  template <class L, bool Unit, class T>
+  FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
+    if (a.io_double)
+      body<double>(a, i);
+    else
+      body<float>(a, i);
+  }
+};
+
+/// C.b = P^T F.r on coarse plane I (F.r holds (b - A x) * inv_norm), 0 on inactive coarse cells:
+/// per coarse row the weighted fine rows summed into one (tmp), then along k.
+struct RestrictPlane {
+  template <class L, bool Unit, class T>
+  FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int I) {
+    const MultigridLevel<T>& F = *a.L;
+    const MultigridLevel<T>& C = *a.coarse;
+    const Shape3 &fs = F.shape, &cs = C.shape;
+    const int nf2 = fs.n[2], nc2 = cs.n[2];
+    const int c0 = F.r_count[0], c1 = F.r_count[1];
+    T tmp[4096];
+    for (int J = 0; J < cs.n[1]; ++J) {
+      std::fill(tmp, tmp + nf2, T(0));
+      for (int e0 = 0; e0 < c0; ++e0) {
+        const std::size_t ea = std::size_t(I * c0 + e0);
+        if (F.r_w[0][ea] == T(0)) continue;
+        for (int e1 = 0; e1 < c1; ++e1) {
+          const std::size_t eb = std::size_t(J * c1 + e1);
+          if (F.r_w[1][eb] == T(0)) continue;
+          const T w = F.r_w[0][ea] * F.r_w[1][eb];
+          const T* rf = F.r.data() + fs.index(F.r_idx[0][ea], F.r_idx[1][eb], 0);
+          for (int k = 0; k < nf2; ++k) tmp[k] += w * rf[k];
+        }
+      }
+      T* out = a.b_coarse + cs.index(I, J, 0);
+      const T* active = C.inv_diag.data() + cs.index(I, J, 0);
+      if (F.r_count[2] == 1) {
+        for (int K = 0; K < nc2; ++K) out[K] = active[K] != T(0) ? tmp[K] : T(0);
+        continue;
+      }
+      for (int K = 0; K < nc2; ++K) {
+        T s;
+        if (K > 0 && 2 * K + 2 < nf2) {
+          s = (T(0.25) * tmp[2 * K - 1] + T(0.75) * tmp[2 * K]) +
+              (T(0.75) * tmp[2 * K + 1] + T(0.25) * tmp[2 * K + 2]);
+        } else {
+          const std::size_t c = std::size_t(4 * K);
+          const T* w = F.r_w[2].data() + c;
+          const int32_t* f = F.r_idx[2].data() + c;
+          s = (w[0] * tmp[f[0]] + w[1] * tmp[f[1]]) + (w[2] * tmp[f[2]] + w[3] * tmp[f[3]]);
+        }
+        out[K] = active[K] != T(0) ? s : T(0);
+      }
+    }
+  }
+};
+
+/// x += P C.x on fine plane i: per fine row the weighted coarse rows summed into one (tmp), then
+/// interpolated along k, times inv_norm.
+struct ProlongPlane {
+  template <class L, bool Unit, class T>
+  FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
+    const MultigridLevel<T>& F = *a.L;
+    const MultigridLevel<T>& C = *a.coarse;
+    const Shape3 &fs = F.shape, &cs = C.shape;
+    const int nf2 = fs.n[2], nc2 = cs.n[2];
+    const int c0 = F.p_count[0], c1 = F.p_count[1];
+    T tmp[2048 + 2];
+    for (int j = 0; j < fs.n[1]; ++j) {
+      std::fill(tmp, tmp + nc2, T(0));
+      for (int e0 = 0; e0 < c0; ++e0) {
+        const std::size_t ea = std::size_t(i * c0 + e0);
+        if (F.p_w[0][ea] == T(0)) continue;
+        for (int e1 = 0; e1 < c1; ++e1) {
+          const std::size_t eb = std::size_t(j * c1 + e1);
+          if (F.p_w[1][eb] == T(0)) continue;
+          const T w = F.p_w[0][ea] * F.p_w[1][eb];
+          const T* row = C.x.data() + cs.index(F.p_idx[0][ea], F.p_idx[1][eb], 0);
+          for (int K = 0; K < nc2; ++K) tmp[K] += w * row[K];
+        }
+      }
+      const std::size_t base = fs.index(i, j, 0);
+      T* xr = a.x + base;
+      const T* nr = F.inv_norm.data() + base;
+      if (F.p_count[2] == 1) {
+        for (int k = 0; k < nf2; ++k) xr[k] += nr[k] * tmp[k];
+        continue;
+      }
+      const T* w = F.p_w[2].data();
+      const int32_t* c = F.p_idx[2].data();
+      for (int k = 0; k < nf2; ++k)
+        xr[k] += nr[k] * (w[2 * k] * tmp[c[2 * k]] + w[2 * k + 1] * tmp[c[2 * k + 1]]);
+    }
+  }
+};
+
+template <class Kernel, class L, class T>
+FLAGSIM_INLINE void run_kernel(const LevelArgs<T>& a, int i) {
+  if (a.L->unit)
+    Kernel::template run<L, true>(a, i);
+  else
+    Kernel::template run<L, false>(a, i);
+}
+
+template <class Kernel, class T>
+void plane_narrow(const LevelArgs<T>& a, int i) {
+  run_kernel<Kernel, NarrowLanes<T>>(a, i);
+}
+
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+template <class Kernel, class T>
+FLAGSIM_TARGET_AVX void plane_wide(const LevelArgs<T>& a, int i) {
+  run_kernel<Kernel, Lanes32<T>>(a, i);
+}
+#endif
+
+/// Kernel on every plane of a level, on the widest vectors this CPU has (the same bits at every
+/// width), planes split over the threads (each plane's result is independent of the split).
+template <class Kernel, class T>
+void for_each_plane(const LevelArgs<T>& a, int planes = -1) {
+  void (*fn)(const LevelArgs<T>&, int) = &plane_narrow<Kernel, T>;
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+  if (vector_bytes() == 32) fn = &plane_wide<Kernel, T>;
+#endif
+  const MultigridLevel<T>& L = *a.L;
+  parallel_for_if(Index(L.shape.size()) > kGridParallelGrain, planes < 0 ? L.shape.n[0] : planes,
+                  [&](Index i) { fn(a, int(i)); });
+}
+
+}  // namespace
+
+template <class T>
+LevelArgs<MgScalar> PoissonMultigrid<T>::args(int l) {
+  LevelArgs<MgScalar> a;
+  MultigridLevel<MgScalar>& L = levels_[std::size_t(l)];
+  a.L = &L;
+  a.zero = zero_row_.data();
+  a.b = L.b.data();
+  a.x = L.x.data();
+  a.r = L.r.data();
+  if (l + 1 < int(levels_.size())) {
+    a.coarse = &levels_[std::size_t(l + 1)];
+    a.b_coarse = levels_[std::size_t(l + 1)].b.data();
+  }
+  a.io_double = std::is_same<T, double>::value;
+  a.parity = parity_.data();
+  return a;
+}
+
+template <class T>
+void PoissonMultigrid<T>::apply_operator(const T* x, T* y) {
+  LevelArgs<T> a;
+  a.L = &product_;
+  a.zero = zero_row_t_.data();
+  a.x = const_cast<T*>(x);  // read only
+  a.r = y;
+  for_each_plane<ProductPlane>(a);
+}
+
+template <class T>
+void PoissonMultigrid<T>::apply(const T* r, T* z) {
+  vcycle(r, z, false);
+}
+
+template <class T>
+void PoissonMultigrid<T>::vcycle(const T* r_in, T* z, bool sums) {
+  using F32 = MgScalar;
+  const int nl = int(levels_.size());
+  // Red then black (forward) or black then red (backward), the wrap passes likewise; `skip`
+  // half-sweeps of the first sweep already done.
+  auto sweep = [&](LevelArgs<F32> a, bool forward, int sweeps, int skip) {
+    for (int s = 0; s < sweeps; ++s)
+      for (int h = s == 0 ? skip : 0; h < 2; ++h) {
+        a.colour = forward ? h : 1 - h;
+        for (int p = 0; p < a.L->passes; ++p) {
+          a.pass = forward ? p : a.L->passes - 1 - p;
+          for_each_plane<SmoothPlane>(a);
+        }
+      }
+  };
+  // Smoothing from x = 0: the first half-sweep reads no neighbour (one wrap pass only). Level 0
+  // reads its b from r on the way.
+  auto presmooth = [&](LevelArgs<F32> a, int l, int sweeps) {
+    const bool first = a.L->passes == 1;
+    if (l == 0) {
+      a.in = r_in;
+      a.first_half_sweep = first;
+      for_each_plane<EntryPlane>(a);
+    } else if (first) {
+      a.first_half_sweep = true;
+      a.in = a.b;
+      a.io_double = false;
+      for_each_plane<EntryPlane>(a);
+    } else {
+      std::fill(a.x, a.x + a.L->shape.size(), F32(0));
+    }
+    sweep(a, true, sweeps, first ? 1 : 0);
+  };
+  // Down: smooth from x = 0, restrict the residual.
+  for (int l = 0; l + 1 < nl; ++l) {
+    const LevelArgs<F32> a = args(l);
+    presmooth(a, l, kSmoothSweeps);
+    for_each_plane<ResidualPlane>(a);
+    for_each_plane<RestrictPlane>(a, a.coarse->shape.n[0]);
+  }
+  // Coarsest: the dense factor, or symmetric sweeps.
+  {
+    const LevelArgs<F32> a = args(nl - 1);
+    if (!chol_.empty()) {
+      if (nl == 1) {  // level 0 is the coarsest: b from r
+        LevelArgs<F32> e = a;
+        e.in = r_in;
+        for_each_plane<EntryPlane>(e);
+      }
+      std::fill(a.x, a.x + a.L->shape.size(), F32(0));
+      const std::size_t m = cell_of_.size();
+      for (std::size_t i = 0; i < m; ++i) {  // L y = b
+        double v = double(a.b[cell_of_[i]]);
+        const double* li = chol_.data() + i * m;
+        for (std::size_t k = 0; k < i; ++k) v -= li[k] * rhs_[k];
+        rhs_[i] = v / li[i];
+      }
+      for (std::size_t i = m; i-- > 0;) {  // L^T x = y
+        double v = rhs_[i];
+        for (std::size_t k = i + 1; k < m; ++k) v -= chol_[k * m + i] * rhs_[k];
+        rhs_[i] = v / chol_[i * m + i];
+      }
+      for (std::size_t i = 0; i < m; ++i) a.x[cell_of_[i]] = F32(rhs_[i]);
+    } else {
+      presmooth(a, nl - 1, kCoarsestSweeps);
+      sweep(a, false, kCoarsestSweeps, 0);
+    }
+  }
+  // Up: add the coarse correction, smooth in the reverse order.
+  for (int l = nl - 2; l >= 0; --l) {
+    const LevelArgs<F32> a = args(l);
+    for_each_plane<ProlongPlane>(a);
+    sweep(a, false, kSmoothSweeps, 0);
+  }
+  LevelArgs<F32> a = args(0);
+  a.out = z;
+  if (sums) {
+    a.in = r_in;
+    a.sums = part_[0].data();
+    a.sums2 = part_[1].data();
+  }
+  for_each_plane<ExitPlane>(a);
+}
+
+template <class T>
+LevelArgs<T> PoissonMultigrid<T>::cg_args() {
+  LevelArgs<T> a;
+  a.L = &product_;
+  a.zero = zero_row_t_.data();
+  a.sums = part_[0].data();
+  a.sums2 = part_[1].data();
+  return a;
+}
+
+template <class T>
+CgResult PoissonMultigrid<T>::solve(const T* b, T* x, double tol, int max_iter, CgScratch<T>& w) {
+  const std::size_t n = product_.shape.size();
+  const int planes = product_.shape.n[0];
+  T* r = w.r.data();
+  T* z = w.z.data();
+  T* s = w.s.data();
+  T* q = w.q.data();
+  const T* active = product_.diag.data();  // 0: not an unknown (solid, or no open face)
+  auto in_order = [&](int k) {             // the planes' partial sums, added in plane order
+    double t = 0;
+    for (int i = 0; i < planes; ++i) t += part_[std::size_t(k)][std::size_t(i)];
+    return t;
+  };
+  auto largest = [&]() {
+    double t = 0;
+    for (int i = 0; i < planes; ++i) t = std::max(t, part_[1][std::size_t(i)]);
+    return t;
+  };
+  CgResult res;
+  if (any_inactive_)
+    parallel_for_cells(long(n), [&](Index i) {
+      if (active[i] == T(0)) x[i] = T(0);
+    });
+  // r = b - K x on the unknowns, 0 elsewhere.
+  LevelArgs<T> a = cg_args();
+  a.x = x;
+  a.r = q;
+  a.sums = nullptr;
+  for_each_plane<ProductPlane>(a);
+  parallel_for_cells(
+      long(n), [&](Index i) { r[i] = active[i] == T(0) ? T(0) : T(double(b[i]) - double(q[i])); });
+  double b_max = 0, sum_r = 0;
+  if (singular_) {
+    // Constants over the unknowns are K's null space: solve for the zero-mean part; max|b| is
+    // measured on b - mean(b).
+    auto mean = [&](const T* v) {
+      return deterministic_sum(
+                 n, [&](std::size_t i) { return active[i] == T(0) ? 0.0 : double(v[i]); }) /
+             double(n_active_);
+    };
+    const double mr = mean(r), mb = mean(b);
+    parallel_for_cells(long(n), [&](Index i) {
+      if (active[i] != T(0)) r[i] = T(r[i] - mr);
+    });
+    b_max = parallel_max(
+        n, [&](std::size_t i) { return active[i] == T(0) ? 0.0 : std::fabs(double(b[i]) - mb); });
+    sum_r = deterministic_sum(n, [&](std::size_t i) { return double(r[i]); });
+  } else {
+    b_max = parallel_max(
+        n, [&](std::size_t i) { return active[i] == T(0) ? 0.0 : std::fabs(double(b[i])); });
+  }
+  double r_max = parallel_max(n, [&](std::size_t i) { return std::fabs(double(r[i])); });
+  if (b_max == 0 || r_max <= tol * b_max) {
+    res.residual = b_max == 0 ? 0.0 : r_max / b_max;
+    return res;
+  }
+  // z = M r; for a singular K, z's mean over the unknowns m is taken out of the direction
+  // (s = z - m + beta s) and of r . z (r . (z - m) = r . z - m sum r).
+  double m = 0;
+  auto precondition = [&]() {
+    vcycle(r, z, true);
+    const double rz = in_order(0);
+    m = singular_ ? in_order(1) / double(n_active_) : 0.0;
+    return rz - m * sum_r;
+  };
+  auto direction = [&](double beta) {
+    LevelArgs<T> d = cg_args();
+    d.cg_s = s;
+    d.cg_r = z;
+    d.beta = beta;
+    d.mean = m;
+    for_each_plane<DirectionPlane>(d);
+  };
+  double rz = precondition();
+  direction(0.0);
+  for (int it = 1; it <= max_iter; ++it) {
+    LevelArgs<T> p = cg_args();
+    p.x = s;
+    p.r = q;
+    for_each_plane<ProductPlane>(p);
+    const double sq = in_order(0);
+    res.iterations = it;
+    if (!(sq > 0)) break;  // breakdown (converged to round-off, or not SPD): stop here
+    LevelArgs<T> u = cg_args();
+    u.cg_x = x;
+    u.cg_rw = r;
+    u.cg_s = s;
+    u.cg_q = q;
+    u.alpha = rz / sq;
+    for_each_plane<UpdatePlane>(u);
+    sum_r = in_order(0);
+    r_max = largest();
+    if (r_max <= tol * b_max) break;
+    const double rz_new = precondition();
+    const double beta = rz_new / rz;
+    rz = rz_new;
+    direction(beta);
+  }
+  res.residual = r_max / b_max;
+  res.converged = r_max <= tol * b_max;
+  return res;
+}
+
+template class PoissonMultigrid<float>;
+template class PoissonMultigrid<double>;
+
+}  // namespace flagsim
