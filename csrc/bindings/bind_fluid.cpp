@@ -149,14 +149,16 @@ void def_fluid_fields(py::class_<AirParams>& cls, const std::string& section) {
       "'periodic' (mean flow = wind) | 'tunnel' (inflow = wind through x-min)");
   def_field<AirParams, Advection>(cls, "advection", &AirParams::advection, section,
                                   "'semi_lagrangian' | 'maccormack'");
-  def_field<AirParams, Pressure>(cls, "pressure", &AirParams::pressure, section,
-                                 "'fft' (periodic, FFTW) | 'pcg' (MIC(0) conjugate gradient)");
+  def_field<AirParams, Pressure>(
+      cls, "pressure", &AirParams::pressure, section,
+      "'fft' (periodic, FFTW) | 'pcg' (MIC(0) conjugate gradient) | 'multigrid' (CG with a "
+      "multigrid V-cycle: periodic or tunnel, with solids)");
   def_field<AirParams, Precision>(cls, "precision", &AirParams::precision, section,
                                   "'double' | 'float'");
   def_field<AirParams, double>(cls, "pcg_tolerance", &AirParams::pcg_tolerance, section,
-                               "relative max-norm residual of the pcg solves");
+                               "relative max-norm residual of the pcg and multigrid solves");
   def_field<AirParams, int>(cls, "pcg_max_iterations", &AirParams::pcg_max_iterations, section,
-                            "iteration cap of each pcg solve");
+                            "iteration cap of each pcg or multigrid solve");
   def_field<AirParams, Slip>(cls, "wall_y_min", &AirParams::wall_y_min, section,
                              "tunnel wall at y-min: 'free_slip' | 'no_slip'");
   def_field<AirParams, Slip>(cls, "wall_y_max", &AirParams::wall_y_max, section,
@@ -283,8 +285,10 @@ Stable Fluids (Stam 1999) on a staggered MAC grid: the air solver alone.
 
 Component arrays (views, m/s): u (x-faces), v (y-faces), w (z-faces). Periodic grids store
 nx x ny x nz of each; tunnel grids one more face along the component's own axis.
-Pressure: "fft" (FFTW, periodic only; divergence at round-off) or "pcg" (MIC(0)-preconditioned
-CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip walls.
+Pressure: "fft" (FFTW, periodic only; divergence at round-off), "pcg" (MIC(0)-preconditioned
+CG) or "multigrid" (CG preconditioned by a multigrid V-cycle; periodic or tunnel, with solid
+cells; iterations about flat in the grid size). Tunnel: inflow = wind through the x-min face,
+p = 0 at x-max, free-slip walls.
 )doc")
       .def(py::init([](const py::object& resolution, const py::object& cell_size,
                        const py::object& origin, const py::object& boundary,
@@ -453,6 +457,24 @@ CG). Tunnel: inflow = wind through the x-min face, p = 0 at x-max, free-slip wal
           "Cell divergence (nx, ny, nz) of the current field, 1/s (after a step: after its "
           "projection).")
       .def("max_divergence", &Fluid::max_divergence, "max |divergence|, 1/s.")
+      .def(
+          "set_solid_cells",
+          [](Fluid& f, const py::object& mask) {
+            const GridGeometry& g = f.geometry();
+            auto a = py::array_t<uint8_t, py::array::c_style | py::array::forcecast>::ensure(mask);
+            if (!a || a.ndim() != 3 || a.shape(0) != g.nx || a.shape(1) != g.ny ||
+                a.shape(2) != g.nz)
+              fail_param("mask",
+                         "a boolean array of shape (" + std::to_string(g.nx) + ", " +
+                             std::to_string(g.ny) + ", " + std::to_string(g.nz) + ")",
+                         a ? "shape " + std::string(py::str(a.attr("shape"))) : repr_of(mask));
+            f.set_solid_cells(a.data());
+          },
+          py::arg("mask"),
+          "The pressure solve's solid cells: mask (nx, ny, nz), true = solid (no unknown of the "
+          "projection, no flux across its faces). Low level: obstacles set it and also hold the "
+          "velocity on solid faces; on its own it changes only the pressure solve. Needs pressure "
+          "'multigrid' or 'pcg'.")
       .def_property(
           "u", [](py::object self) { return component_view(self, 0); },
           [](Fluid& f, const py::object& a) { set_component_from(f, 0, a); },

@@ -13,6 +13,7 @@
 #include "common/timer.h"
 #include "fluid/advect.h"
 #include "fluid/forces.h"
+#include "fluid/multigrid.h"
 #include "fluid/pressure.h"
 #include "fluid/solids.h"
 #include "fluid/turbulence.h"
@@ -40,6 +41,9 @@ struct Fluid::Solver {
   virtual Vec3 obstacle_force(int index) const = 0;
   SolidMap solids;
   double last_dt = 0;  ///< s, the last step's dt (pressure = rho phi / dt)
+  /// Copies the solid-cell mask (nx*ny*nz, 1 = solid; nullptr: none) and rebuilds what the
+  /// pressure backend precomputes (MIC factor, multigrid hierarchy).
+  virtual void set_solid(const uint8_t* mask) = 0;
 };
 
 namespace {
@@ -53,11 +57,13 @@ struct TypedSolver final : Fluid::Solver {
   Laplace7 pressure_op;
   std::array<Laplace7, 3> diffusion_op;
   MicPreconditioner<T> mic;
+  PoissonMultigrid<T> mg;
   CgScratch<T> cg;
+  AlignedVector<uint8_t> solid;  // nx*ny*nz, 1 = solid cell (the pressure solve's mask)
   std::vector<FanStencil<T>> fans;
   PeriodicAdvectScratch<T> padded;  // periodic grids: ghost-padded u^n and MacCormack predictor
   double tol = 0;
-  bool maccormack = false, use_fft = false;
+  bool maccormack = false, use_fft = false, use_mg = false;
   std::vector<double> inflow_w;  // tunnel: the inflow profile per (j, k) of the x-min face
   InflowShape inflow_profile;    // and at departure points upstream of it
   bool explicit_viscosity = false;
@@ -88,15 +94,13 @@ struct TypedSolver final : Fluid::Solver {
     div_out.assign(cells, T(0));
     maccormack = p.advection == Advection::kMacCormack;
     use_fft = p.pressure == Pressure::kFft;
+    use_mg = p.pressure == Pressure::kMultigrid;
+    solid.assign(cells, 0);
     // float cannot reach residuals near its epsilon: floor the relative tolerance there.
     tol = std::max(p.pcg_tolerance, 50.0 * double(std::numeric_limits<T>::epsilon()));
     pressure_op = pressure_operator(geo);
     for (int c = 0; c < 3; ++c) diffusion_op[c] = diffusion_operator(geo, c);
-    if (use_fft) {
-      fft = std::make_unique<FftProjector<T>>(geo);
-    } else {
-      mic.build(pressure_op);
-    }
+    if (use_fft) fft = std::make_unique<FftProjector<T>>(geo);  // MIC or multigrid: rebuild_solids
     std::size_t largest = cells;
     for (int c = 0; c < 3; ++c) largest = std::max(largest, u.shape[c].size());
     cg.resize(largest);
@@ -134,12 +138,33 @@ struct TypedSolver final : Fluid::Solver {
     psi_time = t1;
   }
 
+  /// The MIC factor or the multigrid hierarchy of pressure_op (and its mask).
+  void build_pressure_solver() {
+    if (use_mg)
+      mg.build(pressure_op);
+    else
+      mic.build(pressure_op);
+  }
+
+  void set_solid(const uint8_t* mask) override {
+    const std::size_t n = solid.size();
+    bool any = false;
+    for (std::size_t i = 0; mask && i < n; ++i) any = any || mask[i] != 0;
+    if (any && use_fft)
+      fail_param("pressure", "\"multigrid\" or \"pcg\" with solid cells (fft has no solids)",
+                 "\"fft\"");
+    for (std::size_t i = 0; i < n; ++i) solid[i] = mask && mask[i] ? 1 : 0;
+    pressure_op.solid = any ? solid.data() : nullptr;
+    for (std::size_t i = 0; i < n; ++i)
+      if (solid[i]) phi[i] = T(0);  // not an unknown any more (the warm start reads phi)
+    if (!use_fft) build_pressure_solver();
+  }
+
   void rebuild_solids() override {
     solids.build(geo, params);
     noise = CurlNoise(params.turbulence, params.obstacles);
     psi_time = std::numeric_limits<double>::quiet_NaN();
-    pressure_op.solid = solids.any_solid ? solids.solid.data() : nullptr;
-    if (!use_fft) mic.build(pressure_op);
+    set_solid(solids.any_solid ? solids.solid.data() : nullptr);
     // Walls and solids make their own viscous step (ghost mirrors); without them the implicit
     // solves (spectral or CG) stay.
     explicit_viscosity = solids.any_solid || solids.any_no_slip;
@@ -217,7 +242,10 @@ struct TypedSolver final : Fluid::Solver {
         else
           set_mean_flow(mean, u);
       }
-      project_pcg();
+      if (use_mg)
+        project_multigrid();
+      else
+        project_pcg();
       enforce_solids(solids, u);  // the gradient may not cross a solid face
     }
     last_dt = dt;
@@ -269,15 +297,30 @@ struct TypedSolver final : Fluid::Solver {
 
   /// K phi = -h^2 div u (K = -h^2 lap), warm-started from the previous phi; u -= grad phi.
   void project_pcg() {
+    pressure_rhs();
+    report(solve_cg(pressure_op, 0.0, 1.0, div.data(), phi.data(), tol, params.pcg_max_iterations,
+                    &mic, cg));
+    subtract_gradient(phi.data(), u);
+  }
+
+  /// The same system by multigrid-preconditioned CG (fluid/multigrid.h).
+  void project_multigrid() {
+    pressure_rhs();
+    report(solve_cg(pressure_op, div.data(), phi.data(), tol, params.pcg_max_iterations, mg, cg));
+    subtract_gradient(phi.data(), u);
+  }
+
+  /// div <- -h^2 div u: the right-hand side of K phi = -h^2 div u.
+  void pressure_rhs() {
     divergence_into(div.data());
     const double h2 = geo.h * geo.h;
     for (std::size_t i = 0; i < div.size(); ++i) div[i] = T(-h2 * div[i]);
-    const CgResult r = solve_cg(pressure_op, 0.0, 1.0, div.data(), phi.data(), tol,
-                                params.pcg_max_iterations, &mic, cg);
+  }
+
+  void report(const CgResult& r) {
     stats.pressure_iterations = r.iterations;
     stats.pressure_residual = r.residual;
     stats.pressure_converged = r.converged;
-    subtract_gradient(phi.data(), u);
   }
 
   void divergence_into(T* out) const { flagsim::divergence(u, out); }
@@ -395,6 +438,8 @@ const std::vector<uint16_t>& Fluid::solid_owner() const { return s_->solids.owne
 std::vector<std::string> Fluid::warnings() const {
   return s_->solids.warnings(s_->params.obstacles);
 }
+
+void Fluid::set_solid_cells(const uint8_t* mask) { s_->set_solid(mask); }
 
 void Fluid::set_uniform(const Vec3& velocity) {
   check_finite_vec("velocity", velocity);

@@ -3,7 +3,7 @@
 // solids.h and pressure.h. One step:
 //   advect (semi-Lagrangian | MacCormack) -> fans -> boundary values (tunnel faces, solids) /
 //   mean flow -> diffuse (implicit; explicit substeps beside no-slip walls and solids; skipped
-//   when viscosity = 0) -> project (fft | pcg) -> solids' faces held again
+//   when viscosity = 0) -> project (fft | pcg | multigrid) -> solids' faces held again
 // Layout of the component arrays: csrc/fluid/grid.h. Scalar type: params.precision.
 #pragma once
 #include <array>
@@ -21,9 +21,9 @@ namespace flagsim {
 /// Counters of the last step (and of sampling), for Simulation stats and tests.
 struct FluidStats {
   long steps = 0;
-  int pressure_iterations = 0;     ///< pcg: CG iterations of the last projection; fft: 0
-  double pressure_residual = 0;    ///< pcg: max|div u| / max|div u*| after the last projection
-  bool pressure_converged = true;  ///< pcg reached its tolerance in the last projection
+  int pressure_iterations = 0;     ///< pcg, multigrid: CG iterations of the last projection; fft: 0
+  double pressure_residual = 0;    ///< pcg, multigrid: max|div u| / max|div u*| after the last one
+  bool pressure_converged = true;  ///< pcg, multigrid: reached its tolerance in the last projection
   int diffusion_iterations = 0;    ///< iterative diffusion: max CG iterations over components
   long samples_outside = 0;        ///< points sampled outside the domain box, cumulative
   /// Cumulative wall-clock seconds per stage of step().
@@ -62,6 +62,12 @@ class Fluid {
   void set_component(int c, const double* values);
   /// Sets every component to a uniform velocity (m/s); tunnel wall normals stay 0.
   void set_uniform(const Vec3& velocity);
+  /// The pressure solve's solid cells: mask nx*ny*nz (C order), nonzero = solid. A solid cell is
+  /// no unknown of the projection (phi = 0 there) and no flux crosses a face to it (Neumann).
+  /// Rebuilds the MIC factor or the multigrid hierarchy (allocates; not during a step).
+  /// Low level: the obstacles (which also hold the velocity on solid faces) call it; on its own
+  /// it changes only the pressure solve. pressure "fft" takes no solid cell (InvalidArgument).
+  void set_solid_cells(const uint8_t* mask);
 
   /// Trilinear velocity at points (m x 3, m) into out (m x 3, m/s). Points outside the domain get
   /// the nearest boundary value; returns how many were outside (also added to stats). No

@@ -127,11 +127,12 @@ double FluidParams::memory_bytes() const {
 void FluidParams::validate_combination(const std::string& prefix) const {
   if (pressure == Pressure::kFft && boundary != Boundary::kPeriodic)
     fail_param(join(prefix, "pressure"),
-               "\"pcg\" with boundary \"" + std::string(name_of(boundary)) +
+               "\"pcg\" or \"multigrid\" with boundary \"" + std::string(name_of(boundary)) +
                    "\" (fft needs a periodic domain)",
                "\"fft\"");
   if (pressure == Pressure::kFft && !obstacles.empty())
-    fail_param(join(prefix, "pressure"), "\"pcg\" with obstacles (the fft solve cannot see solids)",
+    fail_param(join(prefix, "pressure"),
+               "\"pcg\" or \"multigrid\" with obstacles (the fft solve cannot see solids)",
                "\"fft\"");
   if (boundary == Boundary::kPeriodic) {
     // A periodic grid has no walls and no inflow face: a condition set there would be ignored.
@@ -156,8 +157,8 @@ void FluidParams::validate_combination(const std::string& prefix) const {
 #ifndef FLAGSIM_HAVE_FFTW
   if (pressure == Pressure::kFft)
     throw MissingFeature(join(prefix, "pressure") +
-                         " should be \"pcg\": this flagsim was built without FFTW "
-                         "(FLAGSIM_WITH_FFTW=OFF), got \"fft\"");
+                         " should be \"pcg\" or \"multigrid\": this flagsim was built without "
+                         "FFTW (FLAGSIM_WITH_FFTW=OFF), got \"fft\"");
 #endif
 }
 

@@ -30,11 +30,13 @@ struct EnumNames<Advection> {
   static constexpr std::array<const char*, 2> names{"semi_lagrangian", "maccormack"};
 };
 
-/// FFT (periodic only, FFTW) or MIC(0)-preconditioned CG.
-enum class Pressure { kFft, kPcg };
+/// FFT (periodic only, FFTW, no solids), MIC(0)-preconditioned CG (the reference), or CG
+/// preconditioned by a geometric multigrid V-cycle (fluid/multigrid.h): periodic or tunnel, with
+/// or without solids.
+enum class Pressure { kFft, kPcg, kMultigrid };
 template <>
 struct EnumNames<Pressure> {
-  static constexpr std::array<const char*, 2> names{"fft", "pcg"};
+  static constexpr std::array<const char*, 3> names{"fft", "pcg", "multigrid"};
 };
 
 enum class Precision { kDouble, kFloat };
@@ -143,7 +145,7 @@ struct FluidParams {
   Precision precision = Precision::kDouble;
   double viscosity = 1.5e-5;     ///< m^2/s, kinematic; 0 = no diffusion stage
   double density = 1.2;          ///< kg/m^3
-  double pcg_tolerance = 1e-8;   ///< relative residual
+  double pcg_tolerance = 1e-8;   ///< relative residual (pcg and multigrid)
   int pcg_max_iterations = 500;  ///< per solve (pressure and each diffusion solve)
   WindSchedule wind;             ///< periodic: mean flow (k = 0 mode); tunnel: inflow velocity
   std::vector<FanParams> fans;

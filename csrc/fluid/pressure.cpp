@@ -440,7 +440,8 @@ struct FftProjector<T>::Impl {};
 template <class T>
 FftProjector<T>::FftProjector(const GridGeometry&) {
   throw MissingFeature(
-      "pressure should be \"pcg\": this flagsim was built without FFTW (FLAGSIM_WITH_FFTW=OFF), "
+      "pressure should be \"pcg\" or \"multigrid\": this flagsim was built without FFTW "
+      "(FLAGSIM_WITH_FFTW=OFF), "
       "got \"fft\"");
 }
 template <class T>

@@ -12,6 +12,7 @@ BACKENDS = [
         "fft", marks=pytest.mark.skipif(not flagsim.has_fftw(), reason="built without FFTW")
     ),
     "pcg",
+    "multigrid",
 ]
 SCHEMES = ["semi_lagrangian", "maccormack"]
 
@@ -51,7 +52,8 @@ def test_divergence_after_projection(pressure, scheme):
         assert after < 1e-10
     else:
         assert fluid.stats["pressure_converged"]
-        assert after <= tol * before * 1.01  # pcg stops at max|div| <= tol max|div before|
+        # pcg and multigrid stop at max|div| <= tol max|div before|
+        assert after <= tol * before * 1.01
 
 
 def test_fft_and_pcg_agree_on_a_periodic_field():
@@ -69,6 +71,99 @@ def test_fft_and_pcg_agree_on_a_periodic_field():
     # Same discrete problem: the answers differ by what the pcg residual allows.
     assert max_abs_diff(a, b) < 1e3 * tol
     assert max_abs_diff(a, b) > 0  # two different solvers
+
+
+# ---- solid cells (the pressure solve's mask) -------------------------------------------------
+
+
+def plate(shape):
+    """A solid plate across the middle of the cross-section, a quarter of the way along x."""
+    nx, ny, nz = shape
+    m = np.zeros(shape, bool)
+    m[nx // 4 : nx // 4 + 2, ny // 4 : 3 * ny // 4, nz // 4 : 3 * nz // 4] = True
+    return m
+
+
+def zero_solid_faces(fluid, mask):
+    """No flux through a face beside a solid cell (the obstacles do this for a real scene)."""
+    periodic = fluid.boundary == "periodic"
+    for axis, name in enumerate("uvw"):
+        a = getattr(fluid, name)
+        if periodic:  # face i lies between cells i - 1 and i
+            closed = mask | np.roll(mask, 1, axis=axis)
+        else:  # faces 0 .. n
+            pad = np.zeros_like(mask.take([0], axis=axis))
+            closed = np.concatenate([pad, mask], axis=axis) | np.concatenate([mask, pad], axis=axis)
+        a[closed] = 0.0
+
+
+@pytest.mark.parametrize("precision", ["double", "float"])
+@pytest.mark.parametrize("boundary", ["periodic", "tunnel"])
+def test_multigrid_and_pcg_agree_with_solid_cells(boundary, precision):
+    tol = 1e-10 if precision == "double" else 1e-5
+    fluids = {}
+    for pressure in ("multigrid", "pcg"):
+        fluid = flagsim.Fluid(
+            resolution=(16, 12, 10),
+            cell_size=0.1,
+            origin=(0, 0, 0),
+            boundary=boundary,
+            pressure=pressure,
+            precision=precision,
+            viscosity=0.0,
+            pcg_tolerance=tol,
+            wind=(1.0, 0.0, 0.0),
+        )
+        mask = plate(fluid.resolution)
+        fluid.set_solid_cells(mask)
+        random_field(fluid, 7)
+        zero_solid_faces(fluid, mask)
+        fluid.step(1e-4)  # advection moves the field by a thousandth of a cell: the projection
+        assert fluid.stats["pressure_converged"]
+        fluids[pressure] = fluid
+    mg, pcg = fluids["multigrid"], fluids["pcg"]
+    assert 0 < mg.stats["pressure_iterations"] <= 15 < pcg.stats["pressure_iterations"]
+    scale = max(float(np.abs(getattr(pcg, n)).max()) for n in "uvw")
+    assert max_abs_diff(mg, pcg) < 1e3 * tol * scale
+
+
+def test_multigrid_takes_the_same_steps_on_one_and_two_threads():
+    def run(threads):
+        flagsim.set_num_threads(threads)
+        fluid = flagsim.Fluid(
+            resolution=(32, 24, 24),
+            cell_size=0.1,
+            origin=(0, 0, 0),
+            boundary="tunnel",
+            pressure="multigrid",
+            advection="maccormack",
+            wind=(2.0, 0.0, 0.0),
+        )
+        mask = plate(fluid.resolution)
+        fluid.set_solid_cells(mask)
+        random_field(fluid, 3)
+        zero_solid_faces(fluid, mask)
+        fluid.step(0.01, 3)
+        return [getattr(fluid, n).copy() for n in "uvw"]
+
+    before = flagsim.num_threads()
+    try:
+        one, two = run(1), run(2)
+    finally:
+        flagsim.set_num_threads(before)
+    for a, b in zip(one, two):
+        assert np.array_equal(a, b)
+
+
+def test_solid_cells_are_checked():
+    fluid = flagsim.Fluid(resolution=(8, 6, 4), pressure="multigrid")
+    with pytest.raises(ValueError, match=r"mask should be a boolean array of shape \(8, 6, 4\)"):
+        fluid.set_solid_cells(np.zeros((8, 6, 5), bool))
+    if flagsim.has_fftw():
+        fft = flagsim.Fluid(resolution=(8, 6, 4), pressure="fft")
+        fft.set_solid_cells(np.zeros((8, 6, 4), bool))  # no solid cell: nothing to refuse
+        with pytest.raises(ValueError, match=r'pressure should be "multigrid" or "pcg"'):
+            fft.set_solid_cells(plate((8, 6, 4)))
 
 
 def test_fft_agrees_with_the_numpy_oracle_after_one_step():
@@ -99,7 +194,7 @@ def test_fft_agrees_with_the_numpy_oracle_after_one_step():
         else ("periodic", p)
         for p in BACKENDS
     ]
-    + [("tunnel", "pcg")],
+    + [("tunnel", "pcg"), ("tunnel", "multigrid")],
 )
 def test_uniform_field_is_preserved_exactly(boundary, pressure, scheme):
     wind = (1.25, -0.5, 0.75) if boundary == "periodic" else (1.25, 0.0, 0.0)
@@ -334,6 +429,7 @@ def mirror_z_error(fluid):
             "periodic", "fft", marks=pytest.mark.skipif(not flagsim.has_fftw(), reason="no FFTW")
         ),
         ("tunnel", "pcg"),
+        ("tunnel", "multigrid"),
     ],
 )
 def test_mirror_symmetric_set_up_stays_symmetric(boundary, pressure, scheme):
@@ -480,11 +576,14 @@ def test_set_velocity_evaluates_at_the_face_positions():
             dict(advection="upwind"),
             r'advection should be one of "semi_lagrangian", "maccormack", got "upwind"',
         ),
-        (dict(pressure="jacobi"), r'pressure should be one of "fft", "pcg", got "jacobi"'),
+        (
+            dict(pressure="jacobi"),
+            r'pressure should be one of "fft", "pcg", "multigrid", got "jacobi"',
+        ),
         (dict(boundary="box"), r'boundary should be one of "periodic", "tunnel", got "box"'),
         (
             dict(boundary="tunnel", pressure="fft"),
-            r'pressure should be "pcg" with boundary "tunnel"',
+            r'pressure should be "pcg" or "multigrid" with boundary "tunnel"',
         ),
         (dict(precision="half"), r'precision should be one of "double", "float"'),
         (dict(viscosity=-1e-5), r"viscosity should be finite and >= 0"),
@@ -530,6 +629,7 @@ def test_invalid_fan_and_step_arguments():
 @pytest.mark.skipif(flagsim.has_fftw(), reason="this build has FFTW")
 def test_fft_without_fftw_is_a_clear_value_error():
     with pytest.raises(
-        ValueError, match=r"pressure should be \"pcg\": this flagsim was built without FFTW"
+        ValueError,
+        match=r"pressure should be \"pcg\" or \"multigrid\": this flagsim was built without FFTW",
     ):
         flagsim.Fluid(pressure="fft")

@@ -189,7 +189,10 @@ def test_add_obstacle_holds_its_faces_at_once_and_warns_when_thin():
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        (dict(pressure="fft", obstacles="one"), r"pressure should be \"pcg\" with obstacles"),
+        (
+            dict(pressure="fft", obstacles="one"),
+            r"pressure should be \"pcg\" or \"multigrid\" with obstacles",
+        ),
         (dict(walls="no_slip"), r"wall_y_min should be \"free_slip\" with boundary \"periodic\""),
         (dict(walls={"x_min": "no_slip"}), "walls should be keys among y_min"),
         (
@@ -275,7 +278,9 @@ def test_pole_obstacle_needs_a_grid_and_a_pole():
     s.pole.enabled = True
     if flagsim.has_fftw():
         s.air.pressure = "fft"
-        with pytest.raises(ValueError, match=r"air.pressure should be \"pcg\" with obstacles"):
+        with pytest.raises(
+            ValueError, match=r"air.pressure should be \"pcg\" or \"multigrid\" with obstacles"
+        ):
             s.validate()
 
 

@@ -9,6 +9,7 @@
 
 #include "../support/alloc_counter.h"
 #include "common/errors.h"
+#include "common/parallel.h"
 #include "common/simd.h"
 
 namespace flagsim {
@@ -80,7 +81,7 @@ TEST_P(FluidBackends, StepAllocatesNothing) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Fluid, FluidBackends,
-                         ::testing::Combine(::testing::Values("fft", "pcg"),
+                         ::testing::Combine(::testing::Values("fft", "pcg", "multigrid"),
                                             ::testing::Values("semi_lagrangian", "maccormack")));
 
 // A whole periodic step (the advection fast path and the spectral diffusion and projection) gives
@@ -113,13 +114,15 @@ TEST(Fluid, PeriodicStepIsTheSameAtEveryVectorWidth) {
   }
 }
 
-TEST(Fluid, TunnelStepAllocatesNothingAndBalancesFlux) {
+class TunnelBackends : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(TunnelBackends, StepAllocatesNothingAndBalancesFlux) {
   FluidParams p;
   p.resolution = {16, 8, 8};
   p.cell_size = 0.125;
   p.origin = Vec3::Zero();
   p.boundary = Boundary::kTunnel;
-  p.pressure = Pressure::kPcg;
+  p.pressure = parse_enum<Pressure>("pressure", GetParam());
   p.pcg_tolerance = 1e-10;
   p.wind = WindSchedule(Vec3(2, 0, 0));
   p.fans.emplace_back();
@@ -144,6 +147,71 @@ TEST(Fluid, TunnelStepAllocatesNothingAndBalancesFlux) {
   EXPECT_NEAR(out, in, 1e-8 * in);
   EXPECT_TRUE(f.stats().pressure_converged);
   EXPECT_GT(f.stats().pressure_iterations, 0);
+}
+
+INSTANTIATE_TEST_SUITE_P(Fluid, TunnelBackends, ::testing::Values("pcg", "multigrid"));
+
+// Solid cells (the pressure solve's mask alone: Fluid::set_solid_cells) rebuild the multigrid
+// hierarchy once; steps then allocate nothing, and multigrid and pcg agree on the projection.
+TEST(Fluid, SolidCellsStepAllocatesNothingAndBackendsAgree) {
+  // One thread: pcg's hundreds of small dot products would each wake a team.
+  const int threads = num_threads();
+  set_num_threads(1);
+  for (Boundary boundary : {Boundary::kPeriodic, Boundary::kTunnel}) {
+    FluidParams p;
+    p.resolution = {24, 16, 16};
+    p.cell_size = 0.1;
+    p.origin = Vec3::Zero();
+    p.boundary = boundary;
+    p.pcg_tolerance = 1e-10;
+    p.viscosity = 0;
+    p.wind = WindSchedule(Vec3(2, 0, 0));
+    std::vector<uint8_t> mask(std::size_t(24) * 16 * 16, 0);
+    for (int i = 6; i < 9; ++i)
+      for (int j = 4; j < 12; ++j)
+        for (int k = 4; k < 12; ++k) mask[(std::size_t(i) * 16 + j) * 16 + k] = 1;
+    std::unique_ptr<Fluid> f[2];
+    const char* names[2] = {"multigrid", "pcg"};
+    for (int b = 0; b < 2; ++b) {
+      p.pressure = parse_enum<Pressure>("pressure", names[b]);
+      f[b] = std::make_unique<Fluid>(p);
+      f[b]->set_solid_cells(mask.data());
+      randomise(*f[b], 5);
+      f[b]->step(0.01);
+    }
+    {
+      testing::CountAllocations count;
+      for (int i = 0; i < 3; ++i) f[0]->step(0.01);
+      EXPECT_EQ(count.count(), 0);
+    }
+    for (int i = 0; i < 3; ++i) f[1]->step(0.01);
+    EXPECT_TRUE(f[0]->stats().pressure_converged);
+    EXPECT_LE(f[0]->stats().pressure_iterations, 15);
+    for (int c = 0; c < 3; ++c) {
+      const double* a =
+          static_cast<const double*>(static_cast<const Fluid&>(*f[0]).component_data(c));
+      const double* b =
+          static_cast<const double*>(static_cast<const Fluid&>(*f[1]).component_data(c));
+      double diff = 0, top = 0;
+      for (std::size_t i = 0; i < f[0]->component_shape(c).size(); ++i) {
+        diff = std::max(diff, std::fabs(a[i] - b[i]));
+        top = std::max(top, std::fabs(b[i]));
+      }
+      EXPECT_LT(diff, 1e-6 * top) << "component " << c;
+    }
+  }
+  set_num_threads(threads);
+}
+
+TEST(Fluid, FftRejectsSolidCells) {
+#ifndef FLAGSIM_HAVE_FFTW
+  GTEST_SKIP() << "built without FFTW";
+#endif
+  Fluid f(small("fft", "semi_lagrangian"));
+  std::vector<uint8_t> mask(f.component_shape(0).size(), 0);
+  f.set_solid_cells(mask.data());  // no solid cell: fine
+  mask[7] = 1;
+  EXPECT_THROW(f.set_solid_cells(mask.data()), InvalidArgument);
 }
 
 TEST(Fluid, FloatPrecisionStoresFloats) {

@@ -43,8 +43,9 @@ TEST(FluidParams, ErrorsNameTheParameter) {
   p = FluidParams();
   p.pressure = Pressure::kFft;
   p.boundary = Boundary::kTunnel;
-  EXPECT_NE(error_of(p).find("air.pressure should be \"pcg\" with boundary \"tunnel\""),
-            std::string::npos)
+  EXPECT_NE(
+      error_of(p).find("air.pressure should be \"pcg\" or \"multigrid\" with boundary \"tunnel\""),
+      std::string::npos)
       << error_of(p);
   p = FluidParams();
   p.viscosity = -1;
