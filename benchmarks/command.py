@@ -18,6 +18,7 @@ EXAMPLES = """examples:
   python -m benchmarks --quick --out out/bench            about a minute
   python -m benchmarks --only cloth --sizes 8x11,128x128 --threads 1
   python -m benchmarks --only air --sizes 32,64 --advection semi_lagrangian --pressure fft,pcg
+  python -m benchmarks --only solver --sizes 64,128        multigrid against pcg and fft
   python -m benchmarks --peers --docs docs/reports/performance.md  the full run behind the docs
 """
 
@@ -47,7 +48,8 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--only",
         metavar="GROUPS",
-        help=f"comma-separated groups among {', '.join(wl.GROUPS)} (default: paper,cloth,air)",
+        help=f"comma-separated groups among {', '.join(wl.GROUPS)} "
+        "(default: paper,cloth,air,solver)",
     )
     parser.add_argument(
         "--peers",
@@ -58,7 +60,7 @@ def configure(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--sizes",
         metavar="LIST",
-        help="comma-separated sizes: ROWSxCOLS for cloth (8x11), N or N^3 for air (64)",
+        help="comma-separated sizes: ROWSxCOLS for cloth (8x11), N or N^3 for air and solver (64)",
     )
     parser.add_argument(
         "--threads", metavar="LIST", help="comma-separated thread counts (default: 1,2)"
@@ -140,7 +142,7 @@ def parse_sizes(text: str | None):
 
 def selection(args) -> tuple[wl.Selection, dict[str, Any]]:
     mode = "smoke" if args.smoke else "quick" if args.quick else "full"
-    groups = _choices("only", args.only, wl.GROUPS) or ("paper", "cloth", "air")
+    groups = _choices("only", args.only, wl.GROUPS) or ("paper", "cloth", "air", "solver")
     if args.peers and "peers" not in groups:
         groups = groups + ("peers",)
     cloth_sizes, air_sizes = parse_sizes(args.sizes)

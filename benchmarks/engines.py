@@ -82,6 +82,11 @@ def features() -> dict[str, tuple[bool, str]]:
     out["self_collision"] = (ok, "" if ok else f"self-collision (issue 5): {why}")
     ok, why = _added_stages("flapping", flapping)
     out["flapping"] = (ok, "" if ok else f"flapping (issue 5): {why}")
+    out["fft"] = (
+        (True, "")
+        if out["fluid"][0] and flagsim.has_fftw()
+        else (False, "this flagsim was built without FFTW")
+    )
     if out["fluid"][0]:
         ok, why = _added_stages("air", grid_air)
         out["grid_air"] = (ok, "" if ok else f"grid air in the Simulation (issue 4): {why}")
@@ -212,6 +217,74 @@ class FluidStepper:
         if stats.get("pressure_iterations"):
             out["notes"] = f"{stats['pressure_iterations']} PCG iterations in the last projection"
         return out
+
+    def ok(self) -> bool:
+        return all(bool(np.isfinite(np.asarray(getattr(self.fluid, c))).all()) for c in "uvw")
+
+
+def solid_plate(n: int) -> np.ndarray:
+    """The solver workloads' solid: a plate of cells across the middle half of the tunnel's
+    cross-section, n/8 cells thick (at least one), a quarter of the way downstream."""
+    m = np.zeros((n, n, n), bool)
+    m[n // 4 : n // 4 + max(1, n // 8), n // 4 : 3 * n // 4, n // 4 : 3 * n // 4] = True
+    return m
+
+
+class SolverStepper:
+    """flagsim.Fluid alone, to time its pressure solve: the 2 m box at n^3, no viscosity (so the
+    'project' stage is the projection alone), from the seeded smooth field. 'tunnel+solid': inflow
+    2 m/s through x-min and the solid plate as the pressure solve's solid cells
+    (Fluid.set_solid_cells; its faces zeroed at the start). The velocity on the plate's faces is
+    not held during the steps (the obstacles do that, issue 23), so the right-hand sides are the
+    divergence of a field that also crosses the plate: the solver's work is the same kind."""
+
+    def __init__(self, n: int, boundary: str, pressure: str, precision: str = "double"):
+        import flagsim
+
+        tunnel = boundary.startswith("tunnel")
+        self.fluid = flagsim.Fluid(
+            resolution=(n, n, n),
+            cell_size=AIR_BOX / n,
+            origin=(0.0, 0.0, 0.0),
+            boundary="tunnel" if tunnel else "periodic",
+            pressure=pressure,
+            precision=precision,
+            viscosity=0.0,
+            wind=(2.0, 0.0, 0.0) if tunnel else None,
+        )
+        self.fluid.set_velocity(smooth_periodic_field)
+        if boundary.endswith("+solid"):
+            mask = solid_plate(n)
+            self.fluid.set_solid_cells(mask)
+            for axis, name in enumerate("uvw"):
+                a = getattr(self.fluid, name)
+                pad = np.zeros_like(mask.take([0], axis=axis))
+                a[
+                    np.concatenate([pad, mask], axis=axis) | np.concatenate([mask, pad], axis=axis)
+                ] = 0
+        self.iterations: list[int] = []
+
+    def step(self, n: int) -> None:
+        for _ in range(n):  # one at a time: each projection's iteration count
+            self.fluid.step(DT)
+            self.iterations.append(int(self.fluid.stats["pressure_iterations"]))
+
+    def timings(self) -> dict[str, float]:
+        return {
+            k[len("seconds_") :]: float(v)
+            for k, v in self.fluid.stats.items()
+            if k.startswith("seconds_")
+        }
+
+    def info(self) -> dict[str, Any]:
+        its = self.iterations[-50:]
+        if not its or max(its) == 0:
+            return {}
+        return {
+            "iterations": float(np.mean(its)),
+            "notes": f"CG iterations per projection: mean {np.mean(its):.1f}, max {max(its)} "
+            f"(last {len(its)} steps)",
+        }
 
     def ok(self) -> bool:
         return all(bool(np.isfinite(np.asarray(getattr(self.fluid, c))).all()) for c in "uvw")

@@ -10,7 +10,9 @@ from typing import Any, Iterable
 
 import numpy as np
 
-#: CSV columns, in order. Figures are per step; *_mb are MiB; stage_split is text.
+#: CSV columns, in order. Figures are per step; *_mb are MiB; stage_split is text; iterations
+#: (pressure CG iterations per projection, mean over the last steps) and project_ms (the
+#: projection stage per step) are filled for the solver group.
 COLUMNS = (
     "group",
     "engine",
@@ -28,6 +30,8 @@ COLUMNS = (
     "peak_rss_mb",
     "workload_mb",
     "stage_split",
+    "iterations",
+    "project_ms",
     "ok",
     "note",
 )
@@ -85,6 +89,12 @@ def make_row(w, result: dict[str, Any]) -> dict[str, Any]:
                 "ok": True,
             }
         )
+        if w.group == "solver":
+            if info.get("iterations") is not None:
+                row["iterations"] = float(info["iterations"])
+            project = (result.get("stages_s") or {}).get("project")
+            if project is not None:
+                row["project_ms"] = 1e3 * float(project)
         last = info.get("last_step") or {}
         if last.get("substeps"):
             notes.append(f"{last['substeps']} substeps/step")
@@ -98,6 +108,8 @@ def make_row(w, result: dict[str, Any]) -> dict[str, Any]:
         row.update({k: "" for k in COLUMNS if k not in row})
         row["ok"] = False
         notes.append(result.get("error") or "failed")
+    for k in ("iterations", "project_ms"):
+        row.setdefault(k, "")
     row["note"] = "; ".join(notes)
     row["_stages_s"] = result.get("stages_s") or {}
     return row
@@ -153,7 +165,7 @@ def series(rows) -> dict[tuple, list[dict[str, Any]]]:
     """Rows of the size-swept groups keyed by (group, engine, variant, threads), sorted by n."""
     out: dict[tuple, list] = {}
     for r in rows:
-        if r["ok"] and r["group"] in ("cloth", "air", "peers"):
+        if r["ok"] and r["group"] in ("cloth", "air", "solver", "peers"):
             out.setdefault((r["group"], r["engine"], r["variant"], r["threads"]), []).append(r)
     return {k: sorted(v, key=lambda r: r["n"]) for k, v in out.items()}
 
@@ -428,6 +440,8 @@ def targets(rows, comps, accuracy: dict[str, Any] | None) -> list[tuple[str, str
         )
     )
 
+    out += solver_targets(rows)
+
     out.append(
         (
             "no heap allocation inside a step (paper scene; 64^3 air)",
@@ -460,6 +474,137 @@ def targets(rows, comps, accuracy: dict[str, Any] | None) -> list[tuple[str, str
         )
     )
     return out
+
+
+# ---- pressure solvers ----------------------------------------------------------------------------
+
+
+def _num(x) -> float | None:
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return None
+    return v if math.isfinite(v) else None
+
+
+def solver_ratios(rows) -> list[dict[str, Any]]:
+    """Per size and thread count: the projection (ms per step) of multigrid on the tunnel with a
+    solid, of fft on the periodic box, of pcg on the same tunnel, and the ratios."""
+    out = []
+    for mg in ok_rows(rows, group="solver", variant="tunnel+solid/multigrid"):
+        key = dict(group="solver", size=mg["size"], threads=mg["threads"])
+        fft = find(rows, variant="periodic/fft", **key)
+        pcg = find(rows, variant="tunnel+solid/pcg", **key)
+        pmg = find(rows, variant="periodic/multigrid", **key)
+        m = _num(mg["project_ms"])
+        f = _num(fft["project_ms"]) if fft else None
+        p = _num(pcg["project_ms"]) if pcg else None
+        q = _num(pmg["project_ms"]) if pmg else None
+        out.append(
+            {
+                "size": mg["size"],
+                "n": mg["n"],
+                "threads": mg["threads"],
+                "multigrid_ms": m,
+                "multigrid_iterations": _num(mg["iterations"]),
+                "fft_ms": f,
+                "pcg_ms": p,
+                "pcg_iterations": _num(pcg["iterations"]) if pcg else None,
+                "periodic_multigrid_ms": q,
+                "mg_over_fft": m / f if m and f else None,
+                "pcg_over_mg": p / m if m and p else None,
+                "periodic_mg_over_fft": q / f if q and f else None,
+            }
+        )
+    return sorted(out, key=lambda r: (r["n"], r["threads"]))
+
+
+def solver_targets(rows) -> list[tuple[str, str, str]]:
+    """Issue 23's solver targets: iterations about flat (<= 15) from 32^3 to 128^3, and a 64^3 and
+    a 128^3 tunnel with a solid projecting in <= 3x the fft projection (same threads, double)."""
+    out = []
+    mg = sorted(
+        ok_rows(rows, group="solver", variant="tunnel+solid/multigrid", threads=1),
+        key=lambda r: r["n"],
+    )
+    its = [(r["size"], _num(r["iterations"])) for r in mg if _num(r["iterations"]) is not None]
+    name = "issue 23: multigrid iterations to 1e-8 about flat 32^3-128^3, <= 15 (tunnel + solid)"
+    if its:
+        big = [v for size, v in its if int(size.split("^")[0]) >= 32]
+        ok = bool(big) and max(big) <= 15 and max(big) <= 1.5 * min(big)
+        out.append(
+            (name, ", ".join(f"{s}: {v:.1f}" for s, v in its), _verdict(ok if big else None))
+        )
+    else:
+        out.append((name, "not run", _verdict(None)))
+    ratios = solver_ratios(rows)
+    for size in ("64^3", "128^3"):
+        name = f"issue 23: {size} tunnel + solid, multigrid projection <= 3x the fft projection"
+        got = [r for r in ratios if r["size"] == size and r["mg_over_fft"] is not None]
+        if got:
+            text = ", ".join(
+                f"t{r['threads']}: {r['multigrid_ms']:.3g} vs {r['fft_ms']:.3g} ms = "
+                f"{r['mg_over_fft']:.1f}x"
+                for r in got
+            )
+            out.append((name, text, _verdict(all(r["mg_over_fft"] <= 3 for r in got))))
+        else:
+            out.append((name, "not run", _verdict(None)))
+    return out
+
+
+def _solver_table(rows) -> list[str]:
+    body = []
+    for r in sorted(
+        (r for r in rows if r["group"] == "solver"),
+        key=lambda r: (r["variant"], r["n"], r["threads"]),
+    ):
+        if not r["ok"]:
+            body.append([r["variant"], r["size"], r["threads"], "failed", "", "", "", r["note"]])
+            continue
+        its = _num(r["iterations"])
+        pm = _num(r["project_ms"])
+        body.append(
+            [
+                r["variant"],
+                r["size"],
+                r["threads"],
+                f"{its:.1f}" if its is not None else "",
+                _fmt_ms(pm) if pm is not None else "",
+                _fmt_ms(r["ms_median"]),
+                f"{r['workload_mb']:.1f}",
+                r["note"],
+            ]
+        )
+    table = _table(
+        ["variant", "size", "threads", "iterations", "project ms", "step ms", "+MiB", "note"], body
+    )
+    ratios = solver_ratios(rows)
+    if ratios:
+
+        def fx(v):
+            return f"{v:.2f}x" if v is not None else ""
+
+        table += [""] + _table(
+            [
+                "size",
+                "threads",
+                "multigrid (tunnel + solid) / fft (periodic)",
+                "pcg / multigrid (tunnel + solid)",
+                "multigrid / fft (both periodic)",
+            ],
+            [
+                [
+                    r["size"],
+                    r["threads"],
+                    fx(r["mg_over_fft"]),
+                    fx(r["pcg_over_mg"]),
+                    fx(r["periodic_mg_over_fft"]),
+                ]
+                for r in ratios
+            ],
+        )
+    return table
 
 
 # ---- markdown ------------------------------------------------------------------------------------
@@ -699,6 +844,24 @@ def markdown(
             + _rows_table(air)
             + [""]
         )
+    solver = [r for r in rows if r["group"] == "solver"]
+    if solver:
+        L += (
+            [
+                "## Pressure solvers",
+                "",
+                "flagsim.Fluid's projection alone (viscosity 0): the 2 m box at n^3 from the "
+                "seeded smooth field, double, to a 1e-8 relative residual. tunnel+solid: inflow "
+                "2 m/s and a solid plate of cells (the middle half of the cross-section, n/8 "
+                "thick) set as the pressure solve's solid cells; periodic: no solid. Iterations: "
+                "CG iterations per projection (warm-started from the last potential), mean over "
+                "the last steps; project ms: the projection stage per step (divergence, solve, "
+                "gradient); +MiB: the peak memory the workload added.",
+                "",
+            ]
+            + _solver_table(rows)
+            + [""]
+        )
     peer_rows = [r for r in rows if r["group"] == "peers"]
     if peer_rows:
         L += ["## Peers", ""] + _rows_table(peer_rows) + [""]
@@ -729,7 +892,7 @@ def markdown(
         L += [""]
     if target_list:
         L += [
-            "## Targets (issue 8)",
+            "## Targets (issues 8 and 23)",
             "",
             "Not asserted anywhere; measured on the machine above.",
             "",

@@ -72,6 +72,8 @@ def build(spec: dict[str, Any]):
         return engines.SimulationStepper(engines.paper_scene(p["full"]))
     if kind == "fluid":
         return engines.FluidStepper(p["n"], p["advection"], p["pressure"], p["precision"])
+    if kind == "solver":
+        return engines.SolverStepper(p["n"], p["boundary"], p["pressure"])
     if kind == "numpy_fluid":
         return engines.NumpyFluidStepper(p["n"])
     if kind == "fftw_floor":

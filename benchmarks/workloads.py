@@ -3,7 +3,9 @@
 Groups (``--only``): ``paper`` (the paper scene as built in, and the full pipeline: grid air,
 self-collision, flapping), ``cloth`` (the flag alone in analytic wind at 8 x 11 .. 128 x 128 for
 each integrator, with and without self-collision), ``air`` (flagsim.Fluid alone at 16^3 ..
-128^3 for each advection scheme and pressure backend, the float grid, and the FFTW floor), and
+128^3 for each advection scheme and pressure backend, the float grid, and the FFTW floor),
+``solver`` (the pressure solvers at 16^3 .. 128^3: a tunnel with a solid plate for multigrid and
+pcg, the periodic box for multigrid and fft; iterations, projection time and memory), and
 with ``--peers`` the same cloth in PyBullet, MuJoCo and pyPBD and the numpy Stable Fluids
 baseline. Every workload runs at each requested thread count (1 and 2 by default) except the
 peers and baselines, which are single-threaded.
@@ -14,12 +16,19 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-GROUPS = ("paper", "cloth", "air", "peers")
+GROUPS = ("paper", "cloth", "air", "solver", "peers")
 CLOTH_SIZES = ((8, 11), (32, 32), (64, 64), (128, 128))
 AIR_SIZES = (16, 32, 64, 128)
 INTEGRATORS = ("implicit", "explicit")
 ADVECTION = ("semi_lagrangian", "maccormack")
 PRESSURE = ("fft", "pcg")
+#: The solver group's workloads: (boundary with or without the solid plate, pressure backend).
+SOLVERS = (
+    ("tunnel+solid", "multigrid"),
+    ("tunnel+solid", "pcg"),
+    ("periodic", "multigrid"),
+    ("periodic", "fft"),
+)
 THREADS = (1, 2)
 SHORT = {"semi_lagrangian": "sl", "maccormack": "maccormack"}
 
@@ -33,9 +42,10 @@ PROTOCOLS = {
 
 @dataclass
 class Workload:
-    group: str  # paper | cloth | air | peers
+    group: str  # paper | cloth | air | solver | peers
     engine: str  # flagsim | numpy | fftw | pybullet | mujoco | pypbd
-    variant: str  # e.g. implicit, implicit+self-collision, sl/fft, sl/fft/float, builtin, full
+    variant: str  # e.g. implicit, implicit+self-collision, sl/fft, sl/fft/float, builtin, full,
+    # tunnel+solid/multigrid
     size: str  # 8x11, 64^3
     n: int  # vertices or cells
     threads: int
@@ -57,7 +67,7 @@ class Workload:
 @dataclass
 class Selection:
     mode: str = "full"  # full | quick | smoke
-    groups: tuple[str, ...] = ("paper", "cloth", "air")
+    groups: tuple[str, ...] = ("paper", "cloth", "air", "solver")
     cloth_sizes: tuple[tuple[int, int], ...] | None = None  # None: the mode's default
     air_sizes: tuple[int, ...] | None = None
     threads: tuple[int, ...] | None = None
@@ -239,6 +249,40 @@ def catalogue(
                 )
         else:
             skipped.append(("FFTW floor (3 r2c + 3 c2r)", why))
+
+    if "solver" in sel.groups:
+        if not features.get("fluid", (False, ""))[0]:
+            skipped.append(("pressure solvers", features.get("fluid", (False, "no Fluid"))[1]))
+        else:
+            # Quick and smoke runs: the small sizes on one thread (the full run is the record).
+            sizes = sel.air_sizes or (
+                AIR_SIZES if sel.mode == "full" else (16, 32) if sel.mode == "quick" else (16,)
+            )
+            counts = sel.threads or (THREADS if sel.mode == "full" else (1,))
+            for boundary, pressure in SOLVERS:
+                if pressure == "fft" and not features.get("fft", (True, ""))[0]:
+                    skipped.append((f"solver {boundary}/fft", features["fft"][1]))
+                    continue
+                if sel.mode == "smoke" and pressure == "pcg":
+                    continue
+                for n in sizes:
+                    for t in counts:
+                        work.append(
+                            Workload(
+                                "solver",
+                                "flagsim",
+                                f"{boundary}/{pressure}",
+                                f"{n}^3",
+                                n**3,
+                                t,
+                                {
+                                    "kind": "solver",
+                                    "n": n,
+                                    "boundary": boundary,
+                                    "pressure": pressure,
+                                },
+                            )
+                        )
 
     if "peers" in sel.groups:
         peer_sizes = cloth_sizes if sel.mode != "quick" or sel.cloth_sizes else cloth_sizes[:2]

@@ -63,7 +63,7 @@ def test_smoke_run_writes_csv_table_and_plot(tmp_path, capsys):
     assert "integrate" in paper["stage_split"] and "stages:" in paper["note"]
 
     md = (out / "results.md").read_text(encoding="utf-8")
-    assert "## Machine" in md and "## Paper scene" in md and "## Targets (issue 8)" in md
+    assert "## Machine" in md and "## Paper scene" in md and "## Targets (issues 8 and 23)" in md
     assert md.count("| flagsim |") >= len([r for r in rows if r["engine"] == "flagsim"])
     png = (out / "scaling.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000
@@ -303,6 +303,44 @@ def test_workloads_needing_missing_parts_are_skipped_with_the_reason():
     assert len(names) == len(work)
 
 
+def test_solver_workloads_cover_the_issues_grid_or_say_why_not():
+    sel = workloads.Selection(mode="full", groups=("solver",))
+    everything = _features(fluid=True)
+    names = {w.name for w in workloads.catalogue(sel, everything)[0]}
+    for boundary, pressure in workloads.SOLVERS:
+        for n in workloads.AIR_SIZES:
+            for t in workloads.THREADS:
+                assert f"solver/flagsim/{boundary}/{pressure}/{n}^3/t{t}" in names
+    work, skipped = workloads.catalogue(sel, _features())
+    assert not work and "no fluid here" in dict(skipped)["pressure solvers"]
+    no_fft = dict(everything, fft=(False, "built without FFTW"))
+    work, skipped = workloads.catalogue(sel, no_fft)
+    assert not any(w.variant.endswith("/fft") for w in work) and work
+    assert dict(skipped)["solver periodic/fft"] == "built without FFTW"
+
+
+def test_solver_smoke_run_reports_iterations_projection_and_targets(tmp_path):
+    out = tmp_path / "solver"
+    assert bench.main(["--smoke", "--only", "solver", "--no-plot", "--out", str(out)]) == 0
+    rows = report.read_csv(out / "results.csv")
+    variants = {r["variant"]: r for r in rows}
+    assert {"tunnel+solid/multigrid", "periodic/multigrid"} <= set(variants)
+    for r in rows:
+        assert r["group"] == "solver" and r["ok"] == "True", r
+        _figures_ok(r)
+        assert 0 < float(r["project_ms"]) <= float(r["ms_median"])  # a stage of the step
+        if r["variant"].endswith("multigrid"):
+            assert 1 <= float(r["iterations"]) <= 15
+        else:
+            assert r["iterations"] == ""  # fft does not iterate
+    md = (out / "results.md").read_text(encoding="utf-8")
+    assert "## Pressure solvers" in md and "multigrid (tunnel + solid) / fft (periodic)" in md
+    data = json.loads((out / "results.json").read_text(encoding="utf-8"))
+    targets = {t[0]: t for t in data["targets"]}
+    flat = [t for name, t in targets.items() if "iterations to 1e-8 about flat" in name]
+    assert flat and "16^3: " in flat[0][1]
+
+
 def test_quick_selection_is_smaller_and_flags_narrow_it():
     import argparse
 
@@ -342,7 +380,7 @@ def test_quick_selection_is_smaller_and_flags_narrow_it():
         (["--threads", "0"], "--threads should be"),
         (
             ["--only", "cloth,wind"],
-            "--only should be a comma-separated list among paper, cloth, air, peers",
+            "--only should be a comma-separated list among paper, cloth, air, solver, peers",
         ),
         (["--pressure", "jacobi"], "--pressure should be"),
         (["--repeats", "0"], "--repeats should be >= 1, got 0"),
