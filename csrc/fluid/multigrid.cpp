@@ -11,6 +11,9 @@ namespace flagsim {
 
 namespace {
 
+/// Position of cell k in a row of n2 cells stored as its even k, then its odd k.
+inline int split_pos(int k, int n2) { return (k & 1) ? (n2 + 1) / 2 + (k >> 1) : (k >> 1); }
+
 /// The other two axes of axis d, in order: a face of axis d is indexed (i_a * n_b + i_b).
 inline void other_axes(int d, int& a, int& b) {
   a = d == 0 ? 1 : 0;
@@ -448,6 +451,27 @@ void PoissonMultigrid<T>::finish_build() {
   MultigridLevel<MgScalar>& L0 = levels_[0];
   L0.unit = true;
   for (int d = 0; d < 3; ++d) AlignedVector<MgScalar>().swap(L0.c[d]);
+  // Every level's per-cell arrays to rows split by the parity of k (see the cycle's kernels).
+  for (MultigridLevel<MgScalar>& L : levels_) {
+    const int n2 = L.shape.n[2];
+    const std::size_t rows = L.shape.size() / std::size_t(n2);
+    auto split = [&](AlignedVector<MgScalar>& v) {
+      if (v.empty()) return;
+      AlignedVector<MgScalar> row(static_cast<std::size_t>(n2));
+      for (std::size_t r = 0; r < rows; ++r) {
+        MgScalar* p = v.data() + r * std::size_t(n2);
+        for (int k = 0; k < n2; ++k) row[std::size_t(split_pos(k, n2))] = p[k];
+        std::copy(row.begin(), row.end(), p);
+      }
+    };
+    for (int d = 0; d < 3; ++d) split(L.c[d]);
+    split(L.diag);
+    split(L.inv_diag);
+    split(L.inv_norm);
+  }
+  MultigridLevel<MgScalar>& C = levels_.back();
+  const int n2 = C.shape.n[2];
+  for (int32_t& q : cell_of_) q = q - q % n2 + split_pos(q % n2, n2);
 }
 
 template <class T>
@@ -603,9 +627,135 @@ FLAGSIM_INLINE int interior_chunks(const RowPtrs<T>& p, const T* xr, int n2, con
   return k;
 }
 
-/// Gauss-Seidel on the cells of one colour (parity of i + j + k) and one wrap pass, plane i:
-/// x_k <- (b_k + neighbour_sum) / diag_k. Vectors compute every cell of a chunk and keep the
-/// colour's (the other colour is only read, so the in-place update is the same as one by one).
+// ---- the V-cycle's kernels, on rows split by the parity of k
+// -------------------------------------- A level stores each row as its even k (positions [0, ne))
+// then its odd k ([ne, n2)): one colour of a red-black half-sweep is then one contiguous half-row,
+// whose k-neighbours are the other half at offsets 0 and -1 (even half) or +1 and 0 (odd half); the
+// neighbouring rows' cells with the same k sit at the same positions. Halving k maps fine k = 2K,
+// 2K + 1 to the even and odd halves at K, so the transfers are contiguous too.
+
+inline int half_len(int n2, int h) { return h == 0 ? (n2 + 1) / 2 : n2 / 2; }
+
+/// The four neighbouring rows of (i, j) (the zero row beyond a bounded end), the conductances to
+/// them and along k, in the split layout.
+template <class T>
+struct SplitRow {
+  const T *xim, *xip, *xjm, *xjp;
+  const T *cim, *cip, *cjm, *cjp, *ck;
+  std::size_t base;
+  int n2, ne;
+  bool wrap2;
+};
+
+template <class T>
+FLAGSIM_INLINE SplitRow<T> split_row(const LevelArgs<T>& a, int i, int j) {
+  const RowPtrs<T> p = row_ptrs(a, i, j);
+  SplitRow<T> w;
+  w.xim = p.xim;
+  w.xip = p.xip;
+  w.xjm = p.xjm;
+  w.xjp = p.xjp;
+  w.cim = p.cim;
+  w.cip = p.cip;
+  w.cjm = p.cjm;
+  w.cjp = p.cjp;
+  w.ck = p.ck;
+  w.base = p.base;
+  w.n2 = a.L->shape.n[2];
+  w.ne = (w.n2 + 1) / 2;
+  w.wrap2 = a.L->periodic[2] && w.n2 > 1;
+  return w;
+}
+
+/// sum over the six neighbours of conductance * x at split position q (xr: x of the row), the
+/// k-neighbours at positions qm (k - 1, also where c along k couples it) and qp (k + 1), S one
+/// lane type. One expression for every lane width: the same bits.
+template <bool Unit, class S, class T>
+FLAGSIM_INLINE S split_sum(const SplitRow<T>& w, const T* xr, int q, const S& xkm, const S& xkp,
+                           const S& ckm) {
+  const S xim = load_lanes<S>(w.xim + q), xip = load_lanes<S>(w.xip + q);
+  const S xjm = load_lanes<S>(w.xjm + q), xjp = load_lanes<S>(w.xjp + q);
+  (void)xr;
+  if constexpr (Unit) {
+    (void)ckm;
+    return ((((xim + xip) + xjm) + xjp) + xkm) + xkp;
+  } else {
+    return ((((load_lanes<S>(w.cim + q) * xim + load_lanes<S>(w.cip + q) * xip) +
+              load_lanes<S>(w.cjm + q) * xjm) +
+             load_lanes<S>(w.cjp + q) * xjp) +
+            ckm * xkm) +
+           load_lanes<S>(w.ck + q) * xkp;
+  }
+}
+
+/// The sum at natural index k (any k: the row's ends wrap or see zero).
+template <bool Unit, class T>
+FLAGSIM_INLINE T split_cell_sum(const SplitRow<T>& w, const T* xr, int k) {
+  const int n2 = w.n2;
+  T xkm = T(0), xkp = T(0), ckm = T(0);
+  const int km = k > 0 ? k - 1 : (w.wrap2 ? n2 - 1 : -1);
+  const int kp = k + 1 < n2 ? k + 1 : (w.wrap2 ? 0 : -1);
+  if (km >= 0) {
+    xkm = xr[split_pos(km, n2)];
+    if (!Unit) ckm = w.ck[split_pos(km, n2)];
+  }
+  if (kp >= 0) xkp = xr[split_pos(kp, n2)];
+  return split_sum<Unit, T>(w, xr, split_pos(k, n2), xkm, xkp, ckm);
+}
+
+/// body(q, sum) over the interior of half h of a row (positions whose k-neighbours are both
+/// inside the row), by vectors of L::W lanes and then one by one; returns the interior's
+/// [first, last) in half-row indices through lo and hi. body must give the same result when
+/// called twice for a position (the last vector may overlap the one before).
+template <bool Unit, class L, class T, class Body>
+FLAGSIM_INLINE void split_interior(const SplitRow<T>& w, const T* xr, int h, int& lo, int& hi,
+                                   const Body& body) {
+  const int ne = w.ne, no = w.n2 / 2;
+  // even half e: k - 1 = odd e - 1, k + 1 = odd e; odd half o: k - 1 = even o, k + 1 = even o + 1
+  lo = h == 0 ? 1 : 0;
+  hi = h == 0 ? no : std::min(no, ne - 1);
+  const int off = h == 0 ? 0 : ne;
+  const int km = h == 0 ? ne - 1 : 0;  // position of k - 1 for half index 0
+  const int kp = h == 0 ? ne : 1;      // position of k + 1 for half index 0
+  int e = lo;
+#ifdef FLAGSIM_HAVE_VECTORS
+  if constexpr (!std::is_void<L>::value) {
+    using S = typename L::V;
+    auto chunk = [&](int c) FLAGSIM_INLINE_LAMBDA {
+      S ckm{};
+      if constexpr (!Unit) ckm = load_lanes<S>(w.ck + km + c);
+      body(off + c, split_sum<Unit, S>(w, xr, off + c, load_lanes<S>(xr + km + c),
+                                       load_lanes<S>(xr + kp + c), ckm));
+    };
+    for (; e + L::W <= hi; e += L::W) chunk(e);
+    // The rest as one more vector ending at hi, overlapping the last: a cell's value depends
+    // only on the other half and the other rows, so computing it twice gives it twice.
+    if (e < hi && hi - lo >= L::W) {
+      chunk(hi - L::W);
+      e = hi;
+    }
+  }
+#endif
+  for (; e < hi; ++e) {
+    T ckm = T(0);
+    if constexpr (!Unit) ckm = w.ck[km + e];
+    body(off + e, split_sum<Unit, T>(w, xr, off + e, xr[km + e], xr[kp + e], ckm));
+  }
+}
+
+/// f(e) for the half-row indices in [0, n) outside the interior [lo, hi).
+template <class F>
+FLAGSIM_INLINE void for_each_end(int n, int lo, int hi, const F& f) {
+  if (hi <= lo) {
+    for (int e = 0; e < n; ++e) f(e);
+    return;
+  }
+  for (int e = 0; e < lo; ++e) f(e);
+  for (int e = hi; e < n; ++e) f(e);
+}
+
+/// Gauss-Seidel on the cells of one colour (parity of i + j + k: one half of each row) and one
+/// wrap pass, plane i: x <- (b + neighbour_sum) / diag.
 struct SmoothPlane {
   template <class L, bool Unit, class T>
   FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
@@ -618,35 +768,28 @@ struct SmoothPlane {
     for (int j = 0; j < n1; ++j) {
       const int row_pass = (odd0 && i == n0 - 1 ? 1 : 0) + (odd1 && j == n1 - 1 ? 1 : 0);
       if (row_pass > a.pass) continue;
-      const RowPtrs<T> p = row_ptrs(a, i, j);
-      T* xr = a.x + p.base;
-      const T* br = a.b + p.base;
-      const T* dr = Lv.inv_diag.data() + p.base;
-      const int want = (a.colour + i + j) & 1;  // parity of the k to update
+      const SplitRow<T> w = split_row(a, i, j);
+      T* xr = a.x + w.base;
+      const T* br = a.b + w.base;
+      const T* dr = Lv.inv_diag.data() + w.base;
+      const int h = (a.colour + i + j) & 1;  // the half (parity of k) of this colour
       auto update = [&](int k) FLAGSIM_INLINE_LAMBDA {
-        xr[k] = dr[k] * (br[k] + cell_sum<Unit>(a, p, xr, k));
+        const int q = split_pos(k, n2);
+        xr[q] = dr[q] * (br[q] + split_cell_sum<Unit>(w, xr, k));
       };
       if (row_pass == a.pass) {
-        int k = 1;
-        if (n2 > 2) {
-#ifdef FLAGSIM_HAVE_VECTORS
-          if constexpr (!std::is_void<L>::value) {
-            // Out of place into a row of scratch, then copied: a chunk stored into x and read
-            // back one cell shifted by the next chunk would stall the store forwarding.
-            using S = typename L::V;
-            T tmp[4096];
-            k = interior_chunks<Unit, L>(
-                p, xr, n2, [&](int k0, const S& sum) FLAGSIM_INLINE_LAMBDA {
-                  store_lanes(tmp + k0, load_lanes<S>(dr + k0) * (load_lanes<S>(br + k0) + sum));
-                });
-            for (int q = 1 + (want == 0); q < k; q += 2) xr[q] = tmp[q];
-          }
-#endif
-        }
-        for (k += ((k & 1) != want); k < n2 - 1; k += 2) update(k);
-        if (want == 0) update(0);
-        if (n2 > 1 && ((n2 - 1) & 1) == want && !odd2) update(n2 - 1);
-      } else if (odd2 && row_pass + 1 == a.pass && ((n2 - 1) & 1) == want) {
+        int lo, hi;
+        split_interior<Unit, L>(
+            w, xr, h, lo, hi, [&](int q, const auto& sum) FLAGSIM_INLINE_LAMBDA {
+              using S = std::decay_t<decltype(sum)>;
+              store_lanes(xr + q, load_lanes<S>(dr + q) * (load_lanes<S>(br + q) + sum));
+            });
+        // the half's ends, by natural k (an odd periodic axis: its last cell in the next pass)
+        for_each_end(half_len(n2, h), lo, hi, [&](int e) FLAGSIM_INLINE_LAMBDA {
+          const int k = 2 * e + h;
+          if (!(odd2 && k == n2 - 1)) update(k);
+        });
+      } else if (odd2 && row_pass + 1 == a.pass && ((n2 - 1) & 1) == h) {
         update(n2 - 1);
       }
     }
@@ -660,52 +803,67 @@ struct ResidualPlane {
     const MultigridLevel<T>& Lv = *a.L;
     const int n1 = Lv.shape.n[1], n2 = Lv.shape.n[2];
     for (int j = 0; j < n1; ++j) {
-      const RowPtrs<T> p = row_ptrs(a, i, j);
-      const T* xr = a.x + p.base;
-      const T* br = a.b + p.base;
-      const T* dg = Lv.diag.data() + p.base;
-      const T* nr = Lv.inv_norm.data() + p.base;
-      T* rr = a.r + p.base;
-      int k = 1;
-      if (n2 > 2) {
-#ifdef FLAGSIM_HAVE_VECTORS
-        if constexpr (!std::is_void<L>::value) {
-          using S = typename L::V;
-          k = interior_chunks<Unit, L>(p, xr, n2, [&](int k0, const S& sum) FLAGSIM_INLINE_LAMBDA {
-            const S ax = load_lanes<S>(dg + k0) * load_lanes<S>(xr + k0) - sum;
-            store_lanes(rr + k0, load_lanes<S>(nr + k0) * (load_lanes<S>(br + k0) - ax));
-          });
-        }
-#endif
+      const SplitRow<T> w = split_row(a, i, j);
+      const T* xr = a.x + w.base;
+      const T* br = a.b + w.base;
+      const T* dg = Lv.diag.data() + w.base;
+      const T* nr = Lv.inv_norm.data() + w.base;
+      T* rr = a.r + w.base;
+      for (int h = 0; h < 2; ++h) {
+        int lo, hi;
+        split_interior<Unit, L>(
+            w, xr, h, lo, hi, [&](int q, const auto& sum) FLAGSIM_INLINE_LAMBDA {
+              using S = std::decay_t<decltype(sum)>;
+              const S ax = load_lanes<S>(dg + q) * load_lanes<S>(xr + q) - sum;
+              store_lanes(rr + q, load_lanes<S>(nr + q) * (load_lanes<S>(br + q) - ax));
+            });
+        for_each_end(half_len(n2, h), lo, hi, [&](int e) FLAGSIM_INLINE_LAMBDA {
+          const int k = 2 * e + h, q = split_pos(k, n2);
+          const T ax = dg[q] * xr[q] - split_cell_sum<Unit>(w, xr, k);
+          rr[q] = nr[q] * (br[q] - ax);
+        });
       }
-      auto one = [&](int q) FLAGSIM_INLINE_LAMBDA {
-        const T ax = dg[q] * xr[q] - cell_sum<Unit>(a, p, xr, q);
-        rr[q] = nr[q] * (br[q] - ax);
-      };
-      for (; k < n2 - 1; ++k) one(k);
-      one(0);
-      if (n2 > 1) one(n2 - 1);
     }
   }
 };
 
-/// sum_k a_k b_k over a row in a fixed order: L::W lane sums in T, added lane by lane, then the
-/// tail in double.
-template <class L, class T>
-FLAGSIM_INLINE double row_dot(const T* a, const T* b, int n) {
-  int k = 0;
-  double s = 0;
-#ifdef FLAGSIM_HAVE_VECTORS
-  if constexpr (!std::is_void<L>::value) {
-    using S = typename L::V;
-    S acc{};
-    for (; k + L::W <= n; k += L::W) acc += load_lanes<S>(a + k) * load_lanes<S>(b + k);
-    for (int l = 0; l < L::W; ++l) s += double(acc[l]);
+/// The first half-sweep from x = 0 on a coarse level (one wrap pass only): colour 0 (one half of
+/// each row) sees no neighbour yet, x = b / diag there; colour 1 stays 0.
+struct FirstHalfSweepPlane {
+  template <class L, bool Unit, class T>
+  FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
+    const MultigridLevel<T>& Lv = *a.L;
+    const int n1 = Lv.shape.n[1], n2 = Lv.shape.n[2], ne = (n2 + 1) / 2;
+    for (int j = 0; j < n1; ++j) {
+      const std::size_t base = Lv.shape.index(i, j, 0);
+      const T* br = a.b + base;
+      const T* dr = Lv.inv_diag.data() + base;
+      T* xr = a.x + base;
+      const int h = (i + j) & 1;
+      const int lo = h == 0 ? 0 : ne, hi = h == 0 ? ne : n2;
+      for (int q = 0; q < lo; ++q) xr[q] = T(0);
+      for (int q = lo; q < hi; ++q) xr[q] = dr[q] * br[q];
+      for (int q = hi; q < n2; ++q) xr[q] = T(0);
+    }
   }
-#endif
-  for (; k < n; ++k) s += double(a[k]) * double(b[k]);
-  return s;
-}
+};
+
+/// Partial sums in a fixed order that does not depend on the vector width: 8 interleaved lanes
+/// (the compiler vectorises them), added pairwise when read.
+struct Lanes8 {
+  double v[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+  double tail = 0;
+  template <class F>
+  FLAGSIM_INLINE void add(int n, const F& f) {
+    int k = 0;
+    for (; k + 8 <= n; k += 8)
+      for (int l = 0; l < 8; ++l) v[l] += f(k + l);
+    for (; k < n; ++k) tail += f(k);
+  }
+  double sum() const {
+    return (((v[0] + v[1]) + (v[2] + v[3])) + ((v[4] + v[5]) + (v[6] + v[7]))) + tail;
+  }
+};
 
 /// CG's update on plane i: x += alpha s, r -= alpha q; sums: sum r, sums2: max |r|.
 struct UpdatePlane {
@@ -720,31 +878,31 @@ struct UpdatePlane {
     const T* q = a.cg_q + base;
     const T al = T(a.alpha);
     int k = 0;
-    double sum = 0, top = 0;
 #ifdef FLAGSIM_HAVE_VECTORS
     if constexpr (!std::is_void<L>::value) {
       using S = typename L::V;
-      S acc{}, big{};
       for (; k + L::W <= n; k += L::W) {
         store_lanes(x + k, load_lanes<S>(x + k) + al * load_lanes<S>(s + k));
-        const S rk = load_lanes<S>(r + k) - al * load_lanes<S>(q + k);
-        store_lanes(r + k, rk);
-        acc += rk;
-        const S m = rk < S{} ? -rk : rk;
-        big = m > big ? m : big;
-      }
-      for (int l = 0; l < L::W; ++l) {
-        sum += double(acc[l]);
-        top = std::max(top, double(big[l]));
+        store_lanes(r + k, load_lanes<S>(r + k) - al * load_lanes<S>(q + k));
       }
     }
 #endif
     for (; k < n; ++k) {
       x[k] = x[k] + al * s[k];
       r[k] = r[k] - al * q[k];
-      sum += double(r[k]);
-      top = std::max(top, double(std::fabs(r[k])));
     }
+    Lanes8 sums;
+    sums.add(n, [&](int c) { return double(r[c]); });
+    double m8[8] = {0, 0, 0, 0, 0, 0, 0, 0}, top = 0;  // max |r|: any order gives the same
+    int c = 0;
+    for (; c + 8 <= n; c += 8)
+      for (int l = 0; l < 8; ++l) {
+        const double v = std::fabs(double(r[c + l]));
+        m8[l] = v > m8[l] ? v : m8[l];
+      }
+    for (; c < n; ++c) top = std::max(top, double(std::fabs(r[c])));
+    for (double v : m8) top = std::max(top, v);
+    const double sum = sums.sum();
     a.sums[i] = sum;
     a.sums2[i] = top;
   }
@@ -783,7 +941,7 @@ struct ProductPlane {
   FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
     const MultigridLevel<T>& Lv = *a.L;
     const int n1 = Lv.shape.n[1], n2 = Lv.shape.n[2];
-    double plane_sum = 0;
+    Lanes8 dots;
     for (int j = 0; j < n1; ++j) {
       const RowPtrs<T> p = row_ptrs(a, i, j);
       const T* xr = a.x + p.base;
@@ -808,39 +966,36 @@ struct ProductPlane {
       for (; k < n2 - 1; ++k) one(k);
       one(0);
       if (n2 > 1) one(n2 - 1);
-      if (a.sums) plane_sum += row_dot<L>(xr, yr, n2);
+      if (a.sums) dots.add(n2, [&](int q) { return double(xr[q]) * double(yr[q]); });
     }
-    if (a.sums) a.sums[i] = plane_sum;
+    if (a.sums) a.sums[i] = dots.sum();
   }
 };
 
-/// Level 0's entry: b = r (to the V-cycle's precision) and x = 0, or with first_half_sweep (one
-/// wrap pass only) the first half-sweep from x = 0 too: colour 0 cells see no neighbour yet,
-/// x = b / diag there, colour 1 cells stay 0 (a fill and a stencil pass saved).
+/// Level 0's entry: b = r, to the V-cycle's precision and split by the parity of k, and x = 0,
+/// or with first_half_sweep (one wrap pass only) the first half-sweep from x = 0 too: colour 0
+/// sees no neighbour yet, x = b / diag there, colour 1 stays 0 (a fill and a stencil pass saved).
 struct EntryPlane {
   template <class In, class T>
   FLAGSIM_INLINE static void body(const LevelArgs<T>& a, int i) {
     const MultigridLevel<T>& Lv = *a.L;
-    const int n1 = Lv.shape.n[1], n2 = Lv.shape.n[2];
+    const int n1 = Lv.shape.n[1], n2 = Lv.shape.n[2], ne = (n2 + 1) / 2, no = n2 / 2;
     for (int j = 0; j < n1; ++j) {
       const std::size_t base = Lv.shape.index(i, j, 0);
       const In* in = static_cast<const In*>(a.in) + base;
       T* br = const_cast<T*>(a.b) + base;
       T* xr = a.x + base;
       const T* dr = Lv.inv_diag.data() + base;
+      for (int e = 0; e < ne; ++e) br[e] = T(in[2 * e]);
+      for (int o = 0; o < no; ++o) br[ne + o] = T(in[2 * o + 1]);
       if (a.first_half_sweep) {
-        // colour 0 at parity (i + j) & 1 of k: a 1/0 pattern, so the loop has no branch
-        const T* keep = a.parity + ((i + j) & 1);
-        for (int k = 0; k < n2; ++k) {
-          const T bk = T(in[k]);
-          br[k] = bk;
-          xr[k] = (dr[k] * bk) * keep[k];
-        }
+        const int h = (i + j) & 1;  // colour 0's half
+        const int lo = h == 0 ? 0 : ne, hi = h == 0 ? ne : n2;
+        for (int q = 0; q < lo; ++q) xr[q] = T(0);
+        for (int q = lo; q < hi; ++q) xr[q] = dr[q] * br[q];
+        for (int q = hi; q < n2; ++q) xr[q] = T(0);
       } else {
-        for (int k = 0; k < n2; ++k) {
-          br[k] = T(in[k]);
-          xr[k] = T(0);
-        }
+        for (int q = 0; q < n2; ++q) xr[q] = T(0);
       }
     }
   }
@@ -853,38 +1008,28 @@ struct EntryPlane {
   }
 };
 
-/// Level 0's exit: z = x in the grid's precision; with sums, per plane r . z (sums) and sum z
-/// (sums2), r = a.in.
+/// Level 0's exit: z = x in the grid's precision and natural order; with sums, per plane r . z
+/// (sums) and sum z (sums2), r = a.in.
 struct ExitPlane {
   template <class Out, class T>
   FLAGSIM_INLINE static void body(const LevelArgs<T>& a, int i) {
     const Shape3& sh = a.L->shape;
-    const std::size_t base = sh.index(i, 0, 0);
-    const int n = sh.n[1] * sh.n[2];
-    const T* x = a.x + base;
-    Out* z = static_cast<Out*>(a.out) + base;
-    for (int k = 0; k < n; ++k) z[k] = Out(x[k]);
-    if (!a.sums) return;
-    const Out* r = static_cast<const Out*>(a.in) + base;
-    // 8 interleaved partial sums (they vectorise), added pairwise, then the tail.
-    double lrz[8] = {0, 0, 0, 0, 0, 0, 0, 0}, lz[8] = {0, 0, 0, 0, 0, 0, 0, 0};
-    int k = 0;
-    for (; k + 8 <= n; k += 8)
-      for (int l = 0; l < 8; ++l) {
-        const double zk = double(x[k + l]);
-        lrz[l] += double(r[k + l]) * zk;
-        lz[l] += zk;
-      }
-    auto fold = [](const double* v) {
-      return ((v[0] + v[1]) + (v[2] + v[3])) + ((v[4] + v[5]) + (v[6] + v[7]));
-    };
-    double rz = fold(lrz), zs = fold(lz);
-    for (; k < n; ++k) {
-      rz += double(r[k]) * double(x[k]);
-      zs += double(x[k]);
+    const int n1 = sh.n[1], n2 = sh.n[2], ne = (n2 + 1) / 2, no = n2 / 2;
+    Lanes8 rz, zs;
+    for (int j = 0; j < n1; ++j) {
+      const std::size_t base = sh.index(i, j, 0);
+      const T* x = a.x + base;
+      Out* z = static_cast<Out*>(a.out) + base;
+      for (int e = 0; e < ne; ++e) z[2 * e] = Out(x[e]);
+      for (int o = 0; o < no; ++o) z[2 * o + 1] = Out(x[ne + o]);
+      if (!a.sums) continue;
+      const Out* r = static_cast<const Out*>(a.in) + base;
+      rz.add(n2, [&](int k) { return double(r[k]) * double(z[k]); });
+      zs.add(n2, [&](int k) { return double(z[k]); });
     }
-    a.sums[i] = rz;
-    a.sums2[i] = zs;
+    if (!a.sums) return;
+    a.sums[i] = rz.sum();
+    a.sums2[i] = zs.sum();
   }
   template <class L, bool Unit, class T>
   FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
@@ -896,16 +1041,17 @@ struct ExitPlane {
 };
 
 /// C.b = P^T F.r on coarse plane I (F.r holds (b - A x) * inv_norm), 0 on inactive coarse cells:
-/// per coarse row the weighted fine rows summed into one (tmp), then along k.
+/// per coarse row the weighted fine rows summed into one (tmp), then along k (on a halved k the
+/// coarse K takes fine 2K - 1, 2K, 2K + 1, 2K + 2: odd K - 1, even K, odd K, even K + 1).
 struct RestrictPlane {
   template <class L, bool Unit, class T>
   FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int I) {
     const MultigridLevel<T>& F = *a.L;
     const MultigridLevel<T>& C = *a.coarse;
     const Shape3 &fs = F.shape, &cs = C.shape;
-    const int nf2 = fs.n[2], nc2 = cs.n[2];
+    const int nf2 = fs.n[2], nc2 = cs.n[2], nef = (nf2 + 1) / 2;
     const int c0 = F.r_count[0], c1 = F.r_count[1];
-    T tmp[4096];
+    T tmp[4096], nat[2048 + 1];
     for (int J = 0; J < cs.n[1]; ++J) {
       std::fill(tmp, tmp + nf2, T(0));
       for (int e0 = 0; e0 < c0; ++e0) {
@@ -919,40 +1065,51 @@ struct RestrictPlane {
           for (int k = 0; k < nf2; ++k) tmp[k] += w * rf[k];
         }
       }
-      T* out = a.b_coarse + cs.index(I, J, 0);
-      const T* active = C.inv_diag.data() + cs.index(I, J, 0);
-      if (F.r_count[2] == 1) {
-        for (int K = 0; K < nc2; ++K) out[K] = active[K] != T(0) ? tmp[K] : T(0);
+      const std::size_t cbase = cs.index(I, J, 0);
+      T* out = a.b_coarse + cbase;
+      const T* active = C.inv_diag.data() + cbase;
+      if (F.r_count[2] == 1) {  // k not halved: the same split positions
+        for (int q = 0; q < nc2; ++q) out[q] = active[q] != T(0) ? tmp[q] : T(0);
         continue;
       }
+      const T* ev = tmp;
+      const T* od = tmp + nef;
+      const int no = nf2 / 2;
+      // interior K: 1 <= K and K + 1 < nef, K < no
+      const int hi = std::min(nef - 1, no);
+      for (int K = 1; K < hi; ++K)
+        nat[K] = (T(0.25) * od[K - 1] + T(0.75) * ev[K]) + (T(0.75) * od[K] + T(0.25) * ev[K + 1]);
       for (int K = 0; K < nc2; ++K) {
-        T s;
-        if (K > 0 && 2 * K + 2 < nf2) {
-          s = (T(0.25) * tmp[2 * K - 1] + T(0.75) * tmp[2 * K]) +
-              (T(0.75) * tmp[2 * K + 1] + T(0.25) * tmp[2 * K + 2]);
-        } else {
-          const std::size_t c = std::size_t(4 * K);
-          const T* w = F.r_w[2].data() + c;
-          const int32_t* f = F.r_idx[2].data() + c;
-          s = (w[0] * tmp[f[0]] + w[1] * tmp[f[1]]) + (w[2] * tmp[f[2]] + w[3] * tmp[f[3]]);
+        if (K >= 1 && K < hi) {
+          K = hi - 1;
+          continue;
         }
-        out[K] = active[K] != T(0) ? s : T(0);
+        const std::size_t c = std::size_t(4 * K);
+        const T* w = F.r_w[2].data() + c;
+        const int32_t* f = F.r_idx[2].data() + c;
+        nat[K] = (w[0] * tmp[split_pos(f[0], nf2)] + w[1] * tmp[split_pos(f[1], nf2)]) +
+                 (w[2] * tmp[split_pos(f[2], nf2)] + w[3] * tmp[split_pos(f[3], nf2)]);
+      }
+      for (int K = 0; K < nc2; ++K) {
+        const int q = split_pos(K, nc2);
+        out[q] = active[q] != T(0) ? nat[K] : T(0);
       }
     }
   }
 };
 
-/// x += P C.x on fine plane i: per fine row the weighted coarse rows summed into one (tmp), then
-/// interpolated along k, times inv_norm.
+/// x += P C.x on fine plane i: per fine row the weighted coarse rows summed into one (tmp, then
+/// in natural order), then interpolated along k (fine 2K and 2K + 1 from coarse K and K -+ 1:
+/// the even and odd halves), times inv_norm.
 struct ProlongPlane {
   template <class L, bool Unit, class T>
   FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
     const MultigridLevel<T>& F = *a.L;
     const MultigridLevel<T>& C = *a.coarse;
     const Shape3 &fs = F.shape, &cs = C.shape;
-    const int nf2 = fs.n[2], nc2 = cs.n[2];
+    const int nf2 = fs.n[2], nc2 = cs.n[2], nef = (nf2 + 1) / 2, nof = nf2 / 2;
     const int c0 = F.p_count[0], c1 = F.p_count[1];
-    T tmp[2048 + 2];
+    T tmp[4096], nat[2048 + 1];
     for (int j = 0; j < fs.n[1]; ++j) {
       std::fill(tmp, tmp + nc2, T(0));
       for (int e0 = 0; e0 < c0; ++e0) {
@@ -963,20 +1120,31 @@ struct ProlongPlane {
           if (F.p_w[1][eb] == T(0)) continue;
           const T w = F.p_w[0][ea] * F.p_w[1][eb];
           const T* row = C.x.data() + cs.index(F.p_idx[0][ea], F.p_idx[1][eb], 0);
-          for (int K = 0; K < nc2; ++K) tmp[K] += w * row[K];
+          for (int q = 0; q < nc2; ++q) tmp[q] += w * row[q];
         }
       }
       const std::size_t base = fs.index(i, j, 0);
       T* xr = a.x + base;
       const T* nr = F.inv_norm.data() + base;
-      if (F.p_count[2] == 1) {
-        for (int k = 0; k < nf2; ++k) xr[k] += nr[k] * tmp[k];
+      if (F.p_count[2] == 1) {  // k not halved: the same split positions
+        for (int q = 0; q < nf2; ++q) xr[q] += nr[q] * tmp[q];
         continue;
       }
+      const int nec = (nc2 + 1) / 2;
+      for (int K = 0; K < nc2; ++K) nat[K] = tmp[(K & 1) ? nec + (K >> 1) : (K >> 1)];
       const T* w = F.p_w[2].data();
       const int32_t* c = F.p_idx[2].data();
-      for (int k = 0; k < nf2; ++k)
-        xr[k] += nr[k] * (w[2 * k] * tmp[c[2 * k]] + w[2 * k + 1] * tmp[c[2 * k + 1]]);
+      auto edge = [&](int k) {
+        const int q = split_pos(k, nf2);
+        xr[q] += nr[q] * (w[2 * k] * nat[c[2 * k]] + w[2 * k + 1] * nat[c[2 * k + 1]]);
+      };
+      // even half e (k = 2e): parent e, other e - 1; odd half o (k = 2o + 1): parent o, other o + 1
+      for (int e = 1; e < nef; ++e) xr[e] += nr[e] * (T(0.75) * nat[e] + T(0.25) * nat[e - 1]);
+      edge(0);
+      const int ohi = std::min(nof, nc2 - 1);
+      for (int o = 0; o < ohi; ++o)
+        xr[nef + o] += nr[nef + o] * (T(0.75) * nat[o] + T(0.25) * nat[o + 1]);
+      for (int o = ohi; o < nof; ++o) edge(2 * o + 1);
     }
   }
 };
@@ -1074,10 +1242,7 @@ void PoissonMultigrid<T>::vcycle(const T* r_in, T* z, bool sums) {
       a.first_half_sweep = first;
       for_each_plane<EntryPlane>(a);
     } else if (first) {
-      a.first_half_sweep = true;
-      a.in = a.b;
-      a.io_double = false;
-      for_each_plane<EntryPlane>(a);
+      for_each_plane<FirstHalfSweepPlane>(a);
     } else {
       std::fill(a.x, a.x + a.L->shape.size(), F32(0));
     }

@@ -14,6 +14,7 @@
 
 #include "common/errors.h"
 #include "common/parallel.h"
+#include "common/simd.h"
 #include "fluid/poisson.h"
 #include "poisson_cases.h"
 
@@ -200,6 +201,39 @@ TEST(PressureMultigrid, SameBitsOnOneAndTwoThreads) {
     EXPECT_EQ(std::memcmp(one.data(), two.data(), n * sizeof(double)), 0)
         << (tunnel ? "tunnel" : "periodic");
   }
+}
+
+/// x from MGPCG on op with vectors of at most cap bytes (0: the widest).
+template <class T>
+AlignedVector<T> solve_at_width(const Laplace7& op, const AlignedVector<T>& b, int cap) {
+  vector_bytes(cap);
+  const std::size_t n = op.shape.size();
+  PoissonMultigrid<T> mg;
+  mg.build(op);
+  CgScratch<T> w;
+  w.resize(n);
+  AlignedVector<T> x(n, T(0));
+  solve_cg(op, b.data(), x.data(), tolerance_for<T>(), 100, mg, w);
+  vector_bytes(0);
+  return x;
+}
+
+TEST(PressureMultigrid, SameBitsAtEveryVectorWidth) {
+  // Every cell by one expression at every width (a last vector may overlap the one before and
+  // recompute cells), dot products in 8 fixed lanes: 16-byte and 32-byte vectors agree.
+  if (vector_bytes() < 32) GTEST_SKIP() << "this CPU has one vector width only (no AVX)";
+  Laplace7 op = pressure_like(28, 18, 22, true);  // rows of 22: an overlapping last vector
+  const AlignedVector<uint8_t> mask = box_mask(op.shape);
+  op.solid = mask.data();
+  const std::size_t n = op.shape.size();
+  const AlignedVector<float> bf = consistent_rhs<float>(op, 4);
+  const AlignedVector<double> bd = consistent_rhs<double>(op, 4);
+  EXPECT_EQ(std::memcmp(solve_at_width(op, bf, 0).data(), solve_at_width(op, bf, 16).data(),
+                        n * sizeof(float)),
+            0);
+  EXPECT_EQ(std::memcmp(solve_at_width(op, bd, 0).data(), solve_at_width(op, bd, 16).data(),
+                        n * sizeof(double)),
+            0);
 }
 
 TEST(PressureMultigrid, OddSizesThinWallsAndPockets) {
