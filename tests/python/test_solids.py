@@ -8,7 +8,7 @@ import pytest
 from flagsim import forces
 from flagsim.study import accuracy_solids
 
-ITERATIVE = ["pcg"]
+ITERATIVE = ["pcg", "multigrid"]
 
 # Most solids here are a few cells across, which warns (the wake is not resolved): tests about
 # the warning catch it with pytest.warns; the others do not need the wake.
@@ -77,6 +77,35 @@ def test_projection_with_solids_leaves_no_divergence_and_no_flux(boundary, press
         assert np.all(div[fluid.solid_cells() > 0] == 0)
         for name, mask in zip("uvw", solid_face_masks(fluid)):
             assert np.all(getattr(fluid, name)[mask] == 0), name  # zero flux, exactly
+
+
+@pytest.mark.parametrize("precision", ["double", "float"])
+@pytest.mark.parametrize("boundary", ["periodic", "tunnel"])
+def test_multigrid_and_pcg_agree_with_obstacles(boundary, precision):
+    tol = 1e-10 if precision == "double" else 1e-5
+    runs = {}
+    for pressure in ("multigrid", "pcg"):
+        fluid = flagsim.Fluid(
+            resolution=(16, 12, 10),
+            cell_size=0.1,
+            origin=(0, 0, 0),
+            boundary=boundary,
+            pressure=pressure,
+            precision=precision,
+            viscosity=1e-3,
+            pcg_tolerance=tol,
+            wind=(1.0, 0, 0) if boundary == "tunnel" else None,
+            obstacles=obstacles(),
+        )
+        random_field(fluid, 5)
+        fluid.step(0.01, 3)
+        assert fluid.stats["pressure_converged"]
+        runs[pressure] = fluid
+    mg, pcg = runs["multigrid"], runs["pcg"]
+    assert mg.stats["pressure_iterations"] < pcg.stats["pressure_iterations"]
+    scale = max(float(np.abs(getattr(pcg, n)).max()) for n in "uvw")
+    for n in "uvw":  # one problem: apart by what the tolerance allows (3 steps of it)
+        assert np.abs(getattr(mg, n) - getattr(pcg, n)).max() < 1e3 * tol * scale, n
 
 
 def test_free_slip_keeps_a_flow_along_a_solid_and_no_slip_stops_it_as_stokes_says():
