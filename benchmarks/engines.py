@@ -11,6 +11,7 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import math
+import warnings
 from typing import Any
 
 import numpy as np
@@ -233,27 +234,44 @@ def solid_plate(n: int) -> np.ndarray:
 class SolverStepper:
     """flagsim.Fluid alone, to time its pressure solve: the 2 m box at n^3, no viscosity (so the
     'project' stage is the projection alone), from the seeded smooth field. 'tunnel+solid': inflow
-    2 m/s through x-min and the solid plate as the pressure solve's solid cells
-    (Fluid.set_solid_cells; its faces zeroed at the start). The velocity on the plate's faces is
-    not held during the steps (the obstacles do that, issue 23), so the right-hand sides are the
-    divergence of a field that also crosses the plate: the solver's work is the same kind."""
+    2 m/s through x-min and the solid plate (solid_plate) as a free-slip box obstacle, so the
+    plate's faces are held (no flux) at every step; where the obstacles do not exist, as the
+    pressure solve's solid cells alone (Fluid.set_solid_cells, faces zeroed at the start only)."""
 
     def __init__(self, n: int, boundary: str, pressure: str, precision: str = "double"):
         import flagsim
 
         tunnel = boundary.startswith("tunnel")
-        self.fluid = flagsim.Fluid(
-            resolution=(n, n, n),
-            cell_size=AIR_BOX / n,
-            origin=(0.0, 0.0, 0.0),
-            boundary="tunnel" if tunnel else "periodic",
-            pressure=pressure,
-            precision=precision,
-            viscosity=0.0,
-            wind=(2.0, 0.0, 0.0) if tunnel else None,
-        )
+        solid = boundary.endswith("+solid")
+        h = AIR_BOX / n
+        kw: dict[str, Any] = {}
+        obstacles = solid and hasattr(flagsim, "ObstacleParams")
+        if obstacles:  # the cells of solid_plate(n): centres inside the box
+            lo = np.array([n // 4, n // 4, n // 4]) * h
+            hi = np.array([n // 4 + max(1, n // 8), 3 * n // 4, 3 * n // 4]) * h
+            kw["obstacles"] = [
+                flagsim.ObstacleParams(
+                    shape="box",
+                    center=tuple((lo + hi) / 2),
+                    half_size=tuple((hi - lo) / 2),
+                    slip="free_slip",
+                )
+            ]
+        with warnings.catch_warnings():  # a plate n/8 cells thick: its wake is not the point
+            warnings.filterwarnings("ignore", message="air.obstacles.*cells across")
+            self.fluid = flagsim.Fluid(
+                resolution=(n, n, n),
+                cell_size=h,
+                origin=(0.0, 0.0, 0.0),
+                boundary="tunnel" if tunnel else "periodic",
+                pressure=pressure,
+                precision=precision,
+                viscosity=0.0,
+                wind=(2.0, 0.0, 0.0) if tunnel else None,
+                **kw,
+            )
         self.fluid.set_velocity(smooth_periodic_field)
-        if boundary.endswith("+solid"):
+        if solid and not obstacles:
             mask = solid_plate(n)
             self.fluid.set_solid_cells(mask)
             for axis, name in enumerate("uvw"):
