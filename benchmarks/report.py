@@ -852,8 +852,9 @@ def markdown(
                 "",
                 "flagsim.Fluid's projection alone (viscosity 0): the 2 m box at n^3 from the "
                 "seeded smooth field, double, to a 1e-8 relative residual. tunnel+solid: inflow "
-                "2 m/s and a solid plate of cells (the middle half of the cross-section, n/8 "
-                "thick) set as the pressure solve's solid cells; periodic: no solid. Iterations: "
+                "2 m/s and a solid plate (a free-slip box obstacle over the middle half of the "
+                "cross-section, n/8 cells thick, a quarter of the way down); periodic: no solid. "
+                "Iterations: "
                 "CG iterations per projection (warm-started from the last potential), mean over "
                 "the last steps; project ms: the projection stage per step (divergence, solve, "
                 "gradient); +MiB: the peak memory the workload added.",
