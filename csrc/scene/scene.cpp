@@ -148,7 +148,7 @@ Scene Scene::pole_wake() {
   // (kWakeCellsAcross), 1.5 x 0.9 x 0.7 m (109 x 65 x 51 cells), inflow 2 m/s along +x.
   const double h = 2 * s.pole.radius / kWakeCellsAcross;
   s.air.boundary = Boundary::kTunnel;
-  s.air.pressure = Pressure::kPcg;
+  s.air.pressure = Pressure::kMultigrid;
   s.air.advection = Advection::kMacCormack;
   s.air.cell_size = h;
   s.air.origin = Vec3(-0.3, -0.75, -0.35);

@@ -1,8 +1,9 @@
 """Run a study and write its CSV, markdown report (and plots) to --out.
 
-  accuracy   error against run time per step: spring-mass pair, banner angle, flag trajectory,
-             Taylor-Green vortex and the coupled paper scene, with observed convergence orders,
-             the Pareto front, and the cheapest setting per error target
+  accuracy   error against run time: spring-mass pair, banner angle, flag trajectory, Taylor-Green
+             vortex, the coupled paper scene, plane Poiseuille flow and the cylinder at Re = 100
+             (St and C_D against published values), with observed convergence orders, the
+             Pareto front, and the cheapest setting per error target
   stability  a matrix over stiffness, wind, dt, areal density, flapping mode and integrator
              plus pathological cases; every case ends plausible (finite, energy ledger balanced,
              strain within the scene's promise), diverged (reported), implausible or non-finite
