@@ -43,6 +43,9 @@ constexpr std::size_t kCoarsestCells = 64;
 constexpr std::size_t kMaxDirectCells = 2048;
 /// Symmetric Gauss-Seidel sweeps on a coarsest level too large to factor.
 constexpr int kCoarsestSweeps = 32;
+/// Bytes per cell the hierarchy takes, an upper bound (bytes(): 37.3 for a double grid, 33 for a
+/// float one, at 32^3-128^3), counted by FluidParams::memory_bytes.
+constexpr double kMultigridBytesPerCell = 40;
 
 /// One level of the hierarchy: an n0 x n1 x n2 cell grid (C order) and its operator
 ///   (A x)_i = diag_i x_i - sum_d (c_d[i] x[i + e_d] + c_d[i - e_d] x[i - e_d]),

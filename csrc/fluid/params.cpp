@@ -4,6 +4,7 @@
 
 #include "common/errors.h"
 #include "common/memory.h"
+#include "fluid/multigrid.h"
 
 namespace flagsim {
 
@@ -119,9 +120,11 @@ double FluidParams::memory_bytes() const {
   // The solid map (csrc/fluid/solids.h): 3 face kinds, an owner (2 bytes) and a mask per cell.
   // Turbulence: psi on the edges now and at the last step, 6 values per cell.
   const double psi = turbulence.enabled() ? 6.0 : 0.0;
+  // The multigrid hierarchy (csrc/fluid/multigrid.h) and the pressure solve's own mask.
+  const double multigrid = pressure == Pressure::kMultigrid ? kMultigridBytesPerCell + 1.0 : 0.0;
   return cells() * ((kValuesPerCell + psi) *
                         double(precision == Precision::kFloat ? sizeof(float) : sizeof(double)) +
-                    (masks ? 6.0 : 0.0));
+                    (masks ? 6.0 : 0.0) + multigrid);
 }
 
 void FluidParams::validate_combination(const std::string& prefix) const {
