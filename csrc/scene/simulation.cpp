@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <stdexcept>
 
 #include "collision/pole.h"
 #include "common/errors.h"
@@ -49,8 +50,26 @@ Simulation::Simulation(const Scene& scene)
   u_.setZero(N, 3);
   x_start_ = x_;
   v_start_ = v_;
+  choose_stages();
+  if (built(Stage::kFluid)) build_fluid();
+  if (scene_.air.model == AirModel::kUniform && scene_.air.turbulence.enabled()) {
+    std::vector<ObstacleParams> solids;  // no air flows into the pole
+    if (scene_.pole.enabled) solids.push_back(AirParams::pole_solid(scene_.pole));
+    noise_ = CurlNoise(scene_.air.turbulence, std::move(solids));
+  }
+  if (built(Stage::kSelfCollision)) build_self_collision();
+  for (int s = 0; s < kNumStages; ++s)
+    if (built_[s]) stage_names_.emplace_back(name_of(Stage(s)));
+  n_.resize(N, 3);
+  update_normals();
+  setup_flapping();
+  setup_energy();
+  check_explicit_step();
+}
 
-  // Build only what the scene needs: a stage left out is never called and costs nothing.
+// The stage table: only what the scene needs is built, and a stage left out is never called and
+// costs nothing.
+void Simulation::choose_stages() {
   const bool air = scene_.air.model != AirModel::kNone && scene_.air.density > 0;
   forces_.gravity = scene_.gravity.squaredNorm() > 0;
   forces_.drag =
@@ -62,12 +81,6 @@ Simulation::Simulation(const Scene& scene)
   forces_.rho = scene_.air.density;
   built(Stage::kWind) = forces_.drag && scene_.air.model == AirModel::kUniform;
   built(Stage::kFluid) = forces_.drag && scene_.air.model == AirModel::kGrid;
-  if (built(Stage::kFluid)) build_fluid();
-  if (scene_.air.model == AirModel::kUniform && scene_.air.turbulence.enabled()) {
-    std::vector<ObstacleParams> solids;  // no air flows into the pole
-    if (scene_.pole.enabled) solids.push_back(AirParams::pole_solid(scene_.pole));
-    noise_ = CurlNoise(scene_.air.turbulence, std::move(solids));
-  }
   built(Stage::kGravity) = forces_.gravity;
   built(Stage::kDrag) = forces_.drag;
   built(Stage::kSprings) = forces_.springs;
@@ -79,22 +92,17 @@ Simulation::Simulation(const Scene& scene)
   built(Stage::kPole) = scene_.pole.enabled;
   built(Stage::kSelfCollision) = scene_.self_collision.enabled;
   built(Stage::kCheck) = true;
-  if (built(Stage::kSelfCollision)) {
-    self_collision_ = std::make_unique<SelfCollision>(topo_.triangles, N, scene_.self_collision);
-    // Strain limiting inside the collision sweeps: contacts alone would hold a stretch.
-    // Its energy is booked with the self-collision response's (one evaluation around it).
-    strain_projector_ = [this](MatX3& x, MatX3& v) {
-      limit_strain(topo_, scene_.integrator.strain_limit, scene_.integrator.strain_limit_iterations,
-                   x, v);
-    };
-  }
-  for (int s = 0; s < kNumStages; ++s)
-    if (built_[s]) stage_names_.emplace_back(name_of(Stage(s)));
-  n_.resize(N, 3);
-  update_normals();
-  setup_flapping();
-  setup_energy();
-  check_explicit_step();
+}
+
+void Simulation::build_self_collision() {
+  self_collision_ =
+      std::make_unique<SelfCollision>(topo_.triangles, topo_.num_vertices(), scene_.self_collision);
+  // Strain limiting inside the collision sweeps: contacts alone would hold a stretch.
+  // Its energy is booked with the self-collision response's (one evaluation around it).
+  strain_projector_ = [this](MatX3& x, MatX3& v) {
+    limit_strain(topo_, scene_.integrator.strain_limit, scene_.integrator.strain_limit_iterations,
+                 x, v);
+  };
 }
 
 // Explicit without adaptive substeps refuses a step above the stable-step estimate (strain
@@ -236,16 +244,16 @@ void Simulation::step_once() {
   if (built(Stage::kFlapVisual)) stage_flap_visual();
 }
 
-// One piece of h_ from t_piece_: an empty cause when it passed its checks.
+// One piece of h_ from t_piece_, the paper's method stage by stage: an empty cause when it passed
+// its checks. A stage the scene does not build returns at once.
 Simulation::Implausible Simulation::step_piece() {
   x_piece_ = x_;
-  const bool displace = built(Stage::kFlap) && scene_.flapping.mode == FlapMode::kDisplace;
-  stage_air();
-  if (displace) stage_flap_drift();                          // a drift of the positions, or
-  if (built(Stage::kFlap) && !displace) stage_flap_force();  // a force, held over the piece
-  stage_integrate();  // includes strain limiting after every substep, timed as its own stage
-  stage_collide();
-  Implausible bad = stage_check();
+  stage_air();             // air velocity at the masses: the wind schedule or the grid (eq. 1, 2)
+  stage_flap();            // eq. 5 as a drift of the positions or a force, held over the piece
+  stage_integrate();       // gravity, drag (eq. 3), springs (eq. 4); strain limiting per substep
+  stage_pole();            // the pole cylinder, alternating with strain limiting
+  stage_self_collision();  // vertex-triangle and edge-edge contacts (paper §1), pole kept out
+  Implausible bad = stage_check();  // finite, strain within its promise, energy explained
   if (!bad.cause.empty()) return bad;
   if (built(Stage::kFlap)) flap_.commit();
   energy_end_ = energy_run_;
@@ -266,19 +274,17 @@ double Simulation::sample_pole_air_speed() {
 }
 
 // Paper eq. 5 at the end of the piece (flapping/flap_stage.h), from the air speed at the pole
-// and the normals at the piece's start.
-void Simulation::stage_flap_drift() {
+// and the normals at the piece's start: "displace" as a drift the integrator carries, "force" as
+// an external force it holds over the piece.
+void Simulation::stage_flap() {
+  if (!built(Stage::kFlap)) return;
   StageClock::Scope t(&clock_, Stage::kFlap);
   u_p_ = sample_pole_air_speed();
   compute_vertex_normals(topo_, x_, n_);
-  flap_.drift(topo_, n_, u_p_, t_piece_ + h_, h_, flap_drift_);
-}
-
-void Simulation::stage_flap_force() {
-  StageClock::Scope t(&clock_, Stage::kFlap);
-  u_p_ = sample_pole_air_speed();
-  compute_vertex_normals(topo_, x_, n_);
-  flap_.force(topo_, n_, u_p_, t_piece_ + h_, h_, flap_force_);
+  if (scene_.flapping.mode == FlapMode::kDisplace)
+    flap_.drift(topo_, n_, u_p_, t_piece_ + h_, h_, flap_drift_);
+  else
+    flap_.force(topo_, n_, u_p_, t_piece_ + h_, h_, flap_force_);
 }
 
 double Simulation::limit_cloth_strain(MatX3& x, MatX3& v) {
@@ -290,43 +296,44 @@ double Simulation::limit_cloth_strain(MatX3& x, MatX3& v) {
 // limiting between its passes (which has its own entry), self-collision's with the strain
 // limiting inside its sweeps (one evaluation around the whole response; the check counts the
 // projections together either way).
-void Simulation::stage_collide() {
+void Simulation::stage_pole() {
   constexpr int kPoleStrainRounds = 10;
-  if (built(Stage::kPole)) {
-    const double strain_before = ledger_.strain_limit;
-    Index moved;
-    {
-      StageClock::Scope t(&clock_, Stage::kPole);
-      moved = collide_pole(scene_.pole, x_piece_, x_, v_, topo_.inv_mass);
-    }
-    const bool changed = moved > 0;  // a vertex left alone keeps its position and velocity
-    for (int k = 0; k < kPoleStrainRounds && moved > 0 && built(Stage::kStrainLimit); ++k) {
-      {
-        StageClock::Scope t(&clock_, Stage::kStrainLimit);
-        ledger_.strain_limit += limit_cloth_strain(x_, v_);
-      }
-      StageClock::Scope t(&clock_, Stage::kPole);
-      moved = collide_pole(scene_.pole, x_piece_, x_, v_, topo_.inv_mass);
-    }
-    if (changed) {
-      StageClock::Scope t(&clock_, Stage::kCheck);
-      const double e = energy_now();
-      ledger_.pole += e - energy_run_ - (ledger_.strain_limit - strain_before);
-      energy_run_ = e;
-    }
+  if (!built(Stage::kPole)) return;
+  const double strain_before = ledger_.strain_limit;
+  Index moved;
+  {
+    StageClock::Scope t(&clock_, Stage::kPole);
+    moved = collide_pole(scene_.pole, x_piece_, x_, v_, topo_.inv_mass);
   }
-  if (built(Stage::kSelfCollision)) {
+  const bool changed = moved > 0;  // a vertex left alone keeps its position and velocity
+  for (int k = 0; k < kPoleStrainRounds && moved > 0 && built(Stage::kStrainLimit); ++k) {
     {
-      StageClock::Scope t(&clock_, Stage::kSelfCollision);
-      self_collision_->resolve(x_piece_, x_, v_, topo_.inv_mass,
-                               built(Stage::kPole) ? &scene_.pole : nullptr,
-                               built(Stage::kStrainLimit) ? &strain_projector_ : nullptr);
+      StageClock::Scope t(&clock_, Stage::kStrainLimit);
+      ledger_.strain_limit += limit_cloth_strain(x_, v_);
     }
-    StageClock::Scope t(&clock_, Stage::kCheck);
-    const double e = energy_now();
-    ledger_.self_collision += e - energy_run_;
-    energy_run_ = e;
+    StageClock::Scope t(&clock_, Stage::kPole);
+    moved = collide_pole(scene_.pole, x_piece_, x_, v_, topo_.inv_mass);
   }
+  if (changed) book_energy_change(ledger_.pole, ledger_.strain_limit - strain_before);
+}
+
+void Simulation::stage_self_collision() {
+  if (!built(Stage::kSelfCollision)) return;
+  {
+    StageClock::Scope t(&clock_, Stage::kSelfCollision);
+    self_collision_->resolve(x_piece_, x_, v_, topo_.inv_mass,
+                             built(Stage::kPole) ? &scene_.pole : nullptr,
+                             built(Stage::kStrainLimit) ? &strain_projector_ : nullptr);
+  }
+  book_energy_change(ledger_.self_collision, 0.0);
+}
+
+// entry += the change of E since energy_run_, less what other entries booked meanwhile (J).
+void Simulation::book_energy_change(double& entry, double booked_elsewhere) {
+  StageClock::Scope t(&clock_, Stage::kCheck);
+  const double e = energy_now();
+  entry += e - energy_run_ - booked_elsewhere;
+  energy_run_ = e;
 }
 
 // "visual": the exported geometry is the positions displaced by eq. 5; physics is untouched.
@@ -379,6 +386,12 @@ void Simulation::stage_integrate() {
     status =
         integrate(topo_, forces_, scene_.integrator, h_, u_, x_, v_, scratch_, stats_, &clock_);
   }
+  book_integrator_work();
+  if (status != IntegrateStatus::kOk) integrate_failed(status);
+}
+
+// The work of each force as the integrator applied it (StepWork) into the ledger.
+void Simulation::book_integrator_work() {
   const StepWork& w = stats_.work;
   ledger_.edits += stats_.energy_before - energy_end_;  // the state written between steps
   ledger_.drag += w.drag;
@@ -388,33 +401,34 @@ void Simulation::stage_integrate() {
   ledger_.strain_limit += w.strain_limit;
   ledger_.integrator += w.remainder;
   energy_run_ = stats_.energy_after;
-  if (status == IntegrateStatus::kTooManySubsteps) {
-    std::ostringstream s;
-    s << "the stable step estimate " << stats_.stable_step << " s needs more than "
-      << scene_.integrator.max_substeps << " substeps (integrator.max_substeps)";
-    diverge("substeps", -1, s.str());
+}
+
+void Simulation::integrate_failed(IntegrateStatus status) {
+  const IntegratorParams& ip = scene_.integrator;
+  std::ostringstream s;
+  switch (status) {
+    case IntegrateStatus::kTooManySubsteps:
+      s << "the stable step estimate " << stats_.stable_step << " s needs more than "
+        << ip.max_substeps << " substeps (integrator.max_substeps)";
+      diverge("substeps", -1, s.str());
+    case IntegrateStatus::kUnstableStep:
+      s << "explicit step dt / substeps = " << scene_.dt / ip.substeps
+        << " s exceeds the stable step estimate " << stats_.stable_step
+        << " s (integrator.adaptive = false)";
+      diverge("unstable_step", -1, s.str());
+    case IntegrateStatus::kEnergyGain:
+      s << "the implicit step made more than integrator.energy_tolerance x the energy scale = "
+        << forces_.energy_guard << " J of energy beyond the work of its forces even after "
+        << ip.max_halvings << " step halvings";
+      diverge("energy", -1, s.str());
+    case IntegrateStatus::kCgFailed:
+      s << "conjugate gradient did not reach integrator.cg_tolerance = " << ip.cg_tolerance
+        << " in " << ip.cg_max_iterations << " iterations even after " << ip.max_halvings
+        << " step halvings";
+      diverge("cg", -1, s.str());
+    case IntegrateStatus::kOk: break;
   }
-  if (status == IntegrateStatus::kUnstableStep) {
-    std::ostringstream s;
-    s << "explicit step dt / substeps = " << scene_.dt / scene_.integrator.substeps
-      << " s exceeds the stable step estimate " << stats_.stable_step
-      << " s (integrator.adaptive = false)";
-    diverge("unstable_step", -1, s.str());
-  }
-  if (status == IntegrateStatus::kEnergyGain) {
-    std::ostringstream s;
-    s << "the implicit step made more than integrator.energy_tolerance x the energy scale = "
-      << forces_.energy_guard << " J of energy beyond the work of its forces even after "
-      << scene_.integrator.max_halvings << " step halvings";
-    diverge("energy", -1, s.str());
-  }
-  if (status == IntegrateStatus::kCgFailed) {
-    std::ostringstream s;
-    s << "conjugate gradient did not reach integrator.cg_tolerance = "
-      << scene_.integrator.cg_tolerance << " in " << scene_.integrator.cg_max_iterations
-      << " iterations even after " << scene_.integrator.max_halvings << " step halvings";
-    diverge("cg", -1, s.str());
-  }
+  throw std::logic_error("integrate_failed called without a failure");
 }
 
 // Finite and strain below integrator.max_strain, or DivergenceError now. Then plausibility
@@ -423,10 +437,21 @@ void Simulation::stage_integrate() {
 // explains; a piece that fails either is returned, and the step is redone in shorter pieces.
 Simulation::Implausible Simulation::stage_check() {
   StageClock::Scope t(&clock_, Stage::kCheck);
+  check_finite();
+  Implausible bad = check_strain();
+  if (!bad.cause.empty()) return bad;
+  return check_energy();
+}
+
+void Simulation::check_finite() {
   const Index N = topo_.num_vertices();
   for (Index i = 0; i < N; ++i)
     if (!x_.row(i).allFinite() || !v_.row(i).allFinite())
       diverge("non-finite", long(i), "non-finite position or velocity");
+}
+
+// Above integrator.max_strain: DivergenceError; above the strain limit's promise: implausible.
+Simulation::Implausible Simulation::check_strain() {
   Index worst = -1;
   const double e = flagsim::max_strain(topo_, x_, &worst);
   // the worst vertex: whichever end of the worst spring moved more in this step
@@ -448,9 +473,13 @@ Simulation::Implausible Simulation::stage_check() {
       << kStrainLimitSlack << " = " << limit + kStrainLimitSlack;
     return {"strain", vertex, s.str()};
   }
+  return {};
+}
+
+// Per step, and net over the run: steps each just within the tolerance must not add up to a
+// flag that holds many times it (what the integrator and projections took out counts back).
+Simulation::Implausible Simulation::check_energy() const {
   if (scene_.integrator.energy_tolerance <= 0) return {};
-  // Per step, and net over the run: steps each just within the tolerance must not add up to a
-  // flag that holds many times it (what the integrator and projections took out counts back).
   const double allowed = scene_.integrator.energy_tolerance * energy_scale_;
   const double gain = ledger_.unexplained_since(ledger_start_), held = ledger_.unexplained_net();
   if (!(gain > allowed) && !(held > allowed)) return {};

@@ -143,21 +143,33 @@ class Simulation {
   };
   Implausible step_piece();
   void restore_step_start();
-  void stage_air();
-  void advance_fluid();
+  // Set-up (the constructor, in this order).
+  void choose_stages();
   void build_fluid();
-  void stage_integrate();
-  Implausible stage_check();
+  void build_self_collision();
   void setup_flapping();
-  double sample_pole_air_speed();
-  void stage_flap_drift();
-  void stage_flap_force();
-  void stage_collide();
-  double limit_cloth_strain(MatX3& x, MatX3& v);  // returns the change of E it made, J
   void setup_energy();
   void check_explicit_step() const;
-  double energy_now() const;  // total_energy of (x_, v_)
+  // The stages of a piece (step_piece), each timed by its own StageClock scope.
+  void stage_air();
+  void stage_flap();
+  void stage_integrate();
+  void stage_pole();
+  void stage_self_collision();
+  Implausible stage_check();
+  // After the step: the air grid advances, the "visual" flap displaces the exported geometry.
+  void advance_fluid();
   void stage_flap_visual();
+  // Helpers of the stages.
+  double sample_pole_air_speed();
+  double limit_cloth_strain(MatX3& x, MatX3& v);  // returns the change of E it made, J
+  void book_integrator_work();
+  void book_energy_change(double& entry, double booked_elsewhere);
+  [[noreturn]] void integrate_failed(IntegrateStatus status);
+  void check_finite();
+  Implausible check_strain();
+  Implausible check_energy() const;
+  double energy_now() const;  // total_energy of (x_, v_)
   [[noreturn]] void diverge(const std::string& cause, long vertex, const std::string& detail);
 
   Scene scene_;
