@@ -157,12 +157,14 @@ void FluidParams::validate_combination(const std::string& prefix) const {
                "runs between two no-slip walls)",
                "\"parabolic\"");
   }
-#ifndef FLAGSIM_HAVE_FFTW
-  if (pressure == Pressure::kFft)
-    throw MissingFeature(join(prefix, "pressure") +
-                         " should be \"pcg\" or \"multigrid\": this flagsim was built without "
-                         "FFTW (FLAGSIM_WITH_FFTW=OFF), got \"fft\"");
-#endif
+  if (pressure == Pressure::kFft) require_fftw(join(prefix, "pressure"));
+}
+
+void require_fftw(const std::string& name, bool built_with_fftw) {
+  if (!built_with_fftw)
+    throw MissingFeature(name +
+                         " should be \"pcg\" or \"multigrid\": this flagsim was built without FFTW "
+                         "(FLAGSIM_WITH_FFTW=OFF), got \"fft\"");
 }
 
 }  // namespace flagsim

@@ -172,4 +172,14 @@ struct FluidParams {
   void validate_combination(const std::string& prefix) const;
 };
 
+#ifdef FLAGSIM_HAVE_FFTW
+inline constexpr bool kBuiltWithFftw = true;
+#else
+inline constexpr bool kBuiltWithFftw = false;
+#endif
+
+/// Pressure "fft" asked for as `name`: MissingFeature naming it unless built_with_fftw (a
+/// parameter, so that every build tests the message).
+void require_fftw(const std::string& name, bool built_with_fftw = kBuiltWithFftw);
+
 }  // namespace flagsim

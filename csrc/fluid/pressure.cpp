@@ -6,6 +6,7 @@
 #include <mutex>
 
 #include "common/errors.h"
+#include "fluid/params.h"
 #ifdef FLAGSIM_HAVE_FFTW
 #include <fftw3.h>
 #endif
@@ -439,10 +440,7 @@ struct FftProjector<T>::Impl {};
 
 template <class T>
 FftProjector<T>::FftProjector(const GridGeometry&) {
-  throw MissingFeature(
-      "pressure should be \"pcg\" or \"multigrid\": this flagsim was built without FFTW "
-      "(FLAGSIM_WITH_FFTW=OFF), "
-      "got \"fft\"");
+  require_fftw("pressure", false);
 }
 template <class T>
 FftProjector<T>::~FftProjector() = default;

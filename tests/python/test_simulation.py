@@ -162,7 +162,7 @@ def test_stages_leave_out_what_the_scene_does_not_need(paper):
     assert not {"wind", "fluid", "gravity", "drag"} & set(sim.stages)
     sim.step(5)
     assert set(sim.timings) == set(sim.stages)
-    assert all(t >= 0 for t in sim.timings.values())
+    assert all(t > 0 for t in sim.timings.values()), sim.timings  # each stage ran, timed
 
 
 def test_energy_and_time(paper):

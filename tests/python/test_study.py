@@ -215,7 +215,6 @@ def test_stability_case_is_a_pure_function_of_its_settings():
     assert a == b
 
 
-@pytest.mark.skipif(not hasattr(flagsim, "Fluid"), reason="needs the air solver")
 def test_air_orders_semi_lagrangian_about_one_maccormack_clearly_higher_in_space(accuracy_rows):
     rows, _ = accuracy_rows
     p = "fft" if flagsim.has_fftw() else "pcg"

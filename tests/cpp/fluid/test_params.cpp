@@ -61,15 +61,27 @@ TEST(FluidParams, ErrorsNameTheParameter) {
   EXPECT_STREQ(name_of(Precision::kFloat), "float");
 }
 
+// The message a build without FFTW gives, tested in every build; validate_combination asks for it
+// exactly when this build has no FFTW.
 TEST(FluidParams, FftWithoutFftwIsAMissingFeature) {
   FluidParams p;
   p.pressure = Pressure::kFft;
   EXPECT_NO_THROW(p.validate("air"));  // each field is fine on its own
-#ifdef FLAGSIM_HAVE_FFTW
-  EXPECT_NO_THROW(p.validate_combination("air"));
-#else
-  EXPECT_THROW(p.validate_combination("air"), MissingFeature);
-#endif
+  if (kBuiltWithFftw) {
+    EXPECT_NO_THROW(p.validate_combination("air"));
+  } else {
+    EXPECT_THROW(p.validate_combination("air"), MissingFeature);
+  }
+  try {
+    require_fftw("air.pressure", false);
+    ADD_FAILURE() << "no MissingFeature";
+  } catch (const MissingFeature& e) {
+    EXPECT_STREQ(e.what(),
+                 "air.pressure should be \"pcg\" or \"multigrid\": this flagsim was built without "
+                 "FFTW "
+                 "(FLAGSIM_WITH_FFTW=OFF), got \"fft\"");
+  }
+  EXPECT_NO_THROW(require_fftw("air.pressure", true));
 }
 
 }  // namespace flagsim
