@@ -1,4 +1,5 @@
-// Wall-clock stage timer: accumulates seconds per named stage (Simulation.timings).
+// Wall-clock scope timer: adds the seconds a scope took to a running sum (Fluid.stats seconds_*;
+// the Simulation's stages use StageClock, common/stage_clock.h).
 #pragma once
 #include <chrono>
 

@@ -179,6 +179,11 @@ def test_python_dash_m_flagsim_and_lazy_imports():
         [sys.executable, "-m", "flagsim", "--help"], capture_output=True, text=True
     )
     assert proc.returncode == 0 and "usage: flagsim" in proc.stdout
+    # python -m flagsim.study is `flagsim study` (study/__main__.py)
+    proc = subprocess.run(
+        [sys.executable, "-m", "flagsim.study", "--help"], capture_output=True, text=True
+    )
+    assert proc.returncode == 0 and proc.stdout.startswith("usage: flagsim study"), proc.stderr
     code = (
         "import sys, flagsim; a = 'flagsim.povray' in sys.modules; flagsim.povray.export; "
         "print(a, sorted(m for m in ('tqdm', 'imageio', 'matplotlib', 'flagsim.cli') "
