@@ -1,5 +1,6 @@
 // Shared helpers for the C++ tests.
 #pragma once
+#include <chrono>
 #include <cmath>
 #include <vector>
 
@@ -30,6 +31,13 @@ inline Scene spring_pair_scene(const std::string& method, double k, double dt) {
   s.integrator.cg_tolerance = 1e-12;
   s.dt = dt;
   return s;
+}
+
+/// Spins for `seconds` of wall time: a wait the scheduler cannot shorten (timer tests).
+inline void busy(double seconds) {
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  while (std::chrono::steady_clock::now() < end) {
+  }
 }
 
 /// log2 ratios of successive errors: the observed orders when h halves each time.

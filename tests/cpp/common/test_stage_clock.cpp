@@ -4,17 +4,11 @@
 #include <chrono>
 #include <thread>
 
+#include "../test_util.h"
 #include "common/stage_clock.h"
 
 using namespace flagsim;
-
-namespace {
-void busy(double seconds) {  // a wait the scheduler cannot shorten
-  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-  while (std::chrono::steady_clock::now() < end) {
-  }
-}
-}  // namespace
+using flagsim::testing::busy;
 
 TEST(StageClock, NestedStagesAreChargedExclusively) {
   StageClock clock;

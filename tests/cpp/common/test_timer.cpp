@@ -3,17 +3,11 @@
 
 #include <chrono>
 
+#include "../test_util.h"
 #include "common/timer.h"
 
 using namespace flagsim;
-
-namespace {
-void busy(double seconds) {  // a wait the scheduler cannot shorten
-  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-  while (std::chrono::steady_clock::now() < end) {
-  }
-}
-}  // namespace
+using flagsim::testing::busy;
 
 // Each scope adds its own wall time to the accumulator, which keeps what it held: two scopes of
 // 2 and 3 ms on a sum that started at 1 s add at least 5 ms and at most the wall time around them.
