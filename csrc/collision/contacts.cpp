@@ -1,5 +1,8 @@
 #include "collision/contacts.h"
 
+#include <algorithm>
+#include <array>
+
 namespace flagsim {
 
 bool VertexTriangleContact::closer_than(const PairPoints& x, double gap) {
@@ -10,6 +13,38 @@ bool VertexTriangleContact::closer_than(const PairPoints& x, double gap) {
   return (p - (bary[0] * a + bary[1] * b + bary[2] * c)).norm() < gap;
 }
 
+namespace {
+
+using Coefficients = std::array<double, 4>;
+
+// A crossing at time t: the unit normal of the plane of two directions at the hit, each moving
+// linearly from its start value (u0, w0) to its end value (u1, w1): a triangle's two edges, or
+// the two edges. It points to the side the pair started on, as towards(n) says of the normal
+// before it is scaled. Parallel directions give no normal: kDegenerate, left to the fallback.
+template <class Towards>
+void set_crossing(const Vec3& u0, const Vec3& u1, const Vec3& w0, const Vec3& w1, double t,
+                  const Towards& towards, const Coefficients& g, Contact& ct) {
+  const Vec3 n = ((1 - t) * u0 + t * u1).cross((1 - t) * w0 + t * w1);
+  const double len = n.norm();
+  if (!(len > 0)) {
+    ct.kind = Contact::kDegenerate;
+    return;
+  }
+  ct.n = towards(n) ? Vec3(n / len) : Vec3(-n / len);
+  std::copy(g.begin(), g.end(), ct.g);
+  ct.kind = Contact::kCrossing;
+}
+
+// A proximity at distance d (m) < thickness h (m), pushed apart along the unit direction n.
+void set_proximity(const Vec3& n, double d, double h, const Coefficients& g, Contact& ct) {
+  ct.n = n;
+  std::copy(g.begin(), g.end(), ct.g);
+  ct.C = d - h;
+  ct.kind = Contact::kProximity;
+}
+
+}  // namespace
+
 void VertexTriangleContact::detect(const PairPoints& x0, const PairPoints& x1, double thickness,
                                    Contact& ct) {
   const double h = thickness;
@@ -19,17 +54,14 @@ void VertexTriangleContact::detect(const PairPoints& x0, const PairPoints& x1, d
   double t;
   Vec3 bary;
   if (vertex_triangle_ccd(p0, a0, b0, c0, p1, a1, b1, c1, t, bary)) {
-    const Vec3 n = ((1 - t) * (b0 - a0) + t * (b1 - a1)).cross((1 - t) * (c0 - a0) + t * (c1 - a1));
-    const double len = n.norm();
-    if (!(len > 0)) {  // a degenerate triangle: left to the fallback
-      ct.kind = Contact::kDegenerate;
-      return;
-    }
-    const double f0 = (b0 - a0).cross(c0 - a0).dot(p0 - a0);
-    const double f1 = (b1 - a1).cross(c1 - a1).dot(p1 - a1);
-    ct.n = (f0 > 0 || (f0 == 0 && f1 >= 0)) ? Vec3(n / len) : Vec3(-n / len);
-    ct.g[0] = 1, ct.g[1] = -bary[0], ct.g[2] = -bary[1], ct.g[3] = -bary[2];
-    ct.kind = Contact::kCrossing;
+    // towards the side of the triangle's plane the vertex started on (or ended on, from it)
+    auto towards = [&](const Vec3&) {
+      const double f0 = (b0 - a0).cross(c0 - a0).dot(p0 - a0);
+      const double f1 = (b1 - a1).cross(c1 - a1).dot(p1 - a1);
+      return f0 > 0 || (f0 == 0 && f1 >= 0);
+    };
+    set_crossing(b0 - a0, b1 - a1, c0 - a0, c1 - a1, t, towards, {1, -bary[0], -bary[1], -bary[2]},
+                 ct);
     return;
   }
   if (beyond_reach(p1, a1, b1, c1, h)) return;
@@ -38,20 +70,19 @@ void VertexTriangleContact::detect(const PairPoints& x0, const PairPoints& x1, d
   const Vec3 r = p1 - (bary[0] * a1 + bary[1] * b1 + bary[2] * c1);
   const double d = r.norm();
   if (d >= h) return;
+  Vec3 n;
   if (d > 1e-9 * h) {
-    ct.n = r / d;
+    n = r / d;
   } else {  // on the triangle: its normal, towards the side the vertex started on
-    const Vec3 n = (b1 - a1).cross(c1 - a1);
-    if (!(n.norm() > 0)) {
+    const Vec3 m = (b1 - a1).cross(c1 - a1);
+    if (!(m.norm() > 0)) {
       ct.kind = Contact::kDegenerate;
       return;
     }
     const double f0 = (b0 - a0).cross(c0 - a0).dot(p0 - a0);
-    ct.n = f0 < 0 ? Vec3(-n.normalized()) : Vec3(n.normalized());
+    n = f0 < 0 ? Vec3(-m.normalized()) : Vec3(m.normalized());
   }
-  ct.g[0] = 1, ct.g[1] = -bary[0], ct.g[2] = -bary[1], ct.g[3] = -bary[2];
-  ct.C = d - h;
-  ct.kind = Contact::kProximity;
+  set_proximity(n, d, h, {1, -bary[0], -bary[1], -bary[2]}, ct);
 }
 
 void EdgeEdgeContact::detect(const PairPoints& x0, const PairPoints& x1, double thickness,
@@ -64,16 +95,13 @@ void EdgeEdgeContact::detect(const PairPoints& x0, const PairPoints& x1, double 
   double t;
   Vec2 su;
   if (edge_edge_ccd(p0, a0, b0, c0, p1, a1, b1, c1, t, su)) {
-    const Vec3 n = ((1 - t) * (a0 - p0) + t * (a1 - p1)).cross((1 - t) * (c0 - b0) + t * (c1 - b1));
-    const double len = n.norm();
-    if (!(len > 0)) {
-      ct.kind = Contact::kDegenerate;
-      return;
-    }
-    const Vec3 gap0 = (p0 + su[0] * (a0 - p0)) - (b0 + su[1] * (c0 - b0));
-    ct.n = gap0.dot(n) >= 0 ? Vec3(n / len) : Vec3(-n / len);
-    ct.g[0] = 1 - su[0], ct.g[1] = su[0], ct.g[2] = -(1 - su[1]), ct.g[3] = -su[1];
-    ct.kind = Contact::kCrossing;
+    // towards the side the first edge's hit point started on, seen from the second's
+    auto towards = [&](const Vec3& n) {
+      const Vec3 gap0 = (p0 + su[0] * (a0 - p0)) - (b0 + su[1] * (c0 - b0));
+      return gap0.dot(n) >= 0;
+    };
+    set_crossing(a0 - p0, a1 - p1, c0 - b0, c1 - b1, t, towards,
+                 {1 - su[0], su[0], -(1 - su[1]), -su[1]}, ct);
     return;
   }
   // Cheap rejection: the midpoints further apart than the half-lengths plus the thickness.
@@ -83,10 +111,7 @@ void EdgeEdgeContact::detect(const PairPoints& x0, const PairPoints& x1, double 
   const Vec3 r = (p1 + su2[0] * (a1 - p1)) - (b1 + su2[1] * (c1 - b1));
   const double d = r.norm();
   if (d >= h || !(d > 1e-9 * h)) return;  // touching exactly: left to the crossing test
-  ct.n = r / d;
-  ct.g[0] = 1 - su2[0], ct.g[1] = su2[0], ct.g[2] = -(1 - su2[1]), ct.g[3] = -su2[1];
-  ct.C = d - h;
-  ct.kind = Contact::kProximity;
+  set_proximity(r / d, d, h, {1 - su2[0], su2[0], -(1 - su2[1]), -su2[1]}, ct);
 }
 
 }  // namespace flagsim
