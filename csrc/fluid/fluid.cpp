@@ -26,7 +26,9 @@ struct Fluid::Solver {
   double time = 0;
   mutable FluidStats stats;
   virtual ~Solver() = default;
-  virtual void step(double dt) = 0;
+  /// One step; true when the step itself showed the new field finite (the FFT diffusion's
+  /// spectral pass, FftProjector::diffuse_and_project), false when all_finite must tell.
+  virtual bool step(double dt) = 0;
   /// Every velocity value finite.
   virtual bool all_finite() const = 0;
   /// Back to the field and time t0 at the start of the last step (the step keeps its copy).
@@ -187,7 +189,7 @@ struct TypedSolver final : Fluid::Solver {
     apply_boundary(Vec3(v.x(), 0, 0));
   }
 
-  void step(double dt) override {
+  bool step(double dt) override {
     const double t0 = time, t1 = time + dt;
     const FluidParams& p = params;
     SampleBoundary bc;
@@ -222,9 +224,10 @@ struct TypedSolver final : Fluid::Solver {
     // 4-5. diffusion and projection
     const double nu_dt = p.viscosity * dt;
     stats.diffusion_iterations = 0;
+    bool finite = false;
     if (use_fft) {
       if (nu_dt > 0) {
-        fft->diffuse_and_project(u, nu_dt, drive_mean ? &mean : nullptr);
+        finite = fft->diffuse_and_project(u, nu_dt, drive_mean ? &mean : nullptr);
       } else {
         if (drive_mean) set_mean_flow(mean, u);
         fft->project(u, phi.data());
@@ -251,6 +254,7 @@ struct TypedSolver final : Fluid::Solver {
     last_dt = dt;
     time = t1;
     ++stats.steps;
+    return finite;
   }
 
   // A value is not finite exactly when its exponent bits are all set: an integer test the
@@ -383,8 +387,7 @@ Fluid& Fluid::operator=(Fluid&&) noexcept = default;
 void Fluid::step(double dt) {
   check_positive("dt", dt);
   const double t0 = s_->time;
-  s_->step(dt);
-  if (s_->all_finite()) return;
+  if (s_->step(dt) || s_->all_finite()) return;
   s_->undo_step(t0);
   std::ostringstream s;
   s << "the air diverged at step " << s_->stats.steps << " (t = " << t0

@@ -3,7 +3,9 @@
 #include "common/simd.h"
 
 #include <cmath>
+#include <limits>
 #include <mutex>
+#include <vector>
 
 #include "common/errors.h"
 #include "fluid/params.h"
@@ -220,6 +222,7 @@ struct FftProjector<T>::Impl {
   // from faces to cells), lam_d(m) = (2 cos theta - 2) / h^2, theta = 2 pi m / n_d.
   std::array<std::vector<double>, 3> ar, ai;  // real and imaginary parts of a_d
   std::array<std::vector<double>, 3> lam;
+  std::vector<double> plane_squares;  // nx: per plane, the squares of its new modes (finiteness)
   typename F::Plan fwd = nullptr, inv = nullptr;
 
   C* cplx(int c) { return hat[c].data(); }
@@ -235,6 +238,7 @@ FftProjector<T>::FftProjector(const GridGeometry& geo) : impl_(new Impl) {
   m.n_cplx = std::size_t(geo.nx) * geo.ny * m.nzc;
   m.div.assign(m.n_real, T(0));
   for (int c = 0; c < 3; ++c) m.hat[c].assign(m.n_cplx, std::complex<T>(0));
+  m.plane_squares.assign(std::size_t(geo.nx), 0.0);
   const double two_pi = 6.283185307179586476925286766559;
   for (int d = 0; d < 3; ++d) {
     const int n = geo.n(d);
@@ -295,6 +299,17 @@ struct SpectralRow {
   double scale, nu_dt;
 };
 
+/// The largest sum of squares (m^2/s^2) of one plane's new modes that still certifies the
+/// inverse transforms finite: every mode is then below sqrt(max T) / (4 n), and a c2r output (a
+/// sum of at most n modes, Hermitian halves included, as is every partial sum FFTW forms on the
+/// way) is below sqrt(max T) / 4, far from overflow. A physical field is hundreds of orders of
+/// magnitude below it; NaN or infinity fails the test, and so does any value too large to square.
+template <class T>
+double finite_plane_bound(std::size_t n_real) {
+  const double b = std::sqrt(double(std::numeric_limits<T>::max())) / (4.0 * double(n_real));
+  return b * b;
+}
+
 template <class S, class T>
 FLAGSIM_INLINE void load_complex(const T* p, S& re, S& im) {
   if constexpr (std::is_same<S, double>::value) {
@@ -323,9 +338,10 @@ FLAGSIM_INLINE void store_complex(T* p, const S& re, const S& im) {
   }
 }
 
-/// Modes k.. of a row, one per lane of S (double or a vector of doubles).
+/// Modes k.. of a row, one per lane of S (double or a vector of doubles); returns the sum of the
+/// squares of the new modes' parts, per lane.
 template <class S, class T>
-FLAGSIM_INLINE void spectral_modes(const SpectralRow<T>& w, int k) {
+FLAGSIM_INLINE S spectral_modes(const SpectralRow<T>& w, int k) {
   S xr, xi, yr, yi, zr, zi;
   load_complex(w.p0 + 2 * k, xr, xi);
   load_complex(w.p1 + 2 * k, yr, yi);
@@ -347,58 +363,70 @@ FLAGSIM_INLINE void spectral_modes(const SpectralRow<T>& w, int k) {
   // products check for NaN and call __muldc3, which keeps a loop scalar and branchy.
   const S pr = sp * (w.axr * xr - w.axi * xi + w.ayr * yr - w.ayi * yi + azr * zr - azi * zi);
   const S pi = sp * (w.axr * xi + w.axi * xr + w.ayr * yi + w.ayi * yr + azr * zi + azi * zr);
-  store_complex(w.p0 + 2 * k, S(s * xr + w.axr * pr + w.axi * pi),
-                S(s * xi + w.axr * pi - w.axi * pr));
-  store_complex(w.p1 + 2 * k, S(s * yr + w.ayr * pr + w.ayi * pi),
-                S(s * yi + w.ayr * pi - w.ayi * pr));
-  store_complex(w.p2 + 2 * k, S(s * zr + azr * pr + azi * pi), S(s * zi + azr * pi - azi * pr));
+  const S ur = s * xr + w.axr * pr + w.axi * pi, ui = s * xi + w.axr * pi - w.axi * pr;
+  const S vr = s * yr + w.ayr * pr + w.ayi * pi, vi = s * yi + w.ayr * pi - w.ayi * pr;
+  const S wr = s * zr + azr * pr + azi * pi, wi = s * zi + azr * pi - azi * pr;
+  store_complex(w.p0 + 2 * k, ur, ui);
+  store_complex(w.p1 + 2 * k, vr, vi);
+  store_complex(w.p2 + 2 * k, wr, wi);
+  // The step's finiteness check, fused here (finite_plane_bound): the new modes' squares.
+  return ur * ur + ui * ui + vr * vr + vi * vi + wr * wr + wi * wi;
 }
 
 /// A whole row: vectors of L (Lanes16<double>, Lanes32<double>; void: scalars), then the tail.
+/// Returns the sum of the squares of its new modes' parts.
 template <class L, class T>
-FLAGSIM_INLINE void spectral_row_body(const SpectralRow<T>& w, int nzc) {
+FLAGSIM_INLINE double spectral_row_body(const SpectralRow<T>& w, int nzc) {
   int k = 0;
+  double squares = 0;
 #ifdef FLAGSIM_HAVE_VECTORS
-  if constexpr (!std::is_void<L>::value)
-    for (; k + L::W <= nzc; k += L::W) spectral_modes<typename L::V>(w, k);
+  if constexpr (!std::is_void<L>::value) {
+    typename L::V lanes = {};
+    for (; k + L::W <= nzc; k += L::W) lanes += spectral_modes<typename L::V>(w, k);
+    for (int l = 0; l < L::W; ++l) squares += lanes[l];
+  }
 #endif
-  for (; k < nzc; ++k) spectral_modes<double>(w, k);
+  for (; k < nzc; ++k) squares += spectral_modes<double>(w, k);
+  return squares;
 }
 
 /// The n1 rows j of a plane i, w set for j = 0; the y symbols per j from (ayr, ayi, lamy).
+/// Returns the sum of the squares of the plane's new modes' parts.
 template <class L, class T>
-FLAGSIM_INLINE void spectral_plane_body(SpectralRow<T> w, const double* ayr, const double* ayi,
-                                        const double* lamy, double lamx, int n1, int nzc) {
+FLAGSIM_INLINE double spectral_plane_body(SpectralRow<T> w, const double* ayr, const double* ayi,
+                                          const double* lamy, double lamx, int n1, int nzc) {
+  double squares = 0;
   for (int j = 0; j < n1; ++j) {
     w.ayr = ayr[j];
     w.ayi = ayi[j];
     w.lxy = lamx + lamy[j];
-    spectral_row_body<L>(w, nzc);
+    squares += spectral_row_body<L>(w, nzc);
     w.p0 += 2 * nzc;
     w.p1 += 2 * nzc;
     w.p2 += 2 * nzc;
   }
+  return squares;
 }
 
 template <class T>
-void spectral_plane_16(const SpectralRow<T>& w, const double* ayr, const double* ayi,
-                       const double* lamy, double lamx, int n1, int nzc) {
-  spectral_plane_body<NarrowLanes<double>>(w, ayr, ayi, lamy, lamx, n1, nzc);
+double spectral_plane_16(const SpectralRow<T>& w, const double* ayr, const double* ayi,
+                         const double* lamy, double lamx, int n1, int nzc) {
+  return spectral_plane_body<NarrowLanes<double>>(w, ayr, ayi, lamy, lamx, n1, nzc);
 }
 
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
 template <class T>
-FLAGSIM_TARGET_AVX void spectral_plane_32(const SpectralRow<T>& w, const double* ayr,
-                                          const double* ayi, const double* lamy, double lamx,
-                                          int n1, int nzc) {
-  spectral_plane_body<Lanes32<double>>(w, ayr, ayi, lamy, lamx, n1, nzc);
+FLAGSIM_TARGET_AVX double spectral_plane_32(const SpectralRow<T>& w, const double* ayr,
+                                            const double* ayi, const double* lamy, double lamx,
+                                            int n1, int nzc) {
+  return spectral_plane_body<Lanes32<double>>(w, ayr, ayi, lamy, lamx, n1, nzc);
 }
 #endif
 
 }  // namespace
 
 template <class T>
-void FftProjector<T>::diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec3* mean) {
+bool FftProjector<T>::diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec3* mean) {
   Impl& m = *impl_;
   const GridGeometry& g = m.geo;
   for (int c = 0; c < 3; ++c) Impl::F::exec_r2c(m.fwd, u.comp[c].data(), m.fc(c));
@@ -423,14 +451,20 @@ void FftProjector<T>::diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec
     w.axi = m.ai[0][i];
     w.scale = 1.0 / double(m.n_real);
     w.nu_dt = nu_dt;
-    plane_fn(w, m.ar[1].data(), m.ai[1].data(), m.lam[1].data(), m.lam[0][i], g.ny, m.nzc);
+    m.plane_squares[std::size_t(i)] =
+        plane_fn(w, m.ar[1].data(), m.ai[1].data(), m.lam[1].data(), m.lam[0][i], g.ny, m.nzc);
   });
+  const double bound = finite_plane_bound<T>(m.n_real);
+  bool finite = true;
+  for (const double squares : m.plane_squares) finite = finite && squares <= bound;
   if (mean) {
     h0[0] = std::complex<T>(T((*mean)[0]));
     h1[0] = std::complex<T>(T((*mean)[1]));
     h2[0] = std::complex<T>(T((*mean)[2]));
+    finite = finite && mean->squaredNorm() <= bound;
   }
   for (int c = 0; c < 3; ++c) Impl::F::exec_c2r(m.inv, m.fc(c), u.comp[c].data());
+  return finite;
 }
 
 #else  // no FFTW
@@ -447,7 +481,9 @@ FftProjector<T>::~FftProjector() = default;
 template <class T>
 void FftProjector<T>::project(MacGrid<T>&, T*) {}
 template <class T>
-void FftProjector<T>::diffuse_and_project(MacGrid<T>&, double, const Vec3*) {}
+bool FftProjector<T>::diffuse_and_project(MacGrid<T>&, double, const Vec3*) {
+  return false;
+}
 
 #endif
 

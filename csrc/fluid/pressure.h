@@ -54,8 +54,10 @@ class FftProjector {
   /// phi (nx*ny*nz) receives the potential. The k = 0 mode is untouched.
   void project(MacGrid<T>& u, T* phi);
   /// u <- P (I - nu dt lap)^-1 u, all in Fourier space (3 r2c + 3 c2r). When mean != nullptr the
-  /// k = 0 mode is set to *mean (m/s), otherwise left as it is.
-  void diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec3* mean);
+  /// k = 0 mode is set to *mean (m/s), otherwise left as it is. Returns true when the new u is
+  /// certainly finite (its modes, checked in the spectral pass, are bounded far below overflow);
+  /// false says nothing either way: the caller checks u itself.
+  bool diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec3* mean);
 
  private:
   struct Impl;
