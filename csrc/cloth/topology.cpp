@@ -90,26 +90,24 @@ class NearestPin {
   }
 };
 
-}  // namespace
-
-ClothTopology build_flag_topology(const FlagParams& p) {
-  ClothTopology t;
-  const int R = p.rows, C = p.cols, N = R * C;
-  t.rows = R;
-  t.cols = C;
+// Rest positions on the grid (row 0 at the top, column 0 at the pole) and texture coordinates.
+void place_grid(const FlagParams& p, ClothTopology& t) {
+  const int R = t.rows, C = t.cols, N = R * C;
   const double dx = p.width / (C - 1), dy = p.height / (R - 1);
-  auto id = [C](int r, int c) { return r * C + c; };
-
   t.rest_positions.resize(N, 3);
   t.uv.resize(N, 2);
   for (int r = 0; r < R; ++r)
     for (int c = 0; c < C; ++c) {
-      t.rest_positions.row(id(r, c)) = p.origin + Vec3(c * dx, -r * dy, 0.0);
-      t.uv.row(id(r, c)) << double(c) / (C - 1), 1.0 - double(r) / (R - 1);
+      t.rest_positions.row(r * C + c) = p.origin + Vec3(c * dx, -r * dy, 0.0);
+      t.uv.row(r * C + c) << double(c) / (C - 1), 1.0 - double(r) / (R - 1);
     }
+}
 
-  // Two triangles per quad, both counter-clockwise seen from +z: (a, c, d) and (a, d, b) with
-  // a = (r, c), b = (r, c+1), c = (r+1, c), d = (r+1, c+1).
+// Two triangles per quad, both counter-clockwise seen from +z: (a, c, d) and (a, d, b) with
+// a = (r, c), b = (r, c+1), c = (r+1, c), d = (r+1, c+1).
+void add_triangles(ClothTopology& t) {
+  const int R = t.rows, C = t.cols;
+  auto id = [C](int r, int c) { return r * C + c; };
   t.triangles.resize(2 * (R - 1) * (C - 1), 3);
   Index k = 0;
   for (int r = 0; r + 1 < R; ++r)
@@ -118,7 +116,12 @@ ClothTopology build_flag_topology(const FlagParams& p) {
       t.triangles.row(k++) << a, cc, d;
       t.triangles.row(k++) << a, d, b;
     }
+}
 
+// Structural, shear and bend springs (paper eq. 4), their rest lengths, stiffness and damping.
+void add_springs(const FlagParams& p, ClothTopology& t) {
+  const int R = t.rows, C = t.cols;
+  auto id = [C](int r, int c) { return r * C + c; };
   std::vector<std::array<int32_t, 2>> s;
   for (int r = 0; r < R; ++r)
     for (int c = 0; c < C; ++c) {
@@ -145,8 +148,13 @@ ClothTopology build_flag_topology(const FlagParams& p) {
       case SpringKind::kBend: t.stiffness[j] = p.bend_stiffness; break;
     }
   }
+}
 
-  // Lumped area: a third of every adjacent triangle's rest area; mass = areal density x area.
+// Lumped area: a third of every adjacent triangle's rest area; mass = areal density x area.
+// Pinned vertices get inv_mass 0.
+void lump_mass_and_pin(const FlagParams& p, ClothTopology& t) {
+  const int R = t.rows, C = t.cols, N = R * C;
+  auto id = [C](int r, int c) { return r * C + c; };
   t.area.setZero(N);
   for (Index f = 0; f < t.triangles.rows(); ++f) {
     const Vec3 e1 =
@@ -168,8 +176,11 @@ ClothTopology build_flag_topology(const FlagParams& p) {
   } else if (p.pin == Pin::kTop) {
     for (int c = 0; c < C; ++c) t.inv_mass[id(0, c)] = 0.0;
   }
+}
 
-  // Tethers to the nearest pin at rest.
+// Tethers to the nearest pin at rest.
+void attach_tethers(ClothTopology& t) {
+  const int N = t.rows * t.cols;
   std::vector<int> pins;
   for (int i = 0; i < N; ++i)
     if (t.inv_mass[i] == 0.0) pins.push_back(i);
@@ -182,8 +193,12 @@ ClothTopology build_flag_topology(const FlagParams& p) {
     t.tether_anchor[i] = a;
     t.tether_length[i] = a >= 0 ? d : 0.0;
   }
+}
 
-  // Vertex -> spring adjacency (CSR), springs in index order for each vertex.
+// Vertex -> spring and vertex -> triangle adjacency (CSR), each in index order for each vertex.
+void build_adjacency(ClothTopology& t) {
+  const int N = t.rows * t.cols;
+  const Index S = t.springs.rows();
   t.adj_offset.assign(N + 1, 0);
   for (Index j = 0; j < S; ++j) {
     ++t.adj_offset[t.springs(j, 0) + 1];
@@ -208,6 +223,20 @@ ClothTopology build_flag_topology(const FlagParams& p) {
   fill.assign(t.tri_adj_offset.begin(), t.tri_adj_offset.end() - 1);
   for (Index f = 0; f < t.triangles.rows(); ++f)
     for (int q = 0; q < 3; ++q) t.tri_adj[fill[t.triangles(f, q)]++] = int32_t(f);
+}
+
+}  // namespace
+
+ClothTopology build_flag_topology(const FlagParams& p) {
+  ClothTopology t;
+  t.rows = p.rows;
+  t.cols = p.cols;
+  place_grid(p, t);
+  add_triangles(t);
+  add_springs(p, t);
+  lump_mass_and_pin(p, t);
+  attach_tethers(t);
+  build_adjacency(t);
   return t;
 }
 
