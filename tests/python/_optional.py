@@ -1,7 +1,9 @@
-"""Optional parts the tests need (the extras [viewer] and [usd], an OpenGL driver)."""
+"""Optional parts the tests need (the extras [viewer], [usd] and [distributed], an OpenGL
+driver, POV-Ray)."""
 
 import importlib.util
 import os
+import shutil
 
 import pytest
 
@@ -22,3 +24,15 @@ def missing(module, extra):
     if importlib.util.find_spec(module) is not None:
         return None
     return f"{module} is not installed (pip install 'flagsim[{extra}]')"
+
+
+def missing_povray():
+    """None when POV-Ray is on the PATH, else why not (for require)."""
+    if shutil.which("povray") is not None:
+        return None
+    return "POV-Ray is not installed (Debian package povray)"
+
+
+#: Marks a test that runs POV-Ray: skipped without it, failed without it under CI (the fixture
+#: povray_installed, tests/python/conftest.py, calls require).
+needs_povray = pytest.mark.usefixtures("povray_installed")

@@ -1,5 +1,6 @@
 import flagsim
 import pytest
+from _optional import missing_povray, require
 
 
 def spring_pair(method: str, k: float = 100.0, dt: float = 1e-3) -> flagsim.Scene:
@@ -12,3 +13,9 @@ def spring_pair(method: str, k: float = 100.0, dt: float = 1e-3) -> flagsim.Scen
 @pytest.fixture
 def paper():
     return flagsim.Scene.paper()
+
+
+@pytest.fixture
+def povray_installed():
+    """For _optional.needs_povray."""
+    require(missing_povray())

@@ -14,6 +14,7 @@ from types import SimpleNamespace
 import flagsim
 import numpy as np
 import pytest
+from _optional import missing, require
 
 import benchmarks as bench
 from benchmarks import engines, peers, report, worker, workloads
@@ -477,11 +478,7 @@ def test_cloth_workloads_build_at_every_size_with_self_collision(rows, cols):
 
 
 def test_cluster_smoke_run_reports_times_and_ratios(tmp_path, capsys):
-    pytest.importorskip(
-        "distributed",
-        reason="Dask distributed is not installed: pip install 'flagsim[distributed]' "
-        "(make test installs it)",
-    )
+    require(missing("distributed", "distributed"))
     from benchmarks import cluster
 
     out = tmp_path / "bench"

@@ -1,16 +1,12 @@
 """The flagsim command: help, scenes, run (with and without rendering), and its user errors."""
 
-import shutil
 import subprocess
 import sys
 
 import flagsim
 import pytest
+from _optional import needs_povray
 from flagsim import cli
-
-needs_povray = pytest.mark.skipif(
-    shutil.which("povray") is None, reason="POV-Ray is not installed (Debian package povray)"
-)
 
 
 def flagsim_cmd(capsys, *argv):

@@ -16,23 +16,18 @@ import threading
 import time
 
 import pytest
+from _optional import missing, needs_povray, require
 
-distributed = pytest.importorskip(
-    "distributed",
-    reason="Dask distributed is not installed: pip install 'flagsim[distributed]' "
-    "(make test installs it)",
-)
+require(missing("distributed", "distributed"))
 
 import dask  # noqa: E402
+import distributed  # noqa: E402
 import flagsim  # noqa: E402
 from flagsim import _pool, cli, povray, sweep  # noqa: E402
 from flagsim.povray.render import png_size  # noqa: E402
 from flagsim.study import runner, stability  # noqa: E402
 from flagsim.testing.cluster import announced, setenv  # noqa: E402
 
-needs_povray = pytest.mark.skipif(
-    shutil.which("povray") is None, reason="POV-Ray is not installed (Debian package povray)"
-)
 SWEEP = ["--vary", "air.wind=[2,0,0],[8,0,1]", "--vary", "flag.rows=5,6", "--seconds", "0.08"]
 SWEEP += ["--width", "64", "--height", "48", "--render", "--quiet"]
 

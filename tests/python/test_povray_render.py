@@ -3,7 +3,6 @@ retry and failure reporting, GIF assembly, clear errors for missing programs."""
 
 import os
 import re
-import shutil
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -13,12 +12,9 @@ import flagsim
 import flagsim.povray as pov
 import numpy as np
 import pytest
+from _optional import needs_povray
 from _standin import StandInSim, standin_scene
 from test_povray_mesh import parse_mesh2
-
-needs_povray = pytest.mark.skipif(
-    shutil.which("povray") is None, reason="POV-Ray is not installed (Debian package povray)"
-)
 
 
 def red_mask(img):

@@ -5,18 +5,14 @@ test_distributed.py. Dask is hidden here: the local path must not need it."""
 import csv
 import json
 import os
-import shutil
 import sys
 
 import flagsim
 import pytest
+from _optional import needs_povray
 from flagsim import cli, sweep
 from flagsim.povray.lock import ExportLock
 from flagsim.study import runner
-
-needs_povray = pytest.mark.skipif(
-    shutil.which("povray") is None, reason="POV-Ray is not installed (Debian package povray)"
-)
 
 
 @pytest.fixture(autouse=True)
