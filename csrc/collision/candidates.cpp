@@ -74,10 +74,14 @@ MatX2i mesh_edges(const MatX3i& tris) {
   return out;
 }
 
-// Concatenate per-thread buffers (in thread order) onto out.
-template <class T>
-void append(const std::vector<std::vector<T>>& buffers, std::vector<T>& out) {
-  for (const auto& b : buffers) out.insert(out.end(), b.begin(), b.end());
+// Concatenate per-thread buffers (in thread order) onto out, each kind of pair onto its list.
+template <class Buffers>
+void append(const Buffers& buffers, CandidatePairs& out) {
+  for (const CandidatePairs& b : buffers)
+    out.vertex_triangle.insert(out.vertex_triangle.end(), b.vertex_triangle.begin(),
+                               b.vertex_triangle.end());
+  for (const CandidatePairs& b : buffers)
+    out.edge_edge.insert(out.edge_edge.end(), b.edge_edge.begin(), b.edge_edge.end());
 }
 
 // Sorts buffer[begin, end) by the pairs' second item (one first item's pairs: the tree's order
@@ -113,13 +117,14 @@ Candidates::Candidates(const MatX3i& triangles, Index num_vertices, double thick
       direct_streak_(kDirectBuilds) {
   const size_t threads = static_cast<size_t>(max_threads());
   thread_pairs_.resize(threads);
-  thread_edge_pairs_.resize(threads);
   const size_t expected = kExpectedPerItem * static_cast<size_t>(num_vertices) + kListSlack;
   const size_t expected_edges = kExpectedPerItem * static_cast<size_t>(edges_.rows()) + kListSlack;
   reserved_ = expected + expected_edges;
   // Thread 0 collects every pair when the broad phase runs on one thread.
-  for (auto& buffer : thread_pairs_) buffer.reserve(expected);
-  for (auto& buffer : thread_edge_pairs_) buffer.reserve(expected_edges);
+  for (CandidatePairs& buffer : thread_pairs_) {
+    buffer.vertex_triangle.reserve(expected);
+    buffer.edge_edge.reserve(expected_edges);
+  }
   // A list that pays is at most kListRatio times the candidates.
   for (CandidatePairs* p : {&pairs_, &list_}) {
     p->vertex_triangle.reserve(expected);
@@ -244,12 +249,8 @@ bool Candidates::query_trees(double wide, const VecX* inv_mass, CandidatePairs& 
     edge_tree_.build(elo_, ehi_);
   }
   const size_t threads = static_cast<size_t>(max_threads());
-  if (thread_pairs_.size() < threads) {
-    thread_pairs_.resize(threads);
-    thread_edge_pairs_.resize(threads);
-  }
-  for (auto& buffer : thread_pairs_) buffer.clear();
-  for (auto& buffer : thread_edge_pairs_) buffer.clear();
+  if (thread_pairs_.size() < threads) thread_pairs_.resize(threads);
+  for (CandidatePairs& buffer : thread_pairs_) buffer.clear();
   const Index E = edges_.rows();
   bool within = true;
   if (use_team(n_ >= kParallelGrain)) {
@@ -258,8 +259,8 @@ bool Candidates::query_trees(double wide, const VecX* inv_mass, CandidatePairs& 
     {
       const size_t id = static_cast<size_t>(thread_id());
       const size_t share = budget / static_cast<size_t>(team_size()) + 1;
-      std::vector<CandidatePair>& pv = thread_pairs_[id];
-      std::vector<CandidatePair>& pe = thread_edge_pairs_[id];
+      std::vector<CandidatePair>& pv = thread_pairs_[id].vertex_triangle;
+      std::vector<CandidatePair>& pe = thread_pairs_[id].edge_edge;
       auto full = [&] {
         if (pv.size() + pe.size() > share) over.store(true, std::memory_order_relaxed);
         return over.load(std::memory_order_relaxed);
@@ -275,8 +276,8 @@ bool Candidates::query_trees(double wide, const VecX* inv_mass, CandidatePairs& 
     }
     within = !over.load();
   } else {
-    std::vector<CandidatePair>& pv = thread_pairs_[0];
-    std::vector<CandidatePair>& pe = thread_edge_pairs_[0];
+    std::vector<CandidatePair>& pv = thread_pairs_[0].vertex_triangle;
+    std::vector<CandidatePair>& pe = thread_pairs_[0].edge_edge;
     for (Index i = 0; i < n_ && within; ++i) {
       collect_vertex(i, wide, inv_mass, pv);
       within = pv.size() <= budget;
@@ -287,8 +288,7 @@ bool Candidates::query_trees(double wide, const VecX* inv_mass, CandidatePairs& 
     }
   }
   out.clear();
-  append(thread_pairs_, out.vertex_triangle);
-  append(thread_edge_pairs_, out.edge_edge);
+  append(thread_pairs_, out);
   return within;
 }
 
@@ -312,13 +312,12 @@ void Candidates::filter_list(const VecX& inv_mass) {
   const auto LV = static_cast<Index>(lv.size()), LE = static_cast<Index>(le.size());
   pairs_.clear();
   if (use_team(LV + LE >= kPairGrain)) {
-    for (auto& buffer : thread_pairs_) buffer.clear();
-    for (auto& buffer : thread_edge_pairs_) buffer.clear();
+    for (CandidatePairs& buffer : thread_pairs_) buffer.clear();
 #pragma omp parallel
     {
       const auto id = static_cast<size_t>(thread_id());
-      std::vector<CandidatePair>& pv = thread_pairs_[id];
-      std::vector<CandidatePair>& pe = thread_edge_pairs_[id];
+      std::vector<CandidatePair>& pv = thread_pairs_[id].vertex_triangle;
+      std::vector<CandidatePair>& pe = thread_pairs_[id].edge_edge;
 #pragma omp for schedule(static) nowait
       for (Index k = 0; k < LV; ++k)
         if (keep_vertex(lv[size_t(k)])) pv.push_back(lv[size_t(k)]);
@@ -327,8 +326,7 @@ void Candidates::filter_list(const VecX& inv_mass) {
         if (keep_edge(le[size_t(k)])) pe.push_back(le[size_t(k)]);
     }
     // Static blocks in thread order: the list's order.
-    append(thread_pairs_, pairs_.vertex_triangle);
-    append(thread_edge_pairs_, pairs_.edge_edge);
+    append(thread_pairs_, pairs_);
   } else {
     for (const CandidatePair& p : lv)
       if (keep_vertex(p)) pairs_.vertex_triangle.push_back(p);
