@@ -102,8 +102,8 @@ class Candidates {
   MatX3 tlo_, thi_;               // T x 3 swept triangle boxes, grown by the thickness
   MatX3 elo_, ehi_;               // E x 3 swept edge boxes, grown by the thickness
   // Per thread (query_trees, filter_list), each on cache lines of its own: the threads push pairs
-  // at the same time, and two threads' vector ends on one line would bounce it between the cores
-  // at every push (how often depended on where malloc put them: a 10-15 % swing of the stage).
+  // at the same time, and two threads' vector ends on one line could bounce it between the cores
+  // at every push (false sharing). On this 2-vCPU machine no difference was measurable either way.
   struct alignas(64) ThreadPairs : CandidatePairs {};
   std::vector<ThreadPairs> thread_pairs_;
   CandidatePairs pairs_;
