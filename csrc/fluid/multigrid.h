@@ -114,7 +114,11 @@ class PoissonMultigrid {
 
  private:
   void finish_build();
-  void vcycle(const T* r, T* z, bool sums);
+  /// One V-cycle: z = M r on natural rows; z == nullptr (the solve's): r split as the levels,
+  /// M r left in level 0's x, r . z and sum z per plane in part_.
+  void vcycle(const T* r, T* z);
+  /// natural <-> split rows (the levels' layout), plane by plane.
+  void split_copy(const LevelArgs<T>& a, T* natural, T* split, bool to_split);
   LevelArgs<MgScalar> args(int l);
   LevelArgs<T> cg_args();
   std::vector<MultigridLevel<MgScalar>> levels_;
