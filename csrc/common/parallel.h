@@ -52,8 +52,40 @@ inline void parallel_for_cells(Index n, const Body& body) {
   parallel_for_if(n > kGridParallelGrain, n, body);
 }
 
-/// Set the thread count for flagsim's loops; n >= 1. Throws InvalidArgument otherwise.
+/// Set the thread count for flagsim's loops; n >= 1. Throws InvalidArgument otherwise. Inside a
+/// parallel region it sets the count for the calling thread's loops until the region ends.
 void set_num_threads(int n);
+
+/// Runs first() and second() at the same time, each on a thread of its own, when use_team(true)
+/// (two threads or more); otherwise first() then second() on the calling thread. Each runs its
+/// own calls in order, and inside each num_threads() is 1: their loops run on their own thread
+/// (no nested team, never more than two threads busy), and since every flagsim loop gives the same
+/// bits on any thread count, each gives the bits it would give alone. The two must not touch the
+/// same data, and must not throw (catch inside, rethrow after). With OpenMP sections a thread that
+/// finishes its part takes the other if it has not been started yet (a sleeping worker).
+template <class First, class Second>
+inline void run_side_by_side(const First& first, const Second& second) {
+#ifdef _OPENMP
+  if (use_team(true)) {
+#pragma omp parallel sections num_threads(2)
+    {
+#pragma omp section
+      {
+        set_num_threads(1);
+        first();
+      }
+#pragma omp section
+      {
+        set_num_threads(1);
+        second();
+      }
+    }
+    return;
+  }
+#endif
+  first();
+  second();
+}
 /// True when compiled with OpenMP.
 bool has_openmp();
 

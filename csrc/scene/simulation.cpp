@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <exception>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
@@ -169,6 +170,9 @@ void Simulation::setup_flapping() {
 }
 
 // The air grid (paper §2): one-way coupling, so it only needs the flag to start inside it.
+// Pipelined (air.pipeline), the air steps on a thread of its own with its loops on that thread,
+// so its FFTs are planned for one thread, and it keeps its warm start so that a step the
+// pipeline takes back is taken again to the same bits.
 void Simulation::build_fluid() {
   const AirParams& a = scene_.air;
   const Vec3 lo = a.origin,
@@ -187,8 +191,16 @@ void Simulation::build_fluid() {
   }
   FluidParams fp = a;
   if (a.pole_obstacle) fp.obstacles.push_back(AirParams::pole_solid(scene_.pole));
+  struct Threads {  // the thread count the FFTW plans are made for, restored however we leave
+    int before = num_threads();
+    ~Threads() { set_num_threads(before); }
+  } restore;
+  if (a.pipeline) set_num_threads(1);
   fluid_ = std::make_unique<Fluid>(fp, "air");
+  if (a.pipeline) fluid_->keep_warm_start();
 }
+
+bool Simulation::pipelined() const { return built(Stage::kFluid) && scene_.air.pipeline; }
 
 void Simulation::update_normals() { compute_vertex_normals(topo_, x_, n_); }
 
@@ -221,27 +233,87 @@ void Simulation::step_once() {
   ledger_start_ = ledger_;
   energy_end_start_ = energy_end_;
   if (built(Stage::kFlap)) flap_.save_step_start();
+  air_advanced_ = false;
   int level = 0;
-  for (;; ++level) {
-    const long pieces = 1L << level;
-    h_ = scene_.dt / double(pieces);
-    forces_.refine = 1.0 / double(pieces);
-    Implausible bad;
-    for (long k = 0; k < pieces && bad.cause.empty(); ++k) {
-      t_piece_ = time_ + double(k) * h_;
-      bad = step_piece();
-    }
-    if (bad.cause.empty()) break;
+  Implausible bad = pipelined() ? step_beside_air() : step_pieces(0);
+  while (!bad.cause.empty()) {
     if (level == scene_.integrator.max_halvings)
-      diverge(bad.cause, bad.vertex, bad.why + " even in " + std::to_string(pieces) + " pieces");
+      diverge(bad.cause, bad.vertex,
+              bad.why + " even in " + std::to_string(1L << level) + " pieces");
     restore_step_start();
+    bad = step_pieces(++level);
   }
-  advance_fluid();  // after the check: a rolled-back step leaves the air as it was
+  if (!air_advanced_) advance_fluid();  // after the check: a rolled-back step leaves the air
   stats_.energy_halvings += level;
   ++step_count_;
   time_ = double(step_count_) * scene_.dt;  // no drift from summing dt
   update_normals();
   if (built(Stage::kFlapVisual)) stage_flap_visual();
+}
+
+Simulation::Implausible Simulation::step_pieces(int level) {
+  const long pieces = 1L << level;
+  h_ = scene_.dt / double(pieces);
+  forces_.refine = 1.0 / double(pieces);
+  Implausible bad;
+  for (long k = 0; k < pieces && bad.cause.empty(); ++k) {
+    t_piece_ = time_ + double(k) * h_;
+    bad = step_piece();
+  }
+  return bad;
+}
+
+// The pipeline (one-way coupling): the air's step u^n -> u^n+1 reads nothing of the cloth, and
+// the cloth's step reads the air only at u^n. So the first piece's reads of the air (at the
+// masses, and u_p along the pole) are sampled here, before the air starts its step; then the air
+// advances on one thread while the cloth steps that piece on the other. Each side runs the serial
+// order's operations on the same data, so the bits are the serial order's. When the piece throws
+// or must be redone in pieces, whose later pieces read u^n at positions known only then, the air's
+// step is taken back (Fluid::undo_step) and the step finishes in the serial order.
+Simulation::Implausible Simulation::step_beside_air() {
+  t_piece_ = time_;
+  stage_air();
+  if (built(Stage::kFlap)) {
+    StageClock::Scope t(&clock_, Stage::kFlap);
+    u_p_ = sample_pole_air_speed();
+  }
+  air_sampled_ = pole_air_sampled_ = true;
+  Implausible bad;
+  std::exception_ptr cloth_error, air_error;
+  run_side_by_side(
+      [&]() noexcept {
+        try {
+          bad = step_pieces(0);
+        } catch (...) {
+          cloth_error = std::current_exception();
+        }
+      },
+      [&]() noexcept {
+        try {
+          StageClock::Scope t(&air_clock_, Stage::kFluid);
+          fluid_->step(scene_.dt);
+        } catch (...) {
+          air_error = std::current_exception();
+        }
+      });
+  air_sampled_ = pole_air_sampled_ = false;
+  if (cloth_error || !bad.cause.empty()) {
+    if (!air_error) {  // a failed air step has taken itself back already
+      StageClock::Scope t(&clock_, Stage::kFluid);
+      fluid_->undo_step();
+    }
+    if (cloth_error) std::rethrow_exception(cloth_error);
+    return bad;
+  }
+  if (air_error) {
+    try {
+      std::rethrow_exception(air_error);
+    } catch (const DivergenceError& e) {
+      air_diverged(e);
+    }
+  }
+  air_advanced_ = true;
+  return bad;
 }
 
 // One piece of h_ from t_piece_, the paper's method stage by stage: an empty cause when it passed
@@ -279,7 +351,7 @@ double Simulation::sample_pole_air_speed() {
 void Simulation::stage_flap() {
   if (!built(Stage::kFlap)) return;
   StageClock::Scope t(&clock_, Stage::kFlap);
-  u_p_ = sample_pole_air_speed();
+  if (!pole_air_sampled_) u_p_ = sample_pole_air_speed();  // else step_beside_air sampled it
   compute_vertex_normals(topo_, x_, n_);
   if (scene_.flapping.mode == FlapMode::kDisplace)
     flap_.drift(topo_, n_, u_p_, t_piece_ + h_, h_, flap_drift_);
@@ -356,7 +428,7 @@ void Simulation::stage_air() {
         u_.row(i) += noise_.velocity(x_.row(i).transpose(), t_piece_).transpose();
       });
   }
-  if (built(Stage::kFluid)) {
+  if (built(Stage::kFluid) && !air_sampled_) {  // else step_beside_air sampled it
     StageClock::Scope t(&clock_, Stage::kFluid);
     air_outside_last_ = fluid_->sample(x_, u_);
     air_outside_total_ += air_outside_last_;
@@ -371,11 +443,15 @@ void Simulation::advance_fluid() {
   try {
     fluid_->step(scene_.dt);
   } catch (const DivergenceError& e) {
-    restore_step_start();
-    update_normals();
-    throw DivergenceError(std::string(e.what()) + " (air.cell_size, air.resolution)", step_count_,
-                          time_, -1, e.cause);
+    air_diverged(e);
   }
+}
+
+void Simulation::air_diverged(const DivergenceError& e) {
+  restore_step_start();
+  update_normals();
+  throw DivergenceError(std::string(e.what()) + " (air.cell_size, air.resolution)", step_count_,
+                        time_, -1, e.cause);
 }
 
 void Simulation::stage_integrate() {
@@ -516,7 +592,8 @@ void Simulation::diverge(const std::string& cause, long vertex, const std::strin
 std::vector<std::pair<std::string, double>> Simulation::timings() const {
   std::vector<std::pair<std::string, double>> out;
   for (int s = 0; s < kNumStages; ++s)
-    if (built_[s]) out.emplace_back(name_of(Stage(s)), clock_.seconds(Stage(s)));
+    if (built_[s])
+      out.emplace_back(name_of(Stage(s)), clock_.seconds(Stage(s)) + air_clock_.seconds(Stage(s)));
   return out;
 }
 

@@ -104,7 +104,8 @@ class Simulation {
 
   /// Names of the stages this scene runs, in step order.
   const std::vector<std::string>& stages() const { return stage_names_; }
-  /// Seconds spent per built stage since construction.
+  /// Seconds spent per built stage since construction. Pipelined, the fluid stage's air step
+  /// runs beside the other stages, so the seconds add up to more than the wall time.
   std::vector<std::pair<std::string, double>> timings() const;
   ClothEnergy energy() const;
   /// Work by stage since construction (EnergyLedger; `gravity` from the current positions).
@@ -132,6 +133,12 @@ class Simulation {
   /// Recompute normals after positions were edited from outside.
   void update_normals();
 
+  /// True when a step takes the air's step together with the cloth's first piece (air.pipeline
+  /// and a grid): side by side on two threads when flagsim has two or more (num_threads()), one
+  /// after the other on one. Same bits as the serial order either way (docs/design.md "Air and
+  /// cloth side by side").
+  bool pipelined() const;
+
  private:
   static constexpr int kNumStages = int(Stage::kCount);
 
@@ -141,6 +148,8 @@ class Simulation {
     long vertex = -1;
     std::string why;
   };
+  Implausible step_pieces(int level);  // the step as 2^level pieces
+  Implausible step_beside_air();       // step_pieces(0) while the air advances on another thread
   Implausible step_piece();
   void restore_step_start();
   // Set-up (the constructor, in this order).
@@ -159,6 +168,7 @@ class Simulation {
   Implausible stage_check();
   // After the step: the air grid advances, the "visual" flap displaces the exported geometry.
   void advance_fluid();
+  [[noreturn]] void air_diverged(const DivergenceError& e);  // the cloth restored, e raised
   void stage_flap_visual();
   // Helpers of the stages.
   double sample_pole_air_speed();
@@ -186,7 +196,11 @@ class Simulation {
   std::array<bool, kNumStages> built_{};  // the stages this scene runs
   bool& built(Stage s) { return built_[std::size_t(s)]; }
   bool built(Stage s) const { return built_[std::size_t(s)]; }
-  StageClock clock_;  // seconds per stage (Simulation.timings)
+  StageClock clock_;      // seconds per stage (Simulation.timings)
+  StageClock air_clock_;  // the air's step when it runs beside the cloth (its own thread)
+  // The pipeline (step_beside_air): the air at the masses and u_p sampled before the air starts
+  // its step, for the step's first piece; whether the air has already advanced this step.
+  bool air_sampled_ = false, pole_air_sampled_ = false, air_advanced_ = false;
   std::vector<std::string> stage_names_;
   std::unique_ptr<Fluid> fluid_;             // the air grid, when the scene needs one
   CurlNoise noise_{TurbulenceParams{}, {}};  // curl noise on the analytic wind (air "uniform")
