@@ -1,6 +1,8 @@
 // Thread-count control for OpenMP loops. Results are deterministic for a given thread count.
 #pragma once
 
+#include <memory>
+
 #include "common/types.h"
 
 namespace flagsim {
@@ -56,36 +58,43 @@ inline void parallel_for_cells(Index n, const Body& body) {
 /// parallel region it sets the count for the calling thread's loops until the region ends.
 void set_num_threads(int n);
 
-/// Runs first() and second() at the same time, each on a thread of its own, when use_team(true)
-/// (two threads or more); otherwise first() then second() on the calling thread. Each runs its
-/// own calls in order, and inside each num_threads() is 1: their loops run on their own thread
-/// (no nested team, never more than two threads busy), and since every flagsim loop gives the same
-/// bits on any thread count, each gives the bits it would give alone. The two must not touch the
-/// same data, and must not throw (catch inside, rethrow after). With OpenMP sections a thread that
-/// finishes its part takes the other if it has not been started yet (a sleeping worker).
-template <class First, class Second>
-inline void run_side_by_side(const First& first, const Second& second) {
-#ifdef _OPENMP
-  if (use_team(true)) {
-#pragma omp parallel sections num_threads(2)
-    {
-#pragma omp section
-      {
-        set_num_threads(1);
-        first();
-      }
-#pragma omp section
-      {
-        set_num_threads(1);
-        second();
-      }
+/// A helper thread that runs one job beside the calling thread (the Simulation's air step beside
+/// its cloth step). run(first, second) runs first() on the calling thread and second() on the
+/// helper, at the same time, when num_threads() >= 2; when the helper has not picked second()
+/// up by the time first() returns (asleep, or without a core on a loaded machine), the calling
+/// thread runs it itself, so it never waits for a thread that has not started. On one thread:
+/// first() then second() on the calling thread. Inside both, num_threads() is 1: their loops run
+/// on their own thread (no OpenMP team inside, never more than two busy threads), and since every
+/// flagsim loop gives the same bits on any thread count, each gives the bits it would give alone.
+/// The two must not touch the same data and must not throw (catch inside, rethrow after).
+/// Waiting threads spin for up to kSpinMicroseconds, then sleep. No heap allocation in run().
+class SideBySide {
+ public:
+  static constexpr int kSpinMicroseconds = 50;
+  SideBySide();   // starts the helper thread
+  ~SideBySide();  // stops and joins it
+  SideBySide(const SideBySide&) = delete;
+  SideBySide& operator=(const SideBySide&) = delete;
+
+  template <class First, class Second>
+  void run(const First& first, const Second& second) {
+    if (!use_team(true)) {
+      first();
+      second();
+      return;
     }
-    return;
+    run_jobs([](const void* f) { (*static_cast<const First*>(f))(); }, &first,
+             [](const void* f) { (*static_cast<const Second*>(f))(); }, &second);
   }
-#endif
-  first();
-  second();
-}
+
+  struct State;  // the helper's thread, its job slot and how the two threads wait
+
+ private:
+  using Job = void (*)(const void*);
+  void run_jobs(Job first, const void* first_arg, Job second, const void* second_arg);
+  std::unique_ptr<State> s_;
+};
+
 /// True when compiled with OpenMP.
 bool has_openmp();
 

@@ -197,7 +197,10 @@ void Simulation::build_fluid() {
   } restore;
   if (a.pipeline) set_num_threads(1);
   fluid_ = std::make_unique<Fluid>(fp, "air");
-  if (a.pipeline) fluid_->keep_warm_start();
+  if (a.pipeline) {
+    fluid_->keep_warm_start();
+    beside_ = std::make_unique<SideBySide>();
+  }
 }
 
 bool Simulation::pipelined() const { return built(Stage::kFluid) && scene_.air.pipeline; }
@@ -280,7 +283,7 @@ Simulation::Implausible Simulation::step_beside_air() {
   air_sampled_ = pole_air_sampled_ = true;
   Implausible bad;
   std::exception_ptr cloth_error, air_error;
-  run_side_by_side(
+  beside_->run(
       [&]() noexcept {
         try {
           bad = step_pieces(0);

@@ -11,6 +11,7 @@
 #include "cloth/integrators.h"
 #include "cloth/topology.h"
 #include "collision/self_collision.h"
+#include "common/parallel.h"
 #include "flapping/flap_stage.h"
 #include "fluid/fluid.h"
 #include "fluid/turbulence.h"
@@ -203,6 +204,7 @@ class Simulation {
   bool air_sampled_ = false, pole_air_sampled_ = false, air_advanced_ = false;
   std::vector<std::string> stage_names_;
   std::unique_ptr<Fluid> fluid_;             // the air grid, when the scene needs one
+  std::unique_ptr<SideBySide> beside_;       // the air's thread when pipelined
   CurlNoise noise_{TurbulenceParams{}, {}};  // curl noise on the analytic wind (air "uniform")
 
   // Flapping (paper eq. 5), set up only when flapping.mode is not "off".
