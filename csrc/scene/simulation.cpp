@@ -203,6 +203,8 @@ void Simulation::build_fluid() {
   }
 }
 
+// One-way coupling only: an air step that takes this step's drag reaction (two-way, issue 24)
+// cannot start before the cloth's step; a pipelined two-way scheme lags the reaction a step.
 bool Simulation::pipelined() const { return built(Stage::kFluid) && scene_.air.pipeline; }
 
 void Simulation::update_normals() { compute_vertex_normals(topo_, x_, n_); }
