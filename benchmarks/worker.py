@@ -72,6 +72,8 @@ def build(spec: dict[str, Any]):
         return engines.SimulationStepper(engines.paper_scene(p["full"], p.get("pipeline", True)))
     if kind == "large":
         return engines.SimulationStepper(engines.large_scene(p["pipeline"]))
+    if kind == "multiflag":
+        return engines.SimulationStepper(engines.multiflag_scene(p["flags"]))
     if kind == "fluid":
         return engines.FluidStepper(p["n"], p["advection"], p["pressure"], p["precision"])
     if kind == "solver":
