@@ -42,7 +42,12 @@ struct Fluid::Solver {
   virtual void rebuild_solids() = 0;
   virtual Vec3 obstacle_force(int index) const = 0;
   SolidMap solids;
-  double last_dt = 0;  ///< s, the last step's dt (pressure = rho phi / dt)
+  double last_dt = 0;     ///< s, the last step's dt (pressure = rho phi / dt)
+  double step_start = 0;  ///< s, the time at the start of the last step (undo_step)
+  /// Copies the iterative solve's warm start at the start of every step from now on.
+  virtual void keep_warm_start() = 0;
+  /// Back to the warm start kept at the start of the last step (zero when none is kept).
+  virtual void restore_warm_start() = 0;
   /// Copies the solid-cell mask (nx*ny*nz, 1 = solid; nullptr: none) and rebuilds what the
   /// pressure backend precomputes (MIC factor, multigrid hierarchy).
   virtual void set_solid(const uint8_t* mask) = 0;
@@ -54,6 +59,7 @@ template <class T>
 struct TypedSolver final : Fluid::Solver {
   MacGrid<T> u, prev, hat;           // current field; advection source; MacCormack / rhs scratch
   AlignedVector<T> phi, div;         // nx*ny*nz: potential dt p / rho (m^2/s), divergence (1/s)
+  AlignedVector<T> phi_start;        // nx*ny*nz or empty: phi at the step's start (undo_step)
   mutable AlignedVector<T> div_out;  // divergence() scratch
   std::unique_ptr<FftProjector<T>> fft;
   Laplace7 pressure_op;
@@ -189,9 +195,21 @@ struct TypedSolver final : Fluid::Solver {
     apply_boundary(Vec3(v.x(), 0, 0));
   }
 
+  void keep_warm_start() override {
+    if (!use_fft) phi_start.assign(phi.size(), T(0));  // fft: phi is an output only
+  }
+
+  void restore_warm_start() override {
+    if (phi_start.empty())
+      std::fill(phi.begin(), phi.end(), T(0));
+    else
+      std::copy(phi_start.begin(), phi_start.end(), phi.begin());
+  }
+
   bool step(double dt) override {
     const double t0 = time, t1 = time + dt;
     const FluidParams& p = params;
+    if (!phi_start.empty()) std::copy(phi.begin(), phi.end(), phi_start.begin());
     SampleBoundary bc;
     if (!geo.periodic) {
       bc.inflow = p.wind.at(t0);
@@ -387,6 +405,7 @@ Fluid& Fluid::operator=(Fluid&&) noexcept = default;
 void Fluid::step(double dt) {
   check_positive("dt", dt);
   const double t0 = s_->time;
+  s_->step_start = t0;
   if (s_->step(dt) || s_->all_finite()) return;
   s_->undo_step(t0);
   std::ostringstream s;
@@ -396,6 +415,13 @@ void Fluid::step(double dt) {
     << s_->geo.h << " m)";
   throw DivergenceError(s.str(), s_->stats.steps, t0, -1, "non-finite");
 }
+
+void Fluid::undo_step() {
+  s_->undo_step(s_->step_start);
+  s_->restore_warm_start();
+}
+
+void Fluid::keep_warm_start() { s_->keep_warm_start(); }
 
 double Fluid::time() const { return s_->time; }
 const FluidParams& Fluid::params() const { return s_->params; }
