@@ -14,10 +14,9 @@ import argparse
 import warnings
 from pathlib import Path
 
-import numpy as np
-
 import flagsim
 import flagsim.povray as pov
+import numpy as np
 from flagsim.povray import scenefiles
 
 SCENES = ("paper", "emergent")
