@@ -2,6 +2,7 @@
 docs/coupling.md). The momentum balance to round-off, determinism and allocation are checked in
 C++ (tests/cpp/scene/test_simulation_coupling.cpp)."""
 
+import copy
 import json
 
 import flagsim
@@ -232,3 +233,24 @@ def test_two_way_run_is_plausible_and_its_ledger_balances():
     balance = sum(sim.energy().values()) - e0 - (sum(ledger.values()) - ledger["gravity"])
     assert abs(balance) < 1e-9 * sim.energy_scale
     assert ledger["drag"] != 0
+
+
+def test_every_flag_of_a_scene_gives_its_drag_back_to_the_shared_grid():
+    sim = _held_plate("two_way")
+    scene = sim.scene
+    second = copy.copy(scene.flags[0])
+    second.origin, second.pole.base = (0.055, 0.0, 0.6), (0.0, -2.5, 0.6)
+    scene.flags = [scene.flags[0], second]
+    sim = flagsim.Simulation(scene)
+    sim.fluid.w[...] = 2.0
+    twin = _twin(sim.fluid)
+    given = np.zeros(3)
+    for _ in range(10):
+        for c in "uvw":
+            getattr(twin, c)[...] = getattr(sim.fluid, c)
+        sim.step(1)
+        twin.step(sim.scene.dt)
+        given += _air_momentum(twin) - _air_momentum(sim.fluid)
+    impulses = [np.array(f.pole_impulse) for f in sim.flags]
+    assert min(j[2] for j in impulses) > 0
+    np.testing.assert_allclose(given, sum(impulses), rtol=0, atol=1e-12 * given[2])
