@@ -478,10 +478,20 @@ Simulation::Implausible Simulation::check_strain() {
 
 // Per step, and net over the run: steps each just within the tolerance must not add up to a
 // flag that holds many times it (what the integrator and projections took out counts back).
+// The net counts only as far as the flag still holds it: a flag can hold no more unexplained
+// energy than its kinetic and spring energy and its rise above where it started. A flag hanging
+// at its strain limit has the projection lift what the solve lets down every step, about
+// 0.3 J/s (64 x 64 paper flag) that the solve and the damping take out again, while it holds
+// 0.01 J; counted without that bound the net crossed the allowance after 3.4 s.
 Simulation::Implausible Simulation::check_energy() const {
   if (scene_.integrator.energy_tolerance <= 0) return {};
   const double allowed = scene_.integrator.energy_tolerance * energy_scale_;
-  const double gain = ledger_.unexplained_since(ledger_start_), held = ledger_.unexplained_net();
+  const double gain = ledger_.unexplained_since(ledger_start_);
+  double held = ledger_.unexplained_net();
+  if (held > allowed) {
+    const ClothEnergy e = energy();
+    held = std::min(held, e.kinetic + e.spring + std::max(e.gravity - gravity_potential_0_, 0.0));
+  }
   if (!(gain > allowed) && !(held > allowed)) return {};
   const EnergyLedger& a = ledger_;
   const EnergyLedger& b = ledger_start_;
@@ -490,8 +500,8 @@ Simulation::Implausible Simulation::check_energy() const {
     << " J that no stage's work explains (integrator " << a.integrator - b.integrator
     << ", strain limiting " << a.strain_limit - b.strain_limit << ", pole " << a.pole - b.pole
     << ", self-collision " << a.self_collision - b.self_collision << " J; since the start, net "
-    << held << " J), more than integrator.energy_tolerance x the energy scale = " << allowed
-    << " J";
+    << ledger_.unexplained_net() << " J, of which the flag can still hold " << held
+    << " J), more than integrator.energy_tolerance x the energy scale = " << allowed << " J";
   return {"energy", -1, s.str()};
 }
 
