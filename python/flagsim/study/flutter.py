@@ -452,6 +452,9 @@ def reference_force_coefficient(scene: flagsim.Scene | None = None) -> float:
     )
 
 
+_PEAK_FIGURES = ("frequency", "strouhal", "wavelength_ratio", "speed_ratio")
+
+
 def write_plots(rows, directory: str) -> str | None:
     """One PNG of six panels against wind speed: frequency, A / L, Strouhal number, wavelength /
     L, wave speed / U, c_f, and the droop angle; the references drawn where there are any."""
@@ -483,14 +486,18 @@ def write_plots(rows, directory: str) -> str | None:
     fig, axes = plt.subplots(2, 4, figsize=(16, 7.5), dpi=90)
     styles = {"eq5": "o-", "turbulence": "s--", "two_way": "^-."}
     umax = max(_num(r, "speed") for r in rows)
+    flapping = [r for r in derived if r["state"] == "ok"]
     for ax, (key, label) in zip(axes.flat, panels):
-        for (model, drag), (us, vs) in sorted(_series(derived, key).items()):
+        # the figures of a spectral peak only where there is one (the study's "ok" runs)
+        src = flapping if key in _PEAK_FIGURES else derived
+        for (model, drag), (us, vs) in sorted(_series(src, key).items()):
             ax.plot(us, vs, styles.get(model, "o-"), ms=4, label=f"{MODEL_TITLES[model]}, {drag}")
         if key == "frequency":
             us = np.linspace(2, umax, 20)
             ax.plot(us, us / (WAVELENGTH_REF * length), "k:", label="U / (1.87 L) (waves at U)")
         if key == "wavelength_ratio":
             ax.axhline(WAVELENGTH_REF, color="k", ls=":", label="1.87 (Raynaud & Mulleners)")
+            ax.set_yscale("log")
         if key == "speed_ratio":
             ax.axhline(WAVE_SPEED_REF, color="k", ls=":", label="1 (Raynaud & Mulleners)")
         if key == "force_coefficient":
@@ -498,7 +505,9 @@ def write_plots(rows, directory: str) -> str | None:
             ax.axhline(cf, color="k", ls=":", label=f"EN 1991-1-4 free flag ({cf:.3f})")
             ax.set_yscale("log")
         ax.set_xlabel("wind speed U (m/s)")
-        ax.set_title(label, fontsize=9)
+        ax.set_title(
+            label + (" (runs with a flapping peak)" if key in _PEAK_FIGURES else ""), fontsize=9
+        )
         ax.grid(True, alpha=0.3)
     handles, labels = [], []
     for ax in axes.flat:
