@@ -117,7 +117,7 @@ def test_quick_study_droop_falls_as_the_wind_rises(quick):
     for model in ("eq5", "turbulence"):
         for drag in flutter.DRAGS:
             droop = [float(r["droop"]) for _, r in sorted(_by(rows, model, drag).items())]
-            assert droop[0] > 45.0, (model, drag, droop)  # still air: hangs along its pole
+            assert droop[0] > 30.0, (model, drag, droop)  # still air: falls (a flat one stays ~3)
             assert all(a > b for a, b in zip(droop, droop[1:])), (model, drag, droop)
 
 
