@@ -190,8 +190,19 @@ void def_fluid_fields(py::class_<AirParams>& cls, const std::string& section) {
       "[FanParams, ...]: regions pushing the air ('grid'); a list copy: assign to change");
 }
 
-void bind_fluid(py::module_& m) {
-  bind_turbulence(m);
+namespace {
+// An (M, 3) array of finite numbers as a matrix, or ValueError naming `name`.
+MatX3 finite_rows(const std::string& name, const py::object& o) {
+  auto a = py::array_t<double, py::array::c_style | py::array::forcecast>::ensure(o);
+  if (!a || a.ndim() != 2 || a.shape(1) != 3)
+    fail_param(name, "an (M, 3) array", a ? "ndim " + std::to_string(a.ndim()) : "not an array");
+  MatX3 m = Eigen::Map<const MatX3>(a.data(), a.shape(0), 3);
+  if (!m.allFinite()) fail_param(name, "finite everywhere", "a non-finite value");
+  return m;
+}
+}  // namespace
+
+void bind_fan(py::module_& m) {
   py::class_<FanParams> fan_cls(
       m, "FanParams",
       "A region pushing the air: force density (N/m^3) along direction inside a box "
@@ -237,7 +248,9 @@ void bind_fluid(py::module_& m) {
          },
          "(time s, factor) keyframes; empty = always 1")
       .def("validate", &FanParams::validate, py::arg("prefix") = "");
+}
 
+void bind_obstacle(py::module_& m) {
   py::class_<ObstacleParams> obs(
       m, "ObstacleParams",
       "A static solid in the air: a box, a sphere or a capped cylinder, free-slip or no-slip. "
@@ -279,7 +292,9 @@ void bind_fluid(py::module_& m) {
             return o.contains(from_py<Vec3>("point", x));
           },
           py::arg("point"), "True when the point (m) lies inside the solid.");
+}
 
+void bind_fluid_class(py::module_& m) {
   py::class_<Fluid>(m, "Fluid", R"doc(
 Stable Fluids (Stam 1999) on a staggered MAC grid: the air solver alone.
 
@@ -392,15 +407,33 @@ p = 0 at x-max, free-slip walls.
            "What the solids' resolution leaves out, one sentence each (empty when all is well).")
       .def(
           "step",
-          [](Fluid& f, const py::object& dt_, const py::object& n_) {
+          [](Fluid& f, const py::object& dt_, const py::object& n_, const py::object& points,
+             const py::object& impulses) {
             const double dt = from_py<double>("dt", dt_);
             const long n = from_py<long>("n", n_);
             check_positive("dt", dt);
             if (n < 0) fail_param("n", ">= 0", n);
+            if (points.is_none() != impulses.is_none())
+              fail_param("impulses", "given together with points (or neither)",
+                         impulses.is_none() ? "None" : "an array");
+            MatX3 p, j;
+            PointImpulses pi{&p, &j};
+            if (!points.is_none()) {
+              p = finite_rows("points", points);
+              j = finite_rows("impulses", impulses);
+              if (j.rows() != p.rows())
+                fail_param("impulses", "shape (" + std::to_string(p.rows()) + ", 3) as points",
+                           "(" + std::to_string(j.rows()) + ", 3)");
+            }
             py::gil_scoped_release release;
-            for (long i = 0; i < n; ++i) f.step(dt);
+            for (long i = 0; i < n; ++i) f.step(dt, points.is_none() ? nullptr : &pi);
           },
-          py::arg("dt"), py::arg("n") = 1, "Advance the air n steps of dt seconds (GIL released).")
+          py::arg("dt"), py::arg("n") = 1, py::arg("points") = py::none(),
+          py::arg("impulses") = py::none(),
+          "Advance the air n steps of dt seconds (GIL released). points, impulses: (M, 3) m and "
+          "N s, impulses a body gives the air in each step, spread onto the faces with the "
+          "weights sample() uses at those points (its transpose) after advection, before the "
+          "projection (two-way coupling, docs/coupling.md).")
       .def_property_readonly("time", &Fluid::time, "Simulated time, s.")
       .def(
           "set_velocity",
@@ -537,6 +570,13 @@ p = 0 at x-max, free-slip walls.
                name_of(p.pressure) + "', precision='" + name_of(p.precision) +
                "', time=" + detail::to_text(f.time()) + ")";
       });
+}
+
+void bind_fluid(py::module_& m) {
+  bind_turbulence(m);
+  bind_fan(m);
+  bind_obstacle(m);
+  bind_fluid_class(m);
 }
 
 }  // namespace flagsim::bindings

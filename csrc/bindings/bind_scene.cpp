@@ -93,6 +93,9 @@ void bind_scene(py::module_& m) {
   def_field<AirParams, bool>(
       air, "pole_obstacle", &AirParams::pole_obstacle, "air",
       "the pole is a no-slip solid of the air grid too, so it sheds a wake ('grid', pole.enabled)");
+  def_field(air, "coupling", &AirParams::coupling, "air",
+            "'one_way' (the paper: the air never feels the flag) | 'two_way' (the flag's drag goes "
+            "back into the grid; 'grid'; docs/coupling.md)");
 
   py::class_<Scene> scene(m, "Scene", R"doc(Everything a Simulation needs, in SI units.
 
@@ -107,6 +110,12 @@ the scene unchanged. Build one with Scene.paper(), Scene.named(name) or Scene.lo
   scene.def_static("flapping_demo", &Scene::flapping_demo,
                    "Paper §4.3 (Fig. 6): eq. 5 flapping alone; no air solver, no gravity, every "
                    "mass pulled along +x.");
+  scene.def_static("pole_wake", &Scene::pole_wake,
+                   "The paper's flag behind its pole as a solid of the air (a 2 m/s tunnel), eq. 5 "
+                   "off.");
+  scene.def_static("emergent", &Scene::emergent,
+                   "A flag that flaps with eq. 5 off: two-way coupling, curl-noise turbulence and "
+                   "the pole as a solid of the air (docs/coupling.md).");
   scene.def_static("_builtins", &builtin_scenes);
   scene.def_static("_named", &builtin_scene, py::arg("name"));
   scene.def_property(
@@ -353,6 +362,21 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
       "fluid", [](Simulation& s) { return s.fluid(); }, py::return_value_policy::reference_internal,
       "the air grid (flagsim.Fluid) when the scene uses one (air.model 'grid'), else None; "
       "stats['samples_outside'] counts masses that sampled it from outside its domain");
+  sim.def_property_readonly(
+      "pole_force", [](const Simulation& s) { return vec3_to_tuple(s.pole_force()); },
+      "(fx, fy, fz) N, the force the flag exerted on its pins in the last step (the pole's "
+      "reaction, from the flag's momentum: sum m g + (drag + eq. 5 force impulse - change of "
+      "momentum) / dt; contact with the pole cylinder not included); zeros before any step");
+  sim.def_property_readonly(
+      "pole_force_mean", [](const Simulation& s) { return vec3_to_tuple(s.pole_force_mean()); },
+      "(fx, fy, fz) N, pole_force averaged over the simulated time since construction or the "
+      "last reset_pole_force_mean() (impulse / time)");
+  sim.def("reset_pole_force_mean", &Simulation::reset_pole_force_mean,
+          "Start pole_force_mean afresh from now (e.g. after the transient).");
+  sim.def_property_readonly(
+      "pole_impulse", [](const Simulation& s) { return vec3_to_tuple(s.pole_impulse()); },
+      "(jx, jy, jz) N s, the pins' impulse since construction (never reset): the mean force "
+      "between two moments is its change over the time between them");
   sim.def(
       "air_velocity",
       [](const Simulation& s, const py::object& points) {

@@ -11,7 +11,8 @@ namespace flagsim {
 
 IntegratorScratch::IntegratorScratch(const ClothTopology& topo) {
   const Index n = topo.num_vertices();
-  for (MatX3* m : {&f, &fd, &x0, &v0, &dv, &r, &z, &p, &q, &b, &tmp, &dv_prev}) m->setZero(n, 3);
+  for (MatX3* m : {&f, &fd, &x0, &v0, &dv, &r, &z, &p, &q, &b, &tmp, &dv_prev, &impulse0})
+    m->setZero(n, 3);
   sys.B.resize(topo.num_springs());
   sys.D.resize(n);
   sys.J.reserve(topo.triangles.rows());
@@ -32,6 +33,7 @@ void compute_forces(const ClothTopology& topo, const ForceSet& fs, const MatX3& 
     StageClock::Scope timer(t, Stage::kDrag);
     drag.setZero();
     add_drag(topo, fs.drag_params, fs.rho, x, v, u, drag);
+    if (fs.drag_scale) drag.array().colwise() *= fs.drag_scale->array();
     f += drag;
   }
   if (fs.springs) {
@@ -87,6 +89,7 @@ double pin_work(const ClothTopology& topo, const MatX3& f, const MatX3& v, doubl
 void book_force_work(const ClothTopology& topo, const ForceSet& fs, const MatX3& a, const MatX3& v,
                      double h, const IntegratorScratch& s, StepWork& work) {
   if (fs.drag) work.drag += work_over(s.fd, v, h);
+  if (fs.drag && fs.drag_impulse) *fs.drag_impulse += h * s.fd;
   if (fs.external) work.external += work_over(*fs.external, v, h);
   work.damping += damping_work(topo, a, v, h);
   work.pins += pin_work(topo, s.f, v, h);
@@ -176,6 +179,15 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
   return IntegrateStatus::kOk;
 }
 
+// The drag Jacobians times each mass's factor; a triangle block by the mean of its three.
+void scale_drag_jacobians(const ClothTopology& topo, const VecX& scale, ClothSystem& A) {
+  for (Index i = 0; i < topo.num_vertices(); ++i) A.D[i] *= scale[i];
+  for (std::size_t t = 0; t < A.J.size(); ++t)
+    A.J[t] *= (scale[topo.triangles(Index(t), 0)] + scale[topo.triangles(Index(t), 1)] +
+               scale[topo.triangles(Index(t), 2)]) /
+              3.0;
+}
+
 }  // namespace
 
 void assemble_implicit_system(const ClothTopology& topo, const ForceSet& fs, double h,
@@ -190,6 +202,7 @@ void assemble_implicit_system(const ClothTopology& topo, const ForceSet& fs, dou
   }
   if (fs.drag) {
     drag_velocity_jacobians(topo, fs.drag_params, fs.rho, x, v, u, A.D, A.J);
+    if (fs.drag_scale) scale_drag_jacobians(topo, *fs.drag_scale, A);
   } else {
     for (auto& d : A.D) d.setZero();
     A.J.clear();
@@ -377,6 +390,7 @@ IntegrateStatus implicit_step(const ClothTopology& topo, const ForceSet& fs,
     const double hp = h / double(pieces);
     s.x0 = x;
     s.v0 = v;
+    if (fs.drag_impulse) s.impulse0 = *fs.drag_impulse;
     StepWork level_work;
     double e = E;
     failure = IntegrateStatus::kOk;
@@ -404,6 +418,7 @@ IntegrateStatus implicit_step(const ClothTopology& topo, const ForceSet& fs,
     }
     x = s.x0;
     v = s.v0;
+    if (fs.drag_impulse) *fs.drag_impulse = s.impulse0;
     s.dv.setZero();  // the extrapolation's steps were of another length
     s.dv_prev.setZero();
     ++stats.halvings;

@@ -36,6 +36,15 @@ struct ForceSet {
   /// none: x' = x + h (v' + drift). Springs answer it inside the solve; damping and drag do not
   /// see it (eq. 5 "displace": dz n / h). Zero rows where pinned.
   const MatX3* drift = nullptr;
+  /// (N x 3) N s, or none: the drag impulse each mass received, as the integrator applied the
+  /// drag (StepWork::drag's force times each piece's length), is added here. Pinned masses
+  /// included (the pins take theirs). Two-way coupling gives it back to the air; the pole force
+  /// is read from it (Simulation).
+  MatX3* drag_impulse = nullptr;
+  /// (N) or none: each mass's drag, force and velocity Jacobian, times this factor (two-way
+  /// coupling's implicit air response, 1 / (1 + kappa_i); docs/coupling.md). A triangle's
+  /// Jacobian block ("triangle" drag) takes the mean of its vertices' factors (kept symmetric).
+  const VecX* drag_scale = nullptr;
 };
 
 /// Seconds spent per force stage (accumulated).
@@ -99,6 +108,7 @@ struct IntegratorStats {
 /// Scratch for both integrators, sized once for a topology (no allocation inside a step).
 struct IntegratorScratch {
   MatX3 f, fd, x0, v0, dv, r, z, p, q, b, tmp;  // fd: the drag part of f
+  MatX3 impulse0;   ///< implicit: ForceSet::drag_impulse at the start of a halving level
   MatX3 dv_prev;    ///< implicit: the solve's dv one step before dv (for the warm start)
   ClothSystem sys;  ///< the implicit system of the current step
   Multigrid mg;     ///< levels built when the topology is a grid (multigrid_applies)

@@ -17,6 +17,7 @@ namespace flagsim {
 enum class Stage {
   kWind,           // analytic wind at the masses
   kFluid,          // the air grid: sampled at the masses, then advanced
+  kCoupling,       // two-way: the flag's drag reaction handed to the air grid
   kFlap,           // eq. 5 "displace" / "force": a drift or force the integrator carries
   kGravity,        // force kernels, called by the integrator
   kDrag,           //   eq. 3
@@ -35,8 +36,8 @@ enum class Stage {
 template <>
 struct EnumNames<Stage> {
   static constexpr std::array<const char*, std::size_t(Stage::kCount)> names{
-      "wind",      "fluid",        "flap", "gravity",        "drag",  "springs",
-      "integrate", "strain_limit", "pole", "self_collision", "check", "flap"};
+      "wind",      "fluid",        "coupling", "flap",           "gravity", "drag", "springs",
+      "integrate", "strain_limit", "pole",     "self_collision", "check",   "flap"};
 };
 
 class StageClock {

@@ -329,23 +329,30 @@ T sample_component(const MacGrid<T>& g, int c, const double p[3]) {
   return Interpolator<T>(g, c)(p[0], p[1], p[2]);
 }
 
+// Point r of points in cell units, moved to the nearest point of the domain box when outside
+// (NaN lands on the min face); true when it was outside.
+inline bool cell_coordinates(const GridGeometry& geo, double inv_h, const double* point,
+                             double p[3]) {
+  const double n[3] = {double(geo.nx), double(geo.ny), double(geo.nz)};
+  bool out_of_box = false;
+  for (int d = 0; d < 3; ++d) {
+    double q = (point[d] - geo.origin[d]) * inv_h;
+    if (!(q >= 0 && q <= n[d])) {  // NaN counts as outside and lands on the min face
+      out_of_box = true;
+      q = q > n[d] ? n[d] : 0.0;
+    }
+    p[d] = q;
+  }
+  return out_of_box;
+}
+
 template <class T>
 long sample_velocity(const MacGrid<T>& g, const double* points, long m, double* out) {
-  const GridGeometry& geo = g.geo;
-  const double inv_h = 1.0 / geo.h;
-  const double n[3] = {double(geo.nx), double(geo.ny), double(geo.nz)};
+  const double inv_h = 1.0 / g.geo.h;
   const Interpolator<T> iu(g, 0), iv(g, 1), iw(g, 2);
   auto one = [&](long r) -> long {
     double p[3];
-    bool out_of_box = false;
-    for (int d = 0; d < 3; ++d) {
-      double q = (points[3 * r + d] - geo.origin[d]) * inv_h;
-      if (!(q >= 0 && q <= n[d])) {  // NaN counts as outside and lands on the min face
-        out_of_box = true;
-        q = q > n[d] ? n[d] : 0.0;
-      }
-      p[d] = q;
-    }
+    const bool out_of_box = cell_coordinates(g.geo, inv_h, points + 3 * r, p);
     out[3 * r + 0] = double(iu(p[0], p[1], p[2]));
     out[3 * r + 1] = double(iv(p[0], p[1], p[2]));
     out[3 * r + 2] = double(iw(p[0], p[1], p[2]));
@@ -360,6 +367,32 @@ long sample_velocity(const MacGrid<T>& g, const double* points, long m, double* 
     for (long r = 0; r < m; ++r) outside += one(r);
   }
   return outside;
+}
+
+// The 8 nodes of trilinear's order (000, 001, 010, ...: x, y, z bits) get
+// (1 - fx or fx) (1 - fy or fy) (1 - fz or fz) of the value: the weights of sample's lerps.
+template <class T>
+void spread_velocity(const double* points, long m, const double* values, double scale,
+                     MacGrid<T>& g) {
+  const double inv_h = 1.0 / g.geo.h;
+  const Interpolator<T> at[3] = {Interpolator<T>(g, 0), Interpolator<T>(g, 1),
+                                 Interpolator<T>(g, 2)};
+  for (long r = 0; r < m; ++r) {
+    double p[3];
+    cell_coordinates(g.geo, inv_h, points + 3 * r, p);
+    for (int c = 0; c < 3; ++c) {
+      const auto k = at[c].corners(p[0], p[1], p[2]);
+      const double v = scale * values[3 * r + c];
+      const double wx[2] = {1.0 - k.fx, k.fx}, wy[2] = {1.0 - k.fy, k.fy},
+                   wz[2] = {1.0 - k.fz, k.fz};
+      const std::size_t row[2][2] = {{k.r00, k.r01}, {k.r10, k.r11}};
+      const int kz[2] = {k.k0, k.k1};
+      T* q = g.comp[c].data();
+      for (int a = 0; a < 2; ++a)
+        for (int b = 0; b < 2; ++b)
+          for (int e = 0; e < 2; ++e) q[row[a][b] + kz[e]] += T(v * (wx[a] * wy[b] * wz[e]));
+    }
+  }
 }
 
 template <class T>
@@ -788,16 +821,37 @@ void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, PeriodicAdvectSc
   padded_mc<2>(scratch, s, hat.comp[2].data(), u.comp[2].data());
 }
 
-#define FLAGSIM_INSTANTIATE_ADVECT(T)                                                       \
-  template T sample_component<T>(const MacGrid<T>&, int, const double[3]);                  \
-  template long sample_velocity<T>(const MacGrid<T>&, const double*, long, double*);        \
-  template void advect_semi_lagrangian<T>(const MacGrid<T>&, double, const SampleBoundary&, \
-                                          MacGrid<T>&);                                     \
-  template void advect_maccormack<T>(const MacGrid<T>&, double, const SampleBoundary&,      \
-                                     MacGrid<T>&, MacGrid<T>&);                             \
-  template struct PaddedComponent<T>;                                                       \
-  template struct PeriodicAdvectScratch<T>;                                                 \
-  template void advect_periodic<T>(MacGrid<T>&, double, bool, PeriodicAdvectScratch<T>&,    \
+template <class T>
+void sample_weight_squares(const MacGrid<T>& g, const double* points, long m, double* out) {
+  const double inv_h = 1.0 / g.geo.h;
+  const Interpolator<T> at[3] = {Interpolator<T>(g, 0), Interpolator<T>(g, 1),
+                                 Interpolator<T>(g, 2)};
+  auto sq = [](double f) { return (1.0 - f) * (1.0 - f) + f * f; };
+  for (long r = 0; r < m; ++r) {
+    double p[3];
+    cell_coordinates(g.geo, inv_h, points + 3 * r, p);
+    double w = 0;
+    for (int c = 0; c < 3; ++c) {
+      const auto k = at[c].corners(p[0], p[1], p[2]);
+      // a clamped axis (bounded, outside the nodes) has f = 0: one node of weight 1
+      w = std::max(w, sq(k.fx) * sq(k.fy) * sq(k.fz));
+    }
+    out[r] = w;
+  }
+}
+
+#define FLAGSIM_INSTANTIATE_ADVECT(T)                                                        \
+  template T sample_component<T>(const MacGrid<T>&, int, const double[3]);                   \
+  template long sample_velocity<T>(const MacGrid<T>&, const double*, long, double*);         \
+  template void spread_velocity<T>(const double*, long, const double*, double, MacGrid<T>&); \
+  template void sample_weight_squares<T>(const MacGrid<T>&, const double*, long, double*);   \
+  template void advect_semi_lagrangian<T>(const MacGrid<T>&, double, const SampleBoundary&,  \
+                                          MacGrid<T>&);                                      \
+  template void advect_maccormack<T>(const MacGrid<T>&, double, const SampleBoundary&,       \
+                                     MacGrid<T>&, MacGrid<T>&);                              \
+  template struct PaddedComponent<T>;                                                        \
+  template struct PeriodicAdvectScratch<T>;                                                  \
+  template void advect_periodic<T>(MacGrid<T>&, double, bool, PeriodicAdvectScratch<T>&,     \
                                    MacGrid<T>&);
 FLAGSIM_INSTANTIATE_ADVECT(float)
 FLAGSIM_INSTANTIATE_ADVECT(double)

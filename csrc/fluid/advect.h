@@ -27,6 +27,24 @@ T sample_component(const MacGrid<T>& g, int c, const double p[3]);
 template <class T>
 long sample_velocity(const MacGrid<T>& g, const double* points, long m, double* out);
 
+/// The transpose of sample_velocity: adds scale * values.row(r) onto the nodes that sample
+/// reads at points.row(r), each node times the weight it has there (the same cells, the same
+/// clamping to the domain box, the same trilinear weights), so for any field g and values J
+///   sum over nodes of g . (spread J) = scale * sum over points of sample(g) . J.
+/// points, values: (M x 3) m and any unit; the grid gains scale x that unit. The weights at a
+/// point sum to 1 per component, so the sum over the nodes of each component gains scale x the
+/// sum of the values. Serial in point order: the same bits for any thread count. No allocation.
+template <class T>
+void spread_velocity(const double* points, long m, const double* values, double scale,
+                     MacGrid<T>& g);
+
+/// Per point, the largest over the three components of the sum of the squared weights sample
+/// gives the nodes it reads there (1/8 at the centre of a component's cell, 1 on a node): the
+/// share of a unit velocity change spread there that sampling at the point reads back.
+/// points (M x 3) m, out (M). No allocation.
+template <class T>
+void sample_weight_squares(const MacGrid<T>& g, const double* points, long m, double* out);
+
 /// Semi-Lagrangian self-advection: out = u(x - dt u(x)) at every face (Stam 1999).
 /// u, out: same geometry, distinct; dt in s.
 template <class T>

@@ -28,7 +28,7 @@ struct Fluid::Solver {
   virtual ~Solver() = default;
   /// One step; true when the step itself showed the new field finite (the FFT diffusion's
   /// spectral pass, FftProjector::diffuse_and_project), false when all_finite must tell.
-  virtual bool step(double dt) = 0;
+  virtual bool step(double dt, const PointImpulses* impulses) = 0;
   /// Every velocity value finite.
   virtual bool all_finite() const = 0;
   /// Back to the field and time t0 at the start of the last step (the step keeps its copy).
@@ -36,6 +36,7 @@ struct Fluid::Solver {
   virtual void* data(int c) = 0;
   virtual void set_component(int c, const double* values) = 0;
   virtual long sample(const double* points, long m, double* out) const = 0;
+  virtual void weight_squares(const double* points, long m, double* out) const = 0;
   virtual void divergence(double* out) const = 0;
   virtual double max_divergence() const = 0;
   /// Rebuilds the solid map (and what the pressure solve precomputes) from params.obstacles.
@@ -140,6 +141,13 @@ struct TypedSolver final : Fluid::Solver {
     psi_time = t1;
   }
 
+  /// du = w J / (density h^3) at the nodes sample() reads at each point (spread_velocity).
+  void add_impulses(const PointImpulses& j) {
+    const double cell_mass = params.density * geo.h * geo.h * geo.h;
+    spread_velocity(j.points->data(), long(j.points->rows()), j.impulses->data(), 1.0 / cell_mass,
+                    u);
+  }
+
   /// The MIC factor or the multigrid hierarchy of pressure_op (and its mask).
   void build_pressure_solver() {
     if (use_mg)
@@ -189,7 +197,7 @@ struct TypedSolver final : Fluid::Solver {
     apply_boundary(Vec3(v.x(), 0, 0));
   }
 
-  bool step(double dt) override {
+  bool step(double dt, const PointImpulses* impulses) override {
     const double t0 = time, t1 = time + dt;
     const FluidParams& p = params;
     SampleBoundary bc;
@@ -215,6 +223,7 @@ struct TypedSolver final : Fluid::Solver {
       ScopedTimer timer(stats.seconds_forces);
       apply_fans(fans, t0, dt, u);
       if (turbulent) add_turbulence(t0, t1);
+      if (impulses) add_impulses(*impulses);
     }
     ScopedTimer timer(stats.seconds_project);
     // 3. boundary values at the new time: tunnel faces and solids, or the periodic mean flow
@@ -346,6 +355,10 @@ struct TypedSolver final : Fluid::Solver {
     return outside;
   }
 
+  void weight_squares(const double* points, long m, double* out) const override {
+    flagsim::sample_weight_squares(u, points, m, out);
+  }
+
   void divergence(double* out) const override {
     divergence_into(div_out.data());
     std::copy(div_out.begin(), div_out.end(), out);
@@ -384,10 +397,13 @@ Fluid& Fluid::operator=(Fluid&&) noexcept = default;
 
 // A step that leaves a non-finite velocity is undone and raises DivergenceError: the air is as
 // it was, as Simulation promises for the cloth (a too-small cell_size or a huge dt gets here).
-void Fluid::step(double dt) {
+void Fluid::step(double dt, const PointImpulses* impulses) {
   check_positive("dt", dt);
+  if (impulses && !(impulses->points && impulses->impulses &&
+                    impulses->points->rows() == impulses->impulses->rows()))
+    throw InvalidArgument("impulses should give as many impulses as points");
   const double t0 = s_->time;
-  if (s_->step(dt) || s_->all_finite()) return;
+  if (s_->step(dt, impulses) || s_->all_finite()) return;
   s_->undo_step(t0);
   std::ostringstream s;
   s << "the air diverged at step " << s_->stats.steps << " (t = " << t0
@@ -454,6 +470,9 @@ void Fluid::set_uniform(const Vec3& velocity) {
 
 long Fluid::sample(const double* points, long m, double* out) const {
   return s_->sample(points, m, out);
+}
+void Fluid::sample_weight_squares(const double* points, long m, double* out) const {
+  s_->weight_squares(points, m, out);
 }
 void Fluid::divergence(double* out) const { s_->divergence(out); }
 double Fluid::max_divergence() const { return s_->max_divergence(); }

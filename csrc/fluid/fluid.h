@@ -30,6 +30,15 @@ struct FluidStats {
   double seconds_advect = 0, seconds_forces = 0, seconds_project = 0;
 };
 
+/// Impulses a body gives the air over one step (two-way coupling, docs/coupling.md): impulses
+/// (M x 3, N s) at points (M x 3, m). The step spreads them onto the faces with the weights
+/// sample() reads the faces with at those points (spread_velocity, its transpose), as the
+/// velocity change w J / (density h^3), after advection and before the projection.
+struct PointImpulses {
+  const MatX3* points = nullptr;
+  const MatX3* impulses = nullptr;
+};
+
 class Fluid {
  public:
   /// Validates `params` (errors name "<prefix>.<field>", or the bare field when prefix is
@@ -42,8 +51,9 @@ class Fluid {
   Fluid(const Fluid&) = delete;
   Fluid& operator=(const Fluid&) = delete;
 
-  /// Advances the air by dt (s, finite and > 0). No heap allocation.
-  void step(double dt);
+  /// Advances the air by dt (s, finite and > 0), with the impulses a body gives it over the step
+  /// (or none). No heap allocation.
+  void step(double dt, const PointImpulses* impulses = nullptr);
   double time() const;  ///< s
   const FluidParams& params() const;
   const GridGeometry& geometry() const;
@@ -76,6 +86,10 @@ class Fluid {
   long sample(const MatX3& points, MatX3& out) const {
     return sample(points.data(), long(points.rows()), out.data());
   }
+  /// Per point (m x 3, m), the sum of the squared weights sample() gives the nodes it reads
+  /// there, the largest over the components, into out (m): 1/8 at a cell centre, 1 on a node
+  /// (sample_weight_squares, fluid/advect.h). No allocation.
+  void sample_weight_squares(const double* points, long m, double* out) const;
   /// Adds a static solid (validated; errors name "obstacle.<field>") and rebuilds the solid cells
   /// and the pressure solve's set-up; held faces are zeroed at once. Not during a step.
   void add_obstacle(const ObstacleParams& obstacle);

@@ -17,6 +17,14 @@ struct EnumNames<AirModel> {
   static constexpr std::array<const char*, 3> names{"none", "uniform", "grid"};
 };
 
+/// one_way: the air pushes the flag and never feels it (the paper); two_way: the drag each mass
+/// receives goes back into the air grid with the opposite sign (docs/coupling.md).
+enum class Coupling { kOneWay, kTwoWay };
+template <>
+struct EnumNames<Coupling> {
+  static constexpr std::array<const char*, 2> names{"one_way", "two_way"};
+};
+
 /// The air the flag feels. model "none": no air at all (no drag stage); "uniform": the wind
 /// schedule everywhere, analytic (no grid is built); "grid": Stable Fluids on the grid described
 /// by the FluidParams fields, with `wind` as its mean flow (periodic) or inflow (tunnel).
@@ -25,6 +33,9 @@ struct AirParams : FluidParams {
   /// The scene's pole is a no-slip solid of the air too (a capped cylinder as pole.* gives it),
   /// so the air flows around it and sheds its wake. Needs model "grid" and an enabled pole.
   bool pole_obstacle = false;
+  /// "two_way": the flag's drag reaction is spread back into the grid at every step, with the
+  /// weights the sampling uses, so air plus flag conserve momentum. Needs model "grid".
+  Coupling coupling = Coupling::kOneWay;
   /// The pole as an obstacle of the air (pole.radius, height, base; axis +y; no-slip).
   static ObstacleParams pole_solid(const PoleParams& pole);
   AirParams() { wind = WindSchedule(Vec3(2.0, 0.0, 0.0)); }
@@ -58,6 +69,9 @@ struct Scene {
   /// The paper's flag behind its pole, the pole a solid of the air (air.pole_obstacle): a tunnel
   /// at 2 m/s whose cells resolve the pole (kWakeCellsAcross across), eq. 5 off (issue 23).
   static Scene pole_wake();
+  /// A flag that flaps with eq. 5 off (issue 24): two-way coupling, curl-noise turbulence and
+  /// the pole as a solid of the air, on a periodic grid around the paper's flag.
+  static Scene emergent();
 };
 
 /// Built-in scenes: (name, one-line description), in display order.

@@ -51,6 +51,14 @@ Simulation::Simulation(const Scene& scene)
   x_start_ = x_;
   v_start_ = v_;
   choose_stages();
+  drag_impulse_.setZero(forces_.drag ? N : 0, 3);
+  if (forces_.drag) forces_.drag_impulse = &drag_impulse_;
+  if (built(Stage::kCoupling)) {
+    reaction_.setZero(N, 3);
+    drag_scale_.setOnes(N);
+    weight_sq_.setZero(N);
+    forces_.drag_scale = &drag_scale_;
+  }
   if (built(Stage::kFluid)) build_fluid();
   if (scene_.air.model == AirModel::kUniform && scene_.air.turbulence.enabled()) {
     std::vector<ObstacleParams> solids;  // no air flows into the pole
@@ -81,6 +89,7 @@ void Simulation::choose_stages() {
   forces_.rho = scene_.air.density;
   built(Stage::kWind) = forces_.drag && scene_.air.model == AirModel::kUniform;
   built(Stage::kFluid) = forces_.drag && scene_.air.model == AirModel::kGrid;
+  built(Stage::kCoupling) = built(Stage::kFluid) && scene_.air.coupling == Coupling::kTwoWay;
   built(Stage::kGravity) = forces_.gravity;
   built(Stage::kDrag) = forces_.drag;
   built(Stage::kSprings) = forces_.springs;
@@ -131,6 +140,13 @@ void Simulation::setup_energy() {
   double U = scene_.air.model == AirModel::kNone ? 0.0 : scene_.air.wind.max_speed();
   if (scene_.air.model == AirModel::kGrid)
     for (const FanParams& fan : scene_.air.fans) U = std::max(U, fan.max_speed);
+  // Curl noise adds its intensity on top of the mean flow (air.turbulence, either model).
+  if (scene_.air.model != AirModel::kNone) {
+    double gust = 0;
+    for (const auto& [t, intensity] : scene_.air.turbulence.intensity.keys)
+      gust = std::max(gust, std::fabs(intensity));
+    U += gust;
+  }
   const double m = topo_.mass.sum(), H = std::max(f.width, f.height);
   energy_scale_ = m * scene_.gravity.norm() * H + 0.5 * m * U * U;
   if (!(energy_scale_ > 0)) energy_scale_ = 0.5 * m;  // m (1 m/s)^2 / 2
@@ -168,7 +184,7 @@ void Simulation::setup_flapping() {
   }
 }
 
-// The air grid (paper §2): one-way coupling, so it only needs the flag to start inside it.
+// The air grid (paper §2): the flag must start inside it.
 void Simulation::build_fluid() {
   const AirParams& a = scene_.air;
   const Vec3 lo = a.origin,
@@ -220,6 +236,8 @@ void Simulation::step_once() {
   v_start_ = v_;
   ledger_start_ = ledger_;
   energy_end_start_ = energy_end_;
+  drag_impulse_.setZero();
+  step_pin_impulse_.setZero();
   if (built(Stage::kFlap)) flap_.save_step_start();
   int level = 0;
   for (;; ++level) {
@@ -236,7 +254,10 @@ void Simulation::step_once() {
       diverge(bad.cause, bad.vertex, bad.why + " even in " + std::to_string(pieces) + " pieces");
     restore_step_start();
   }
-  advance_fluid();  // after the check: a rolled-back step leaves the air as it was
+  pole_force_ = step_pin_impulse_ / scene_.dt;
+  pole_impulse_ += step_pin_impulse_;
+  stage_coupling();  // two-way: the drag's reaction, for the air's step
+  advance_fluid();   // after the check: a rolled-back step leaves the air as it was
   stats_.energy_halvings += level;
   ++step_count_;
   time_ = double(step_count_) * scene_.dt;  // no drift from summing dt
@@ -265,6 +286,8 @@ void Simulation::restore_step_start() {
   v_ = v_start_;
   ledger_ = ledger_start_;
   energy_end_ = energy_end_start_;
+  drag_impulse_.setZero();
+  step_pin_impulse_.setZero();
   if (built(Stage::kFlap)) flap_.restore_step_start();
 }
 
@@ -345,7 +368,8 @@ void Simulation::stage_flap_visual() {
 }
 
 // Air at every mass for this step's start time: the wind schedule (analytic), or the grid
-// sampled trilinearly (the grid then advances in advance_fluid). The flag never pushes the air.
+// sampled trilinearly (the grid then advances in advance_fluid, taking the flag's drag reaction
+// when the coupling is two-way).
 void Simulation::stage_air() {
   if (built(Stage::kWind)) {
     StageClock::Scope t(&clock_, Stage::kWind);
@@ -361,6 +385,37 @@ void Simulation::stage_air() {
     air_outside_last_ = fluid_->sample(x_, u_);
     air_outside_total_ += air_outside_last_;
   }
+  scale_drag_for_air_response();
+}
+
+// Two-way coupling's implicit air response (docs/coupling.md). The air a mass drags is a parcel
+// of mass rho h^3 / W (W: the sum of the squared weights the sampling gives the nodes there):
+// the drag's slope beta = C_D rho S |w| (w = u - v; u for the paper's |u| u - |v| v) changes the
+// air it reads by kappa = beta dt W / (rho h^3) of w over a step, so an explicit exchange
+// overshoots past kappa = 1 and diverges past 2 (fine grids, strong wind). With the parcel's
+// response implicit (linearised), F = (F0 - beta dv) / (1 + kappa): every mass's drag and its
+// Jacobian times 1 / (1 + kappa), and the air takes that same impulse back.
+void Simulation::scale_drag_for_air_response() {
+  if (!built(Stage::kCoupling)) return;
+  StageClock::Scope t(&clock_, Stage::kCoupling);
+  const Index N = topo_.num_vertices();
+  fluid_->sample_weight_squares(x_.data(), long(N), weight_sq_.data());
+  const double h = fluid_->geometry().h;
+  const double k = scene_.drag.coefficient * scene_.dt / (h * h * h);
+  const bool paper = scene_.drag.model == DragModel::kPaper;
+  for (Index i = 0; i < N; ++i) {
+    const Vec3 w = paper ? Vec3(u_.row(i)) : Vec3(u_.row(i) - v_.row(i));
+    drag_scale_[i] = 1.0 / (1.0 + k * topo_.area[i] * w.norm() * weight_sq_[i]);
+  }
+}
+
+// Two-way coupling (docs/coupling.md): the air takes back the drag impulse each mass received in
+// this step, with the opposite sign, at the positions the step sampled it (x_start_); the
+// fluid's step spreads it with the sampling's weights after advection, before the projection.
+void Simulation::stage_coupling() {
+  if (!built(Stage::kCoupling)) return;
+  StageClock::Scope t(&clock_, Stage::kCoupling);
+  reaction_ = -drag_impulse_;
 }
 
 // The air restores itself when its step fails; the cloth's step is then undone too, so the
@@ -369,7 +424,8 @@ void Simulation::advance_fluid() {
   if (!built(Stage::kFluid)) return;
   StageClock::Scope t(&clock_, Stage::kFluid);
   try {
-    fluid_->step(scene_.dt);
+    const PointImpulses reaction{&x_start_, &reaction_};
+    fluid_->step(scene_.dt, built(Stage::kCoupling) ? &reaction : nullptr);
   } catch (const DivergenceError& e) {
     restore_step_start();
     update_normals();
@@ -378,7 +434,12 @@ void Simulation::advance_fluid() {
   }
 }
 
+// The pins hold the flag: over the piece they give it what its momentum gained beyond the
+// forces that act on it (gravity, drag, eq. 5's force); the flag pushes them with the opposite
+// (pole_force). The tethers' strain limiting inside the integrator counts with the pins.
 void Simulation::stage_integrate() {
+  const Vec3 p0 = momentum();
+  const Vec3 j0 = forces_.drag ? Vec3(drag_impulse_.colwise().sum()) : Vec3::Zero();
   IntegrateStatus status;
   {
     // The force kernels, strain limiting and energy bookkeeping it calls time themselves.
@@ -388,6 +449,26 @@ void Simulation::stage_integrate() {
   }
   book_integrator_work();
   if (status != IntegrateStatus::kOk) integrate_failed(status);
+  Vec3 external = topo_.mass.sum() * h_ * scene_.gravity;
+  if (forces_.drag) external += Vec3(drag_impulse_.colwise().sum()) - j0;
+  if (forces_.external) external += h_ * Vec3(forces_.external->colwise().sum());
+  step_pin_impulse_ += external - (momentum() - p0);
+}
+
+Vec3 Simulation::momentum() const {
+  Vec3 p = Vec3::Zero();
+  for (Index i = 0; i < v_.rows(); ++i) p += topo_.mass[i] * Vec3(v_.row(i));
+  return p;
+}
+
+Vec3 Simulation::pole_force_mean() const {
+  const double t = time_ - pole_time_mark_;
+  return t > 0 ? Vec3((pole_impulse_ - pole_impulse_mark_) / t) : pole_force_;
+}
+
+void Simulation::reset_pole_force_mean() {
+  pole_impulse_mark_ = pole_impulse_;
+  pole_time_mark_ = time_;
 }
 
 // The work of each force as the integrator applied it (StepWork) into the ledger.

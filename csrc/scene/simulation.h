@@ -118,6 +118,20 @@ class Simulation {
   double max_strain() const { return flagsim::max_strain(topo_, x_); }
   const IntegratorStats& last_step_stats() const { return stats_; }
 
+  /// N, the force the flag exerted on its pins in the last step (the reaction of the pins,
+  /// pole and tethers to it; contact with the pole cylinder not included): from the flag's
+  /// momentum over the integrate stage, F = sum m g + (drag impulse + flap force impulse -
+  /// change of momentum) / dt. Zero before the first step (docs/coupling.md).
+  const Vec3& pole_force() const { return pole_force_; }
+  /// N, pole_force() averaged over the time since construction or the last
+  /// reset_pole_force_mean() (impulse over time, so steps of any length weigh by their length);
+  /// the last step's force when no time has passed since.
+  Vec3 pole_force_mean() const;
+  /// Starts the average of pole_force_mean() afresh from now (e.g. after a transient).
+  void reset_pole_force_mean();
+  /// N s, the pins' impulse since construction (the integral of pole_force()); never reset.
+  const Vec3& pole_impulse() const { return pole_impulse_; }
+
   /// Air velocity at world points (M x 3) at the current time into out (M x 3).
   void air_velocity(const MatX3& points, MatX3& out) const;
 
@@ -152,6 +166,8 @@ class Simulation {
   void check_explicit_step() const;
   // The stages of a piece (step_piece), each timed by its own StageClock scope.
   void stage_air();
+  void stage_coupling();
+  void scale_drag_for_air_response();
   void stage_flap();
   void stage_integrate();
   void stage_pole();
@@ -170,6 +186,7 @@ class Simulation {
   Implausible check_strain();
   Implausible check_energy() const;
   double energy_now() const;  // total_energy of (x_, v_)
+  Vec3 momentum() const;      // sum of m v over every mass, N s
   [[noreturn]] void diverge(const std::string& cause, long vertex, const std::string& detail);
 
   Scene scene_;
@@ -212,6 +229,19 @@ class Simulation {
   std::atomic<bool> stepping_{false};          // a step() is running (one thread at a time)
   SelfCollision::Projector strain_projector_;  // built once: no allocation per step
   long air_outside_last_ = 0, air_outside_total_ = 0;
+
+  // Drag impulse of the step per mass (N x 3, N s; the integrator adds to it), the reaction the
+  // air takes in two-way coupling (its negative) and the points it is spread at (the step's
+  // start positions, where the first piece sampled the air).
+  MatX3 drag_impulse_, reaction_;
+  // Two-way: each mass's drag factor 1 / (1 + kappa) (ForceSet::drag_scale) and the sum of the
+  // squared sampling weights at it (N).
+  VecX drag_scale_, weight_sq_;
+  // The pins' impulse in this step (N s), the last step's force, the impulse since
+  // construction and where the mean restarts (impulse and time at the last reset).
+  Vec3 step_pin_impulse_{0, 0, 0}, pole_force_{0, 0, 0}, pole_impulse_{0, 0, 0};
+  Vec3 pole_impulse_mark_{0, 0, 0};
+  double pole_time_mark_ = 0;
 };
 
 }  // namespace flagsim

@@ -285,6 +285,12 @@ def _export_frames(
         )
     start_step = sim.step_count
     written = kept = 0
+    # The force the flag exerts on its pins (Simulation.pole_force), per frame: the mean over the
+    # steps since the frame before (the impulse's change over the time between them); a frame
+    # with no step before it takes the last step's force (zeros before any step).
+    has_pole = hasattr(sim, "pole_impulse")
+    pole_forces = []
+    last_impulse, last_time = (np.array(sim.pole_impulse), sim.time) if has_pole else (None, 0.0)
     facing = np.zeros(3)  # area-weighted normal summed over the frames: where the flag faces
     lo = np.full(3, np.inf)
     hi = np.full(3, -np.inf)
@@ -297,6 +303,12 @@ def _export_frames(
                 ts = time.perf_counter()
                 sim.step(n)
                 step_time += time.perf_counter() - ts
+            if has_pole:
+                impulse = np.array(sim.pole_impulse)
+                span = sim.time - last_time
+                force = (impulse - last_impulse) / span if span > 0 else sim.pole_force
+                pole_forces.append([float(f) for f in force])
+                last_impulse, last_time = impulse, sim.time
             positions, _, _, triangles = mesh_arrays(sim)
             positions = np.asarray(positions)
             lo = np.minimum(lo, positions.min(axis=0))
@@ -335,6 +347,8 @@ def _export_frames(
     manifest["complete"] = True
     manifest["texture"] = None if texture is None else Path(texture).name
     manifest["bounds"] = [lo.tolist(), hi.tolist()]
+    if has_pole:
+        manifest["pole_force"] = pole_forces  # N per frame, see above
     scenefiles.write_text(out / MANIFEST, json.dumps(manifest, indent=1) + "\n")
     return ExportResult(
         out_dir=out,
