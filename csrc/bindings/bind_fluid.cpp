@@ -417,7 +417,7 @@ p = 0 at x-max, free-slip walls.
               fail_param("impulses", "given together with points (or neither)",
                          impulses.is_none() ? "None" : "an array");
             MatX3 p, j;
-            PointImpulses pi{&p, &j};
+            const std::vector<PointImpulses> pi{{&p, &j}};
             if (!points.is_none()) {
               p = finite_rows("points", points);
               j = finite_rows("impulses", impulses);

@@ -28,7 +28,7 @@ struct Fluid::Solver {
   virtual ~Solver() = default;
   /// One step; true when the step itself showed the new field finite (the FFT diffusion's
   /// spectral pass, FftProjector::diffuse_and_project), false when all_finite must tell.
-  virtual bool step(double dt, const PointImpulses* impulses) = 0;
+  virtual bool step(double dt, const std::vector<PointImpulses>* impulses) = 0;
   /// Every velocity value finite.
   virtual bool all_finite() const = 0;
   /// Back to the field and time t0 at the start of the last step (the step keeps its copy).
@@ -197,7 +197,7 @@ struct TypedSolver final : Fluid::Solver {
     apply_boundary(Vec3(v.x(), 0, 0));
   }
 
-  bool step(double dt, const PointImpulses* impulses) override {
+  bool step(double dt, const std::vector<PointImpulses>* impulses) override {
     const double t0 = time, t1 = time + dt;
     const FluidParams& p = params;
     SampleBoundary bc;
@@ -223,7 +223,8 @@ struct TypedSolver final : Fluid::Solver {
       ScopedTimer timer(stats.seconds_forces);
       apply_fans(fans, t0, dt, u);
       if (turbulent) add_turbulence(t0, t1);
-      if (impulses) add_impulses(*impulses);
+      if (impulses)
+        for (const PointImpulses& j : *impulses) add_impulses(j);
     }
     ScopedTimer timer(stats.seconds_project);
     // 3. boundary values at the new time: tunnel faces and solids, or the periodic mean flow
@@ -397,11 +398,12 @@ Fluid& Fluid::operator=(Fluid&&) noexcept = default;
 
 // A step that leaves a non-finite velocity is undone and raises DivergenceError: the air is as
 // it was, as Simulation promises for the cloth (a too-small cell_size or a huge dt gets here).
-void Fluid::step(double dt, const PointImpulses* impulses) {
+void Fluid::step(double dt, const std::vector<PointImpulses>* impulses) {
   check_positive("dt", dt);
-  if (impulses && !(impulses->points && impulses->impulses &&
-                    impulses->points->rows() == impulses->impulses->rows()))
-    throw InvalidArgument("impulses should give as many impulses as points");
+  if (impulses)
+    for (const PointImpulses& j : *impulses)
+      if (!(j.points && j.impulses && j.points->rows() == j.impulses->rows()))
+        throw InvalidArgument("impulses should give as many impulses as points");
   const double t0 = s_->time;
   if (s_->step(dt, impulses) || s_->all_finite()) return;
   s_->undo_step(t0);

@@ -51,9 +51,9 @@ class Fluid {
   Fluid(const Fluid&) = delete;
   Fluid& operator=(const Fluid&) = delete;
 
-  /// Advances the air by dt (s, finite and > 0), with the impulses a body gives it over the step
+  /// Advances the air by dt (s, finite and > 0), with the impulses bodies give it over the step
   /// (or none). No heap allocation.
-  void step(double dt, const PointImpulses* impulses = nullptr);
+  void step(double dt, const std::vector<PointImpulses>* impulses = nullptr);
   double time() const;  ///< s
   const FluidParams& params() const;
   const GridGeometry& geometry() const;
