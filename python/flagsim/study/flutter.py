@@ -12,7 +12,7 @@ friction, docs/design.md), one run of the paper's flag (8 x 11 masses, 0.81 m x 
               scale (a new noise slice each time the mean wind has carried the air one eddy on)
   two_way     the air grid of Scene.emergent() around the flag with the pole as a solid (its
               wake), two-way coupling, the same turbulence injected, eq. 5 off; at
-              TWO_WAY_SPEEDS for TWO_WAY_TIMES (its grid costs ~100x a one-way step). Only when
+              TWO_WAY_SPEEDS for TWO_WAY_TIMES (its grid costs ~30x a one-way step). Only when
               this build has air.coupling; otherwise the study says so and runs the others.
               --quick leaves it out.
 
@@ -61,8 +61,8 @@ MODEL_TITLES = {
 DRAGS = ("paper", "triangle")
 SPEEDS = (0.0, 2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0, 18.0, 20.0)
 QUICK_SPEEDS = (0.0, 3.0, 10.0)
-#: the two-way model pays for its air grid (0.15 s a step on one thread, ~100x the one-way
-#: models): fewer, shorter runs, so that the full study takes ~15 min on 2 cores
+#: the two-way model pays for its air grid (0.013 s a step on one thread, ~30x the one-way
+#: models): fewer, shorter runs (the full study: ~5 min on 2 loaded cores)
 TWO_WAY_SPEEDS = (2.0, 5.0, 10.0, 15.0, 20.0)
 TURBULENCE_INTENSITY = 0.1  # of U: a moderate atmospheric intensity near the ground
 TURBULENCE_LENGTH = 0.3  # m, about half the flag's height
@@ -325,7 +325,7 @@ def simulate(scene: flagsim.Scene, transient: float, duration: float) -> dict[st
     core's; `force_core` from sim.pole_impulse (the integrate stage's balance) always. Returns
     the series and the step cost."""
     with warnings.catch_warnings():
-        # the emergent grid resolves the pole by 3.5 cells, not the 8 its wake needs: known,
+        # the emergent grid resolves the pole by a few cells, not the 8 its wake needs: known,
         # and said in docs/flutter.md
         warnings.filterwarnings("ignore", message=".*cells across.*", category=UserWarning)
         sim = flagsim.Simulation(scene)
@@ -403,7 +403,7 @@ def cases(quick: bool = False) -> list[dict[str, Any]]:
     out = []
     for m in MODELS:
         if m == "two_way" and (quick or not has_two_way()):
-            continue  # quick (seconds): the one-way models only; the grid costs ~100x a step
+            continue  # quick (seconds): the one-way models only; the grid costs ~30x a step
         speeds = QUICK_SPEEDS if quick else TWO_WAY_SPEEDS if m == "two_way" else SPEEDS
         times = QUICK_TIMES if quick else TWO_WAY_TIMES if m == "two_way" else FULL_TIMES
         for d in DRAGS:
