@@ -85,11 +85,12 @@ bench-deps: $(VENV)/.deps
 bench: build bench-deps
 	$(PY) -m benchmarks --peers --out out/bench --docs docs/reports/performance.md
 
-# Regenerates docs/reports/accuracy.md (with docs/reports/images/accuracy_*.png) and
-# docs/reports/stability.md. Accuracy runs on one worker so its timings are undisturbed; on 2
-# cores each study takes tens of minutes.
+# Regenerates docs/reports/accuracy.md (with docs/reports/images/accuracy_*.png),
+# docs/reports/flutter.md (images/flutter.png) and docs/reports/stability.md. Accuracy runs on
+# one worker so its timings are undisturbed; on 2 cores each study takes tens of minutes.
 study: build
 	$(VENV)/bin/flagsim study accuracy --out out/accuracy --docs docs/reports --jobs 1
+	$(VENV)/bin/flagsim study flutter --out out/flutter --docs docs/reports --jobs $(JOBS)
 	$(VENV)/bin/flagsim study stability --out out/stability --docs docs/reports --jobs $(JOBS)
 
 clean:

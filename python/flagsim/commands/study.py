@@ -4,6 +4,11 @@
              vortex, the coupled paper scene, plane Poiseuille flow and the cylinder at Re = 100
              (St and C_D against published values), with observed convergence orders, the
              Pareto front, and the cheapest setting per error target
+  flutter    the paper's flag at 0 and 2..20 m/s, per model (one-way + eq. 5, one-way +
+             turbulence, two-way + turbulence + the pole's wake when built) and drag model
+             (paper, triangle): flapping frequency, amplitude, Strouhal number, the bending
+             wave's length and speed, the force coefficient on the pole against EN 1991-1-4's
+             free flag, the droop angle, and the cost per simulated second (docs/flutter.md)
   stability  a matrix over stiffness, wind, dt, areal density, flapping mode and integrator
              plus pathological cases; every case ends plausible (finite, energy ledger balanced,
              strain within the scene's promise), diverged (reported), implausible or non-finite
@@ -18,6 +23,8 @@ examples:
   flagsim study stability --out out/stability --jobs 2
   flagsim study stability --out out/stability --scheduler tcp://scheduler:8786
   flagsim study accuracy --out out/accuracy --docs docs/reports   # docs/reports/accuracy.md
+  flagsim study flutter --out out/flutter --jobs 2 --docs docs/reports
+  flagsim study flutter --out out/flutter-quick --quick             # seconds
 """
 
 from __future__ import annotations
@@ -28,7 +35,7 @@ from ._common import add_cluster_options, cluster_executor, local_jobs
 
 
 def configure(p):
-    p.add_argument("study", choices=("accuracy", "stability"), help="which study to run")
+    p.add_argument("study", choices=("accuracy", "flutter", "stability"), help="which study to run")
     p.add_argument(
         "--out", required=True, metavar="DIR", help="directory for CSV, report and plots"
     )
@@ -42,12 +49,13 @@ def configure(p):
     p.add_argument(
         "--quick",
         action="store_true",
-        help="a reduced sweep / matrix (minutes instead of tens of minutes)",
+        help="a reduced sweep / matrix (minutes instead of tens of minutes; flutter: seconds)",
     )
     p.add_argument(
         "--docs",
         metavar="DIR",
-        help="also write the report (and plots) into DIR as accuracy.md / stability.md",
+        help="also write the report (and plots) into DIR as accuracy.md / flutter.md / "
+        "stability.md (plots in DIR/images)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     add_cluster_options(p)
@@ -79,6 +87,21 @@ def _run(args, study, report, jobs, executor):
         print(headline(rows))
         total = summarize(rows, by=())[()]
         silent = total["implausible"] + total["nonfinite"]
+    elif args.study == "flutter":
+        plot_dir = os.path.join(args.docs, "images") if args.docs else None
+        rows = study.run_flutter(
+            args.out,
+            quick=args.quick,
+            jobs=jobs,
+            executor=executor,
+            progress=not args.quiet,
+            report_path=report,
+            plot_dir=plot_dir,
+        )
+        from ..study.flutter import headline
+
+        print(headline(rows))
+        silent = 0
     else:
         plot_dir = os.path.join(args.docs, "images") if args.docs else None
         study.run_accuracy(

@@ -1,10 +1,12 @@
-"""Studies users asked for: error against run time (`accuracy`) and stability on stiff and
-extreme cases (`stability`). Both run their cases through a concurrent.futures.Executor
-(local processes by default; a Dask cluster's, docs/distributed.md), resume from their CSV, and
-write CSV + markdown (+ PNG plots), and tasks.csv: where each case ran and how long it took.
+"""Studies users asked for: error against run time (`accuracy`), stability on stiff and
+extreme cases (`stability`), and the flag's flapping against published flags (`flutter`). All
+run their cases through a concurrent.futures.Executor (local processes by default; a Dask
+cluster's, docs/distributed.md), resume from their CSV, and write CSV + markdown (+ PNG plots),
+and tasks.csv: where each case ran and how long it took.
 
     python -m flagsim.study stability --out DIR [--reduced] [--jobs N]
     python -m flagsim.study accuracy --out DIR [--quick] [--jobs N]
+    python -m flagsim.study flutter --out DIR [--quick] [--jobs N]
 
     from distributed import Client
     with Client("tcp://scheduler:8786") as client:
@@ -87,4 +89,33 @@ def run_accuracy(
         plots,
         os.path.dirname(report_path) if report_path else out,
     )
+    return rows
+
+
+def run_flutter(
+    out: str,
+    *,
+    quick: bool = False,
+    jobs: int = 1,
+    executor=None,
+    progress: bool = True,
+    report_path: str | None = None,
+    plot_dir: str | None = None,
+) -> list[dict[str, str]]:
+    from . import flutter
+
+    rows = run_cases(
+        flutter.cases(quick),
+        flutter.run_case,
+        os.path.join(out, "flutter.csv"),
+        flutter.COLUMNS,
+        jobs=jobs,
+        executor=executor,
+        progress=progress,
+        desc="flutter",
+        index=os.path.join(out, TASK_INDEX),
+    )
+    plot = flutter.write_plots(rows, plot_dir or out)
+    report = report_path or os.path.join(out, "flutter.md")
+    flutter.write_report(rows, report, plot, os.path.dirname(os.path.abspath(report)))
     return rows
