@@ -31,6 +31,18 @@ struct AirParams : FluidParams {
   void validate(const std::string& prefix = "air") const;
 };
 
+/// A solid of the scene: one description for the air (its cells solid, as air.obstacles) and the
+/// cloth (collided with, csrc/collision/solids.h). A keyframed solid (motion) is cloth-only: the
+/// air's solids are static.
+struct SolidParams : ObstacleParams {
+  bool air = true;           ///< a solid of the air grid (air.model "grid"; static only)
+  bool cloth = true;         ///< the flag collides with it
+  double thickness = 0.005;  ///< m, the distance the flag's vertices keep from its surface
+  double friction = 0.3;     ///< Coulomb coefficient of the cloth's contact
+  MotionSchedule motion;     ///< keyframed rigid motion (cloth only); empty = at rest
+  void validate(const std::string& prefix) const;
+};
+
 struct Scene {
   std::string name = "custom";
   FlagParams flag;
@@ -40,8 +52,9 @@ struct Scene {
   FlappingParams flapping;
   SelfCollisionParams self_collision;
   PoleParams pole;
-  Vec3 gravity{0.0, -9.81, 0.0};  ///< m/s^2
-  double dt = 0.01;               ///< s, one Simulation step
+  std::vector<SolidParams> solids;  ///< TOML [[solids]]
+  Vec3 gravity{0.0, -9.81, 0.0};    ///< m/s^2
+  double dt = 0.01;                 ///< s, one Simulation step
 
   /// Throws InvalidArgument naming the first bad parameter ("flag.rows should be >= 2, got 1").
   void validate() const;
@@ -58,6 +71,9 @@ struct Scene {
   /// The paper's flag behind its pole, the pole a solid of the air (air.pole_obstacle): a tunnel
   /// at 2 m/s whose cells resolve the pole (kWakeCellsAcross across), eq. 5 off (issue 23).
   static Scene pole_wake();
+  /// A flag on the mast of a boat rolling and pitching in a 6 m/s wind: flag.pin_motion moves the
+  /// pole and the pins together (roll about the boat's length, pitch across it, at the deck).
+  static Scene boat();
 };
 
 /// Built-in scenes: (name, one-line description), in display order.
