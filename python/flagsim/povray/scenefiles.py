@@ -217,10 +217,33 @@ def pole_enabled(pole):
     )
 
 
+def pole_pose_text(sim):
+    """A frame's `#declare PolePose`: the pole's rigid pose (moving pins, `sim.pole_pose`) in
+    POV-Ray's frame, or "" when the simulation has no pose or it is the identity."""
+    pose = getattr(sim, "pole_pose", None)
+    if pose is None:
+        return ""
+    R, t = (np.asarray(a, dtype=float) for a in pose)
+    if np.array_equal(R, np.eye(3)) and not t.any():
+        return ""
+    S = np.diag([1.0, 1.0, -1.0])  # z mirrored: p' = S p, so R' = S R S and t' = S t
+    R, t = S @ R @ S, S @ t
+    # POV-Ray's matrix maps row vectors: its 3 x 3 block is R' transposed, then the translation.
+    values = list(R.T.ravel()) + list(t)
+    return (
+        "#declare PolePose = transform { matrix <" + ", ".join(f"{v:.9g}" for v in values) + "> }\n"
+    )
+
+
 def pole_text(pole):
-    """Cylinder from the scene's pole (base, height, radius) with a ball finial on top."""
+    """Cylinder from the scene's pole (base, height, radius) with a ball finial on top, moved by
+    the frame's PolePose when it declares one (moving pins)."""
     if pole is None or not pole_enabled(pole):
         return "// (the scene has no pole)\n"
+    return "union {\n" + _pole_parts(pole) + "  #ifdef (PolePose) transform { PolePose } #end\n}\n"
+
+
+def _pole_parts(pole):
     base = np.asarray(pole.base, dtype=float)
     r = float(pole.radius)
     top = base + np.array([0.0, float(pole.height), 0.0])
