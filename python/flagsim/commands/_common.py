@@ -10,6 +10,15 @@ class UnknownScene(ValueError):
     pass
 
 
+def add_scene_argument(parser):
+    """The SCENE positional every scene command takes (load it with load_scene)."""
+    parser.add_argument(
+        "scene",
+        metavar="SCENE",
+        help="a built-in scene name ('flagsim scenes' lists them) or a TOML scene file",
+    )
+
+
 def load_scene(spec):
     """(scene, description) for SCENE: a TOML file, or a built-in scene name.
 
