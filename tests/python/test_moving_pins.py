@@ -158,3 +158,22 @@ def test_boat_scene_rolls_and_pitches_plausibly():
     assert max(angles) > 10  # the mast leans (roll 12 degrees at 1 s, pitch on top)
     ledger = sim.energy_ledger()
     assert ledger["pins"] != 0
+
+
+def test_povray_frames_draw_the_pole_where_the_pins_moved_it():
+    """PolePose, applied by POV-Ray to the pole at rest in its mirrored frame, is the mirrored
+    image of where the simulation's pole is."""
+    from flagsim.povray import scenefiles
+
+    sim = flagsim.Simulation(flagsim.Scene.boat())
+    assert scenefiles.pole_pose_text(sim) == ""  # at rest at t = 0: nothing declared
+    sim.step(70)
+    text = scenefiles.pole_pose_text(sim)
+    m = np.array([float(v) for v in text.split("<")[1].split(">")[0].split(",")])
+    block, shift = m[:9].reshape(3, 3), m[9:]
+    R, t = sim.pole_pose
+    mirror = np.array([1.0, 1.0, -1.0])
+    top = np.asarray(sim.scene.pole.base) + (0.0, sim.scene.pole.height, 0.0)
+    pov = (top * mirror) @ block + shift  # POV-Ray's row-vector matrix
+    np.testing.assert_allclose(pov, (R @ top + t) * mirror, atol=1e-8)
+    assert np.linalg.norm(R @ top + t - top) > 0.05  # it did move
