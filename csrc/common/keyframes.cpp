@@ -115,8 +115,6 @@ void MotionSchedule::validate(const std::string& name) const {
       fail_param(k + ".time", "> the previous key's time " + detail::to_text(keys[i - 1].time),
                  keys[i].time);
   }
-  if (repeat && keys.size() < 2)
-    fail_param(name + ".repeat", "false with fewer than 2 keys (a period needs two)", "true");
 }
 
 }  // namespace flagsim

@@ -73,7 +73,8 @@ struct MotionSchedule {
   bool repeat = false;
   bool empty() const { return keys.empty(); }
   Pose at(double t) const;
-  /// Keys strictly increasing in time, finite; `repeat` needs two keys at least.
+  /// Keys strictly increasing in time, finite. (`repeat` with fewer than two keys has no period
+  /// and holds the one pose: not an error, so that fields can be set in any order.)
   void validate(const std::string& name) const;
 };
 

@@ -239,7 +239,7 @@ class Simulation {
   // the pins and pole now and, for a pose set from Python, the one asked for the end of the next
   // step. kNone: the pins move with whatever velocity they have (as before moving pins).
   enum class PinDriver { kNone, kKeyframes, kHold, kTargets, kPose };
-  PinDriver pin_driver_ = PinDriver::kNone, pin_driver_start_ = PinDriver::kNone;
+  PinDriver pin_driver_ = PinDriver::kNone;
   std::vector<Index> pin_index_;
   MatX3 pin_rest_, pin_hold_, pin_goal_, pin_at_, pin_start_;  // (P x 3) m
   Pose pose_now_, pose_goal_, pose_start_;
