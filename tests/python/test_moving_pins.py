@@ -177,3 +177,28 @@ def test_povray_frames_draw_the_pole_where_the_pins_moved_it():
     pov = (top * mirror) @ block + shift  # POV-Ray's row-vector matrix
     np.testing.assert_allclose(pov, (R @ top + t) * mirror, atol=1e-8)
     assert np.linalg.norm(R @ top + t - top) > 0.05  # it did move
+
+
+def test_each_flag_of_a_scene_moves_its_own_pins():
+    """Several flags (docs/multiflag.md): flag 1 carried along its path, flag 0 still."""
+    import copy
+
+    scene = small_flag()
+    second = copy.copy(scene.flags[0])
+    second.origin = (0.055, 0.0, 2.0)
+    second.pole.base = (0.0, -2.5, 2.0)
+    second.pin_motion.keys = [(0.0, (0, 0, 0), (0, 0, 0)), (0.5, (0.0, 0.2, 0.0), (0, 0, 0))]
+    scene.flags = [scene.flags[0], second]
+    sim = flagsim.Simulation(scene)
+    assert "pins" in sim.stages
+    still = sim.positions[sim.pinned_vertices].copy()
+    moved = sim.flags[1]
+    rest = moved.rest_positions[moved.pinned_vertices]
+    sim.step(30)
+    np.testing.assert_allclose(
+        moved.positions[moved.pinned_vertices],
+        second.pin_motion.apply(0.3, rest),
+        rtol=0,
+        atol=1e-14,
+    )
+    np.testing.assert_array_equal(sim.positions[sim.pinned_vertices], still)
