@@ -108,6 +108,8 @@ def to_dict(obj: Any) -> dict[str, Any]:
 def _plain(v: Any) -> Any:
     if _is_struct(v):
         return to_dict(v)
+    if hasattr(v, "tolist"):  # numpy arrays (a mesh solid's vertices and faces)
+        return v.tolist()
     if isinstance(v, (list, tuple)):
         return [_plain(x) for x in v]
     return v

@@ -150,3 +150,16 @@ def test_bad_solids_name_the_parameter(tmp_path):
     (tmp_path / "bad.obj").write_text("v 0 0 0\nf 1 x 3\n")
     with pytest.raises(ValueError, match=r"bad.obj:2"):
         flagsim.Scene.from_dict({"solids": [{"mesh": "bad.obj"}]}, directory=str(tmp_path))
+
+
+def test_a_scene_with_a_mesh_solid_round_trips_through_plain_data():
+    """to_dict gives plain lists (JSON for export manifests, pickling for workers)."""
+    import json
+    import pickle
+
+    v, f = box_mesh(BOX["center"], BOX["half_size"])
+    s = falling_flag(air=False, shape="mesh", vertices=v, faces=f)
+    data = json.loads(json.dumps(s.to_dict()))
+    back = flagsim.Scene.from_dict(data)
+    np.testing.assert_array_equal(back.solids[0].faces, f)
+    np.testing.assert_array_equal(pickle.loads(pickle.dumps(s)).solids[0].vertices, v)
