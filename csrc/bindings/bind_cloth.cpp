@@ -1,3 +1,4 @@
+#include <pybind11/eigen.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
@@ -8,7 +9,67 @@ namespace py = pybind11;
 
 namespace flagsim::bindings {
 
+namespace {
+
+// Motion keys from Python: [(time s, (tx, ty, tz) m, (rx, ry, rz) degrees), ...]; each part of a
+// bad value named ("flag.pin_motion.keys[2].time").
+std::vector<MotionKey> motion_keys_from_py(const std::string& name, py::handle o) {
+  auto seq = conv::sequence_of(name, "keyframes [(time, (tx, ty, tz), (rx, ry, rz)), ...]", o, -1);
+  std::vector<MotionKey> keys;
+  for (size_t i = 0; i < py::len(seq); ++i) {
+    const std::string key = name + "[" + std::to_string(i) + "]";
+    auto k = conv::sequence_of(key, "a triple (time s, translation m, rotation vector degrees)",
+                               seq[i], 3);
+    keys.push_back({from_py<double>(key + ".time", k[0]), from_py<Vec3>(key + ".translation", k[1]),
+                    from_py<Vec3>(key + ".rotation", k[2])});
+  }
+  return keys;
+}
+
+void bind_motion(py::module_& m) {
+  py::class_<MotionSchedule> ms(m, "MotionSchedule", R"doc(Keyframed rigid motion.
+
+pose(t) maps a point p at rest to pivot + translation(t) + R(rotation(t)) (p - pivot); the
+translation (m) and the rotation vector (unit axis x angle, degrees) are interpolated linearly
+between keys. Before the first key the first pose holds, after the last the last one (or, with
+repeat, the keys play again with period last time - first time). Empty: no motion.)doc");
+  ms.def(py::init<>());
+  ms.def_property(
+      "keys",
+      [](const MotionSchedule& s) {
+        py::list out;
+        for (const MotionKey& k : s.keys)
+          out.append(
+              py::make_tuple(k.time, vec3_to_tuple(k.translation), vec3_to_tuple(k.rotation)));
+        return out;
+      },
+      [](MotionSchedule& s, const py::object& o) {
+        MotionSchedule copy = s;
+        copy.keys = motion_keys_from_py("motion.keys", o);
+        copy.validate("motion");
+        s = copy;
+      },
+      "[(time s, (tx, ty, tz) m, (rx, ry, rz) degrees), ...], times strictly increasing");
+  def_field(ms, "pivot", &MotionSchedule::pivot, "motion", "m, the point the rotation turns about");
+  def_field(ms, "repeat", &MotionSchedule::repeat, "motion",
+            "play the keys again after the last one (period: last time - first time)");
+  ms.def("validate", &MotionSchedule::validate, py::arg("prefix") = "motion");
+  ms.def(
+      "apply",
+      [](const MotionSchedule& s, double t, const MatX3& points) {
+        const Pose p = s.at(t);
+        MatX3 out(points.rows(), 3);
+        for (Index i = 0; i < points.rows(); ++i) out.row(i) = p.apply(row(points, i)).transpose();
+        return out;
+      },
+      py::arg("time"), py::arg("points"),
+      "The points (M x 3, m, at rest) where pose(time) puts them (M x 3, m).");
+}
+
+}  // namespace
+
 void bind_cloth(py::module_& m) {
+  bind_motion(m);
   m.attr("STRAIN_LIMIT_SLACK") = kStrainLimitSlack;  // the strain limit's promise: limit + this
   py::class_<FlagParams> flag(m, "FlagParams",
                               "The mass-spring flag (paper §3): a rows x cols grid of masses.");
@@ -37,6 +98,16 @@ void bind_cloth(py::module_& m) {
                                            from_py<int64_t>("flag.imperfection_seed", seed));
       },
       "seed of the imperfection's offsets, an integer in [0, 2**32)");
+  flag.def_property(
+      "pin_motion", [](FlagParams& p) -> MotionSchedule& { return p.pin_motion; },
+      [](FlagParams& p, const py::object& o) {
+        FlagParams copy = p;
+        copy.pin_motion = from_py<MotionSchedule>("flag.pin_motion", o);
+        copy.validate("flag");
+        p = copy;
+      },
+      py::return_value_policy::reference_internal,
+      "MotionSchedule: keyframed rigid motion of the pinned vertices and the pole together");
 
   py::class_<DragParams> drag(m, "DragParams",
                               "Air drag: 'paper' (eq. 3), 'relative' or 'triangle'.");

@@ -118,6 +118,36 @@ void bind_turbulence(py::module_& m) {
       "solids ([ObstacleParams, ...]).");
 }
 
+// An (n, 3) array of T from any array-like: floats for points, integers (no fractions) for faces.
+template <class T>
+Eigen::Matrix<T, Eigen::Dynamic, 3, Eigen::RowMajor> mesh_array(const std::string& name,
+                                                                const py::object& value) {
+  const char* what = std::is_integral_v<T> ? "integers" : "numbers";
+  py::array a;
+  try {
+    a = py::array::ensure(py::module_::import("numpy").attr("asarray")(value, "float64"));
+  } catch (const py::error_already_set&) {
+    a = py::array();
+  }
+  if (!a || (a.ndim() != 2 && !(a.ndim() == 1 && a.shape(0) == 0)) ||
+      (a.ndim() == 2 && a.shape(1) != 3))
+    throw InvalidArgument(name + " should be an array of shape (n, 3) of " + what + ", got " +
+                          py::str(py::repr(value)).cast<std::string>());
+  const Index n = a.ndim() == 2 ? a.shape(0) : 0;
+  auto d = a.cast<py::array_t<double, py::array::c_style | py::array::forcecast>>();
+  Eigen::Matrix<T, Eigen::Dynamic, 3, Eigen::RowMajor> out(n, 3);
+  for (Index i = 0; i < n; ++i)
+    for (int k = 0; k < 3; ++k) {
+      const double x = d.at(i, k);
+      if constexpr (std::is_integral_v<T>) {
+        if (!(std::isfinite(x) && x == std::floor(x) && std::fabs(x) < 2e9))
+          fail_param(name + "[" + std::to_string(i) + "]", "integer vertex indices", x);
+      }
+      out(i, k) = T(x);
+    }
+  return out;
+}
+
 void def_fluid_fields(py::class_<AirParams>& cls, const std::string& section) {
   cls.def_property(
       "turbulence", [](AirParams& a) -> TurbulenceParams& { return a.turbulence; },
@@ -274,7 +304,8 @@ void bind_obstacle(py::module_& m) {
           py::arg("half_size") = py::make_tuple(0.1, 0.1, 0.1), py::arg("radius") = 0.1,
           py::arg("axis") = py::make_tuple(0.0, 0.0, 1.0), py::arg("length") = 1.0,
           py::arg("slip") = "no_slip");
-  def_field(obs, "shape", &ObstacleParams::shape, "obstacle", "'box' | 'sphere' | 'cylinder'");
+  def_field<ObstacleParams, ObstacleShape>(obs, "shape", &ObstacleParams::shape, "obstacle",
+                                           "'box' | 'sphere' | 'cylinder' | 'capsule' | 'mesh'");
   def_field<ObstacleParams, Vec3>(obs, "center", &ObstacleParams::center, "obstacle", "m");
   def_field<ObstacleParams, Vec3>(obs, "half_size", &ObstacleParams::half_size, "obstacle",
                                   "m, box half extents");
@@ -283,7 +314,25 @@ void bind_obstacle(py::module_& m) {
   def_field<ObstacleParams, Vec3>(obs, "axis", &ObstacleParams::axis, "obstacle",
                                   "cylinder axis, normalised on use");
   def_field<ObstacleParams, double>(obs, "length", &ObstacleParams::length, "obstacle",
-                                    "m, cylinder length between its caps");
+                                    "m, cylinder length between its caps, capsule segment");
+  obs.def_property(
+      "vertices", [](const ObstacleParams& o) { return MatX3(o.vertices); },
+      [](ObstacleParams& o, const py::object& value) {
+        ObstacleParams copy = o;
+        copy.vertices = mesh_array<double>("obstacle.vertices", value);
+        copy.validate("obstacle");
+        o = copy;
+      },
+      "(M, 3) m, the mesh's points (shape 'mesh'); a copy: assign to change");
+  obs.def_property(
+      "faces", [](const ObstacleParams& o) { return MatX3i(o.faces); },
+      [](ObstacleParams& o, const py::object& value) {
+        ObstacleParams copy = o;
+        copy.faces = mesh_array<int32_t>("obstacle.faces", value);
+        copy.validate("obstacle");
+        o = copy;
+      },
+      "(F, 3) indices into vertices, one closed triangle mesh (shape 'mesh'); a copy");
   def_field(obs, "slip", &ObstacleParams::slip, "obstacle", "'no_slip' | 'free_slip'");
   obs.def("validate", &ObstacleParams::validate, py::arg("prefix") = "")
       .def(

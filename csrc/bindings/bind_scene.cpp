@@ -70,7 +70,62 @@ void assign_rows(MatX3& m, const std::string& name, const py::object& o) {
 
 }  // namespace
 
+// A SolidParams field as a validated property (def_field takes a class_ without bases).
+template <class T>
+void def_solid_field(py::class_<SolidParams, ObstacleParams>& cls, const char* name,
+                     T SolidParams::*member, const char* doc) {
+  cls.def_property(
+      name, [member](const SolidParams& s) { return to_py(s.*member); },
+      [member, name](SolidParams& s, const py::object& value) {
+        SolidParams copy = s;
+        copy.*member = from_py<T>(std::string("solid.") + name, value);
+        copy.validate("solid");
+        s = copy;
+      },
+      doc);
+}
+
+void bind_solids(py::module_& m) {
+  py::class_<SolidParams, ObstacleParams> solid(m, "SolidParams", R"doc(A solid of the scene.
+
+One description for the air and the cloth ([[solids]] in TOML): a box, sphere, capped cylinder,
+capsule or closed triangle mesh (the ObstacleParams fields), a solid of the air grid when air is
+true (static only), collided with by the flag when cloth is true (keeping `thickness` from its
+surface, Coulomb `friction`), at rest or keyframed (motion, cloth only).)doc");
+  solid.def(
+      py::init([](const py::kwargs& kw) {
+        // Field by field through the validated properties, in the order given.
+        py::object o = py::cast(SolidParams());
+        const py::object cls = py::type::of(o);
+        for (const auto& item : kw) {
+          const std::string key = py::str(item.first);
+          if (!py::hasattr(cls, key.c_str()) || key.rfind('_', 0) == 0)
+            throw InvalidArgument("unknown key '" + key + "' for SolidParams");
+          py::setattr(o, item.first, item.second);
+        }
+        return o.cast<SolidParams>();
+      }),
+      "SolidParams(**fields), e.g. SolidParams(shape='sphere', center=(0, 0, 0), radius=0.1)");
+  def_solid_field(solid, "air", &SolidParams::air, "a solid of the air grid (static)");
+  def_solid_field(solid, "cloth", &SolidParams::cloth, "the flag collides with it");
+  def_solid_field(solid, "thickness", &SolidParams::thickness,
+                  "m, the distance the flag's vertices keep from its surface");
+  def_solid_field(solid, "friction", &SolidParams::friction, "Coulomb coefficient (>= 0)");
+  solid.def_property(
+      "motion", [](SolidParams& s) -> MotionSchedule& { return s.motion; },
+      [](SolidParams& s, const py::object& o) {
+        SolidParams copy = s;
+        copy.motion = from_py<MotionSchedule>("solid.motion", o);
+        copy.validate("solid");
+        s = copy;
+      },
+      py::return_value_policy::reference_internal,
+      "MotionSchedule: keyframed rigid motion (cloth only); empty = at rest");
+  solid.def("validate", &SolidParams::validate, py::arg("prefix") = "solid");
+}
+
 void bind_scene(py::module_& m) {
+  bind_solids(m);
   py::class_<AirParams> air(
       m, "AirParams", "The air: 'none', 'uniform' (analytic wind) or 'grid' (Stable Fluids).");
   air.def(py::init<>());
@@ -147,6 +202,8 @@ the scene unchanged. Build one with Scene.paper(), Scene.named(name) or Scene.lo
   scene.def_static("emergent", &Scene::emergent,
                    "A flag that flaps with eq. 5 off: two-way coupling, curl-noise turbulence and "
                    "the pole as a solid of the air (docs/coupling.md).");
+  scene.def_static("boat", &Scene::boat,
+                   "A flag on the mast of a boat rolling and pitching in a 6 m/s wind.");
   scene.def_static("_builtins", &builtin_scenes);
   scene.def_static("_named", &builtin_scene, py::arg("name"));
   scene.def_property(
@@ -172,6 +229,15 @@ the scene unchanged. Build one with Scene.paper(), Scene.named(name) or Scene.lo
   part("flapping", &Scene::flapping, "FlappingParams (paper eq. 5)");
   part("self_collision", &Scene::self_collision, "SelfCollisionParams");
   part("pole", &Scene::pole, "PoleParams");
+  scene.def_property(
+      "solids", [](const Scene& s) { return s.solids; },
+      [](Scene& s, const py::object& o) {
+        Scene copy = s;
+        copy.solids = from_py<std::vector<SolidParams>>("solids", o);
+        copy.validate();
+        s = copy;
+      },
+      "[SolidParams, ...]: solids of the air and the cloth; a list copy: assign to change");
   scene.def_property(
       "dt", [](const Scene& s) { return s.dt; },
       [](Scene& s, const py::object& o) {
@@ -261,6 +327,42 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
         s.update_normals();
       },
       "(N, 3) m, view");
+  sim.def_property_readonly(
+      "pinned_vertices",
+      [](const Simulation& s) {
+        return py::array_t<Index>(py::ssize_t(s.pinned_vertices().size()),
+                                  s.pinned_vertices().data());
+      },
+      "(P,) indices of the pinned vertices, the order set_pin_targets takes");
+  sim.def(
+      "set_pin_targets",
+      [](Simulation& s, const py::object& targets) {
+        MatX3 t(Index(s.pinned_vertices().size()), 3);
+        assign_rows(t, "targets", targets);
+        s.set_pin_targets(t);
+      },
+      py::arg("targets"),
+      "Where the pinned vertices are at the end of the next step ((P, 3) m, in pinned_vertices "
+      "order): they move there at constant velocity over the step (their velocity that of the "
+      "motion; the pins' work is in energy_ledger()['pins']) and stay there until set again. "
+      "The pole stays (set_pin_pose moves both).");
+  sim.def(
+      "set_pin_pose",
+      [](Simulation& s, const py::object& translation, const py::object& rotation) {
+        s.set_pin_pose(from_py<Vec3>("translation", translation),
+                       from_py<Vec3>("rotation", rotation));
+      },
+      py::arg("translation") = py::make_tuple(0.0, 0.0, 0.0),
+      py::arg("rotation") = py::make_tuple(0.0, 0.0, 0.0),
+      "The pins and the pole together at a rigid pose at the end of the next step: translation "
+      "(m) and rotation vector (degrees, about flag.pin_motion.pivot) from where they are at "
+      "rest.");
+  sim.def_property_readonly(
+      "pole_pose",
+      [](const Simulation& s) {
+        return py::make_tuple(Mat3(s.pole_pose().R), Vec3(s.pole_pose().t));
+      },
+      "(R, t): the pole (and the pins) now at R p + t of their rest positions p");
   sim.def_property(
       "velocities",
       [](py::object self) { return view_of(self.cast<Simulation&>().velocities(), self, true); },

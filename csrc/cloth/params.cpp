@@ -25,6 +25,7 @@ void FlagParams::validate(const std::string& p) const {
       fail_param(p + ".pinned_vertices[" + std::to_string(k) + "]",
                  "a vertex index in [0, " + std::to_string(rows * cols - 1) + "]", i);
   }
+  pin_motion.validate(p + ".pin_motion");
 }
 
 void DragParams::validate(const std::string& p) const {

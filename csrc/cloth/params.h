@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "common/enums.h"
+#include "common/keyframes.h"
 #include "common/types.h"
 
 namespace flagsim {
@@ -58,6 +59,11 @@ struct FlagParams {
   /// 0 = perfectly flat. The rest shape (spring lengths) stays flat either way.
   double imperfection = 0.0;
   uint32_t imperfection_seed = 0;  ///< seed of the imperfection's offsets
+  /// Keyframed rigid motion of the pinned vertices and the pole together (a flag on a boat, a
+  /// banner carried): the pins follow pose(t) of their rest positions exactly, with the velocity
+  /// of that motion; the whole flag starts at pose(0). Empty: the pins stay (or follow
+  /// Simulation.set_pin_targets). docs/solids.md "Moving pins and solids".
+  MotionSchedule pin_motion;
   void validate(const std::string& prefix = "flag") const;
 };
 

@@ -91,13 +91,11 @@ bool inside_pole(const PoleParams& pole, const Vec3& p, double tolerance) {
 
 namespace {
 
-// collide_pole() for vertex i: how far it was moved, or -1 when it was left alone.
-double collide_vertex(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
-                      const VecX& inv_mass, Index i) {
-  if (inv_mass[i] == 0) return -1;
-  const Vec3 a = x0.row(i).transpose();
-  Vec3 p = x.row(i).transpose();
+// One vertex from a to p (velocity v) against the pole at rest: how far it was moved, or -1 when
+// it was left alone.
+double collide_point(const PoleParams& pole, const Vec3& a, Vec3& p, Vec3& v) {
   Vec3 normal;
+  const Vec3 end = p;
   const double t = inside_pole(pole, a) ? -1.0 : entry_time(pole, a, p, normal);
   if (t >= 0) {
     // Entered from outside (possibly right through): stop at the entry point q and keep the
@@ -111,17 +109,39 @@ double collide_vertex(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& 
   } else {
     return -1;
   }
-  const double moved = (p - x.row(i).transpose()).norm();
-  x.row(i) = p.transpose();
-  const double vn = v.row(i).dot(normal.transpose());
-  if (vn < 0) v.row(i) -= vn * normal.transpose();
+  const double vn = v.dot(normal);
+  if (vn < 0) v -= vn * normal;
+  return (p - end).norm();
+}
+
+// collide_pole() for vertex i: the pole at rest, or moving (the vertex's path and velocity taken
+// into the pole's frame, relative to the pole's surface, and back).
+double collide_vertex(const PoleParams& pole, const RigidMotion* motion, const MatX3& x0, MatX3& x,
+                      MatX3& v, const VecX& inv_mass, Index i) {
+  if (inv_mass[i] == 0) return -1;
+  if (!motion) {
+    Vec3 p = x.row(i).transpose(), vi = v.row(i).transpose();
+    const double moved = collide_point(pole, row(x0, i), p, vi);
+    if (moved < 0) return -1;
+    x.row(i) = p.transpose();
+    v.row(i) = vi.transpose();
+    return moved;
+  }
+  const Vec3 a = motion->from.inverse(row(x0, i));
+  Vec3 p = motion->to.inverse(row(x, i));
+  const Vec3 surface = motion->velocity_at(p);
+  Vec3 vi = motion->to.R.transpose() * (row(v, i) - surface);
+  const double moved = collide_point(pole, a, p, vi);
+  if (moved < 0) return -1;
+  x.row(i) = motion->to.apply(p).transpose();
+  v.row(i) = (motion->to.R * vi + motion->velocity_at(p)).transpose();
   return moved;
 }
 
 }  // namespace
 
 Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
-                   const VecX& inv_mass, double* max_move) {
+                   const VecX& inv_mass, double* max_move, const RigidMotion* motion) {
   Index moved = 0;
   double largest = 0;
   const Index n = x.rows();
@@ -130,12 +150,12 @@ Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
   if (use_team(n >= kParallelGrain)) {
 #pragma omp parallel for schedule(static) reduction(+ : moved) reduction(max : largest)
     for (Index i = 0; i < n; ++i) {
-      const double d = collide_vertex(pole, x0, x, v, inv_mass, i);
+      const double d = collide_vertex(pole, motion, x0, x, v, inv_mass, i);
       if (d >= 0) ++moved, largest = std::max(largest, d);
     }
   } else {
     for (Index i = 0; i < n; ++i) {
-      const double d = collide_vertex(pole, x0, x, v, inv_mass, i);
+      const double d = collide_vertex(pole, motion, x0, x, v, inv_mass, i);
       if (d >= 0) ++moved, largest = std::max(largest, d);
     }
   }

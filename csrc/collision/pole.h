@@ -2,6 +2,7 @@
 // the axis through base. Vertices collide with it so that a flag blown back wraps around it.
 #pragma once
 #include "collision/params.h"
+#include "common/keyframes.h"
 #include "common/types.h"
 
 namespace flagsim {
@@ -18,7 +19,12 @@ bool inside_pole(const PoleParams& pole, const Vec3& p, double tolerance = 0.0);
 /// entered. The velocity's component into the surface (outward normal n, v . n < 0) is removed.
 /// Returns the number of vertices moved (and the largest move, m, in *max_move if given).
 /// Vertices inside the pole at x0 are projected to its surface like the rest.
+/// motion: the pole moving rigidly over the piece (PoleParams describe it at rest; it is at
+/// motion->from at x0's time and at motion->to at x's): the test runs in the pole's frame on the
+/// path from.inverse(x0) -> to.inverse(x), and the velocity's component into the surface is
+/// removed relative to the surface's own velocity there. nullptr: the pole at rest.
 Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
-                   const VecX& inv_mass, double* max_move = nullptr);
+                   const VecX& inv_mass, double* max_move = nullptr,
+                   const RigidMotion* motion = nullptr);
 
 }  // namespace flagsim

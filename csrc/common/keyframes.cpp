@@ -1,6 +1,7 @@
 #include "common/keyframes.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include "common/errors.h"
 
@@ -77,6 +78,42 @@ void ScalarSchedule::validate(const std::string& name) const {
     if (i > 0 && !(keys[i].first > keys[i - 1].first))
       fail_param(name + "[" + std::to_string(i) + "].time",
                  "> the previous key's time " + detail::to_text(keys[i - 1].first), keys[i].first);
+  }
+}
+
+Pose MotionSchedule::at(double t) const {
+  Pose pose;
+  if (keys.empty()) return pose;
+  const double t0 = keys.front().time, t1 = keys.back().time;
+  if (repeat && t1 > t0 && (t < t0 || t > t1))
+    t = t0 + (t - t0) - (t1 - t0) * std::floor((t - t0) / (t1 - t0));
+  Vec3 move = keys.front().translation, rot = keys.front().rotation;
+  if (t >= t1) {
+    move = keys.back().translation, rot = keys.back().rotation;
+  } else if (t > t0) {
+    auto hi = std::upper_bound(keys.begin(), keys.end(), t,
+                               [](double x, const MotionKey& k) { return x < k.time; });
+    auto lo = hi - 1;
+    const double s = (t - lo->time) / (hi->time - lo->time);
+    move = (1 - s) * lo->translation + s * hi->translation;
+    rot = (1 - s) * lo->rotation + s * hi->rotation;
+  }
+  const double angle = rot.norm() * (3.14159265358979323846 / 180.0);
+  if (angle > 0) pose.R = Eigen::AngleAxisd(angle, rot.normalized()).toRotationMatrix();
+  pose.t = pivot + move - pose.R * pivot;
+  return pose;
+}
+
+void MotionSchedule::validate(const std::string& name) const {
+  check_position(name + ".pivot", pivot);
+  for (size_t i = 0; i < keys.size(); ++i) {
+    const std::string k = name + ".keys[" + std::to_string(i) + "]";
+    check_finite(k + ".time", keys[i].time);
+    check_position(k + ".translation", keys[i].translation);
+    check_finite_vec(k + ".rotation", keys[i].rotation);
+    if (i > 0 && !(keys[i].time > keys[i - 1].time))
+      fail_param(k + ".time", "> the previous key's time " + detail::to_text(keys[i - 1].time),
+                 keys[i].time);
   }
 }
 

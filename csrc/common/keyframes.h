@@ -1,4 +1,5 @@
-// Piecewise-linear keyframe schedules: wind velocity (time -> m/s vector) and scalar strengths.
+// Piecewise-linear keyframe schedules: wind velocity (time -> m/s vector), scalar strengths, and
+// rigid motions (time -> translation and rotation) that move pins, poles and solids.
 // Before the first key the first value holds, after the last key the last value holds.
 #pragma once
 #include <string>
@@ -37,6 +38,44 @@ struct ScalarSchedule {
 
  private:
   double integral_from(double a, double b, double fallback) const;
+};
+
+/// A rigid placement: world = R p + t.
+struct Pose {
+  Mat3 R = Mat3::Identity();
+  Vec3 t = Vec3::Zero();
+  Vec3 apply(const Vec3& p) const { return R * p + t; }
+  Vec3 inverse(const Vec3& q) const { return R.transpose() * (q - t); }
+};
+
+/// A pose over a piece of h seconds, from `from` (its start) to `to` (its end): a point fixed in
+/// the moving body goes from from.apply(p) to to.apply(p) with the secant velocity.
+struct RigidMotion {
+  Pose from, to;
+  double h = 1.0;  ///< s
+  Vec3 velocity_at(const Vec3& local) const { return (to.apply(local) - from.apply(local)) / h; }
+};
+
+struct MotionKey {
+  double time = 0;            ///< s
+  Vec3 translation{0, 0, 0};  ///< m
+  Vec3 rotation{0, 0, 0};     ///< degrees: a rotation vector (unit axis x angle) about `pivot`
+};
+
+/// Rigid motion keyframes: pose(t) maps a point p of the body at rest to
+/// pivot + translation(t) + R(rotation(t)) (p - pivot), translation and rotation vector each
+/// interpolated linearly between keys (a rotation about one fixed axis is then exact). Before the
+/// first key the first pose holds, after the last key the last (or, with `repeat`, the keys play
+/// again from the first with period last time - first time). Empty: no motion (identity).
+struct MotionSchedule {
+  std::vector<MotionKey> keys;
+  Vec3 pivot{0, 0, 0};  ///< m
+  bool repeat = false;
+  bool empty() const { return keys.empty(); }
+  Pose at(double t) const;
+  /// Keys strictly increasing in time, finite. (`repeat` with fewer than two keys has no period
+  /// and holds the one pose: not an error, so that fields can be set in any order.)
+  void validate(const std::string& name) const;
 };
 
 }  // namespace flagsim

@@ -19,12 +19,14 @@ enum class Stage {
   kFluid,          // the air grid: sampled at the masses, then advanced
   kCoupling,       // two-way: the flag's drag reaction handed to the air grid
   kFlap,           // eq. 5 "displace" / "force": a drift or force the integrator carries
+  kPins,           // moving pins: their velocity for the piece, their positions placed after
   kGravity,        // force kernels, called by the integrator
   kDrag,           //   eq. 3
   kSprings,        //   eq. 4
   kIntegrate,      // explicit or implicit step, less the kernels and projections it calls
   kStrainLimit,    // Provot projection
   kPole,           // collision with the pole
+  kSolids,         // collision with the scene's solids (boxes, spheres, capsules, meshes)
   kSelfCollision,  // vertex-triangle and edge-edge
   kCheck,          // finiteness, strain, energy bookkeeping and the plausibility test
   kFlapVisual,     // eq. 5 "visual": after the step, on the exported geometry only
@@ -36,8 +38,9 @@ enum class Stage {
 template <>
 struct EnumNames<Stage> {
   static constexpr std::array<const char*, std::size_t(Stage::kCount)> names{
-      "wind",      "fluid",        "coupling", "flap",           "gravity", "drag", "springs",
-      "integrate", "strain_limit", "pole",     "self_collision", "check",   "flap"};
+      "wind",    "fluid",  "coupling",       "flap",      "pins",
+      "gravity", "drag",   "springs",        "integrate", "strain_limit",
+      "pole",    "solids", "self_collision", "check",     "flap"};
 };
 
 class StageClock {

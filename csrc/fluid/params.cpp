@@ -29,31 +29,7 @@ void check_direction(const std::string& name, const Vec3& v) {
 
 }  // namespace
 
-bool ObstacleParams::contains(const Vec3& x) const {
-  const Vec3 d = x - center;
-  switch (shape) {
-    case ObstacleShape::kBox: return (d.array().abs() <= half_size.array()).all();
-    case ObstacleShape::kSphere: return d.squaredNorm() <= radius * radius;
-    case ObstacleShape::kCylinder: {
-      const Vec3 a = axis.normalized();
-      const double along = d.dot(a);
-      return std::fabs(along) <= 0.5 * length && (d - along * a).squaredNorm() <= radius * radius;
-    }
-  }
-  return false;
-}
-
-double ObstacleParams::thickness() const {
-  return shape == ObstacleShape::kBox ? 2.0 * half_size.minCoeff() : 2.0 * radius;
-}
-
-void ObstacleParams::validate(const std::string& prefix) const {
-  check_position(join(prefix, "center"), center);
-  check_half_size(join(prefix, "half_size"), half_size);
-  check_length(join(prefix, "radius"), radius);
-  check_direction(join(prefix, "axis"), axis);
-  check_length(join(prefix, "length"), length);
-}
+void ObstacleParams::validate(const std::string& prefix) const { validate_geometry(prefix); }
 
 void FanParams::validate(const std::string& prefix) const {
   check_position(join(prefix, "center"), center);
@@ -90,8 +66,10 @@ void FluidParams::validate(const std::string& prefix) const {
     fans[i].validate(join(prefix, "fans[" + std::to_string(i) + "]"));
   if (obstacles.size() > 65535)
     fail_param(join(prefix, "obstacles"), "at most 65535 obstacles", obstacles.size());
-  for (size_t i = 0; i < obstacles.size(); ++i)
+  for (size_t i = 0; i < obstacles.size(); ++i) {
     obstacles[i].validate(join(prefix, "obstacles[" + std::to_string(i) + "]"));
+    obstacles[i].validate_mesh(join(prefix, "obstacles[" + std::to_string(i) + "]"));
+  }
   turbulence.validate(join(prefix, "turbulence"));
 }
 

@@ -8,6 +8,7 @@
 
 #include "common/enums.h"
 #include "common/keyframes.h"
+#include "common/shapes.h"
 #include "common/types.h"
 
 namespace flagsim {
@@ -55,12 +56,6 @@ struct EnumNames<Slip> {
   static constexpr std::array<const char*, 2> names{"free_slip", "no_slip"};
 };
 
-enum class ObstacleShape { kBox, kSphere, kCylinder };
-template <>
-struct EnumNames<ObstacleShape> {
-  static constexpr std::array<const char*, 3> names{"box", "sphere", "cylinder"};
-};
-
 /// Velocity across the tunnel's inflow face (x-min): uniform, or parabolic across each axis
 /// whose two walls are no-slip (the laminar channel profile), with the same mean, so the flux is
 /// the wind's either way.
@@ -70,20 +65,10 @@ struct EnumNames<InflowProfile> {
   static constexpr std::array<const char*, 2> names{"uniform", "parabolic"};
 };
 
-/// A static solid in the air: a box, a sphere or a capped cylinder. The cells whose centres lie
-/// inside it are solid (csrc/fluid/solids.h).
-struct ObstacleParams {
-  ObstacleShape shape = ObstacleShape::kBox;
-  Vec3 center{0, 0, 0};           ///< m
-  Vec3 half_size{0.1, 0.1, 0.1};  ///< m, box half extents (shape "box")
-  double radius = 0.1;            ///< m (sphere, cylinder)
-  Vec3 axis{0, 0, 1};             ///< cylinder axis, normalised on use
-  double length = 1.0;            ///< m, cylinder length between its flat caps
+/// A static solid in the air: a box, a sphere, a capped cylinder, a capsule or a closed triangle
+/// mesh (common/shapes.h). The cells whose centres lie inside it are solid (csrc/fluid/solids.h).
+struct ObstacleParams : SolidGeometry {
   Slip slip = Slip::kNoSlip;
-  /// True when point x (m) lies inside (closed).
-  bool contains(const Vec3& x) const;
-  /// The solid's thinnest extent, m: the smallest box edge, or the diameter.
-  double thickness() const;
   /// Throws InvalidArgument naming "<prefix>.<field>" (e.g. "air.obstacles[0].radius").
   void validate(const std::string& prefix) const;
 };

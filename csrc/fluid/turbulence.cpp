@@ -81,55 +81,7 @@ double noise_ramp(double r, double* derivative) {
 }
 
 double obstacle_distance(const ObstacleParams& o, const Vec3& x, Vec3* gradient) {
-  const Vec3 p = x - o.center;
-  Vec3 g = Vec3::UnitX();
-  double d = 0;
-  switch (o.shape) {
-    case ObstacleShape::kSphere: {
-      const double r = p.norm();
-      d = r - o.radius;
-      if (r > 0) g = p / r;
-      break;
-    }
-    case ObstacleShape::kCylinder: {
-      const Vec3 a = o.axis.normalized();
-      const double h = p.dot(a);
-      const Vec3 rho = p - h * a;
-      const double rr = rho.norm();
-      const Vec3 radial = rr > 0 ? Vec3(rho / rr) : a.unitOrthogonal();
-      const Vec3 along = h >= 0 ? a : Vec3(-a);
-      const double dr = rr - o.radius, dh = std::fabs(h) - 0.5 * o.length;
-      if (dr > 0 && dh > 0) {
-        d = std::hypot(dr, dh);
-        g = (dr * radial + dh * along) / d;
-      } else if (dr >= dh) {
-        d = dr;
-        g = radial;
-      } else {
-        d = dh;
-        g = along;
-      }
-      break;
-    }
-    case ObstacleShape::kBox: {
-      const Vec3 q = p.cwiseAbs() - o.half_size;
-      const Vec3 sign = p.unaryExpr([](double v) { return v < 0 ? -1.0 : 1.0; });
-      const Vec3 out = q.cwiseMax(0.0);
-      const double outside = out.norm();
-      if (outside > 0) {
-        d = outside;
-        g = out.cwiseProduct(sign) / outside;
-      } else {
-        int m = 0;
-        d = q.maxCoeff(&m);
-        g = Vec3::Zero();
-        g[m] = sign[m];
-      }
-      break;
-    }
-  }
-  if (gradient) *gradient = g;
-  return d;
+  return solid_distance(o, x, gradient);
 }
 
 CurlNoise::CurlNoise(const TurbulenceParams& params, std::vector<ObstacleParams> solids)

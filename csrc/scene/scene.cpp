@@ -26,6 +26,18 @@ ObstacleParams AirParams::pole_solid(const PoleParams& pole) {
   return o;
 }
 
+void SolidParams::validate(const std::string& p) const {
+  ObstacleParams::validate(p);
+  check_length(p + ".thickness", thickness);
+  check_nonnegative(p + ".friction", friction);
+  motion.validate(p + ".motion");
+  if (air && !motion.empty())
+    fail_param(p + ".air",
+               "false for a keyframed solid (the air's solids are static; a moving solid is "
+               "cloth-only)",
+               "true");
+}
+
 std::vector<FlagSpec> Scene::flags() const {
   std::vector<FlagSpec> out{FlagSpec{flag, drag, integrator, flapping, pole}};
   out.insert(out.end(), more_flags.begin(), more_flags.end());
@@ -112,11 +124,21 @@ void Scene::validate() const {
     fail_param("air.coupling",
                "\"one_way\" unless air.model is \"grid\" (two-way coupling pushes the air grid)",
                "\"two_way\"");
+  for (size_t i = 0; i < solids.size(); ++i) {
+    solids[i].validate("solids[" + std::to_string(i) + "]");
+    solids[i].validate_mesh("solids[" + std::to_string(i) + "]");
+  }
+  for (const FlagSpec& f : all)
+    if (air.pole_obstacle && !f.flag.pin_motion.empty())
+      fail_param("air.pole_obstacle",
+                 "false with a keyframed flag.pin_motion (the air's solids are static)", "true");
   if (air.model == AirModel::kGrid) {
     AirParams with_pole = air;
     if (air.pole_obstacle)
       for (const FlagSpec& f : all)
         if (f.pole.enabled) with_pole.obstacles.push_back(AirParams::pole_solid(f.pole));
+    for (const SolidParams& s : solids)
+      if (s.air) with_pole.obstacles.push_back(s);
     with_pole.validate_combination("air");
   }
   check_finite_vec("gravity", gravity);
@@ -263,6 +285,40 @@ Scene Scene::emergent() {
   return s;
 }
 
+Scene Scene::boat() {
+  Scene s;
+  s.name = "boat";
+  s.flag.rows = 12;
+  s.flag.cols = 18;
+  s.flag.width = 0.9;
+  s.flag.height = 0.6;
+  s.flag.origin = Vec3(0.055, 0.0, 0.0);
+  s.flag.imperfection = 1e-3;
+  // The mast stands on the deck at y = -2.5 m; the boat rolls +-12 degrees about its length (the
+  // x axis, downwind) with a 4 s period and pitches +-5 degrees about z with a 3 s period. The two
+  // are sampled every 0.125 s over their common 12 s period (piecewise linear: 2 % of the peak
+  // angular velocity lost at the turning points), then played again (repeat).
+  MotionSchedule& m = s.flag.pin_motion;
+  m.pivot = Vec3(0.0, -2.5, 0.0);
+  m.repeat = true;
+  constexpr double kPi = 3.14159265358979323846;
+  for (int k = 0; k <= 96; ++k) {
+    const double t = 0.125 * k;
+    MotionKey key;
+    key.time = t;
+    key.rotation = Vec3(12.0 * std::sin(2 * kPi * t / 4.0), 0.0, 5.0 * std::sin(2 * kPi * t / 3.0));
+    key.translation = Vec3(0.0, 0.15 * std::sin(2 * kPi * t / 3.0), 0.0);  // heave
+    m.keys.push_back(key);
+  }
+  s.air.model = AirModel::kUniform;
+  s.air.wind = WindSchedule(Vec3(6.0, 0.0, 0.0));
+  s.air.turbulence.intensity.keys = {{0.0, 0.8}};
+  s.drag.model = DragModel::kTriangle;
+  s.flapping.mode = FlapMode::kOff;
+  s.dt = 0.01;
+  return s;
+}
+
 std::vector<std::pair<std::string, std::string>> builtin_scenes() {
   return {
       {"paper",
@@ -281,6 +337,9 @@ std::vector<std::pair<std::string, std::string>> builtin_scenes() {
       {"emergent",
        "a flag that flaps with eq. 5 off: two-way coupling, curl-noise turbulence, the pole a "
        "solid of the air"},
+      {"boat",
+       "a flag on the mast of a boat rolling and pitching in a 6 m/s wind (flag.pin_motion "
+       "moves the pole and the pins)"},
   };
 }
 
@@ -291,6 +350,7 @@ Scene builtin_scene(const std::string& name) {
   if (name == "pole_wake") return Scene::pole_wake();
   if (name == "large") return Scene::large();
   if (name == "emergent") return Scene::emergent();
+  if (name == "boat") return Scene::boat();
   std::string known;
   for (const auto& [n, d] : builtin_scenes()) known += (known.empty() ? "" : ", ") + n;
   throw InvalidArgument("unknown scene '" + name + "'; built-in scenes are: " + known);

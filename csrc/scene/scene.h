@@ -48,6 +48,18 @@ struct AirParams : FluidParams {
   void validate(const std::string& prefix = "air") const;
 };
 
+/// A solid of the scene: one description for the air (its cells solid, as air.obstacles) and the
+/// cloth (collided with, csrc/collision/solids.h). A keyframed solid (motion) is cloth-only: the
+/// air's solids are static.
+struct SolidParams : ObstacleParams {
+  bool air = true;           ///< a solid of the air grid (air.model "grid"; static only)
+  bool cloth = true;         ///< the flag collides with it
+  double thickness = 0.005;  ///< m, the distance the flag's vertices keep from its surface
+  double friction = 0.3;     ///< Coulomb coefficient of the cloth's contact
+  MotionSchedule motion;     ///< keyframed rigid motion (cloth only); empty = at rest
+  void validate(const std::string& prefix) const;
+};
+
 /// One flag of a scene with several (TOML [[flags]]): its cloth and fabric, pins, pole, drag,
 /// flapping and integrator. The flags of a scene share its air, gravity, dt and self_collision.
 struct FlagSpec {
@@ -67,8 +79,9 @@ struct Scene {
   FlappingParams flapping;
   SelfCollisionParams self_collision;
   PoleParams pole;
-  Vec3 gravity{0.0, -9.81, 0.0};  ///< m/s^2
-  double dt = 0.01;               ///< s, one Simulation step
+  std::vector<SolidParams> solids;  ///< TOML [[solids]], every flag collides with them
+  Vec3 gravity{0.0, -9.81, 0.0};    ///< m/s^2
+  double dt = 0.01;                 ///< s, one Simulation step
   /// Flags 1, 2, ... of a scene with several; flag 0 is the fields flag, drag, integrator,
   /// flapping and pole above (so a one-flag scene is exactly what it always was).
   std::vector<FlagSpec> more_flags;
@@ -104,6 +117,9 @@ struct Scene {
   /// A flag that flaps with eq. 5 off (issue 24): two-way coupling, curl-noise turbulence and
   /// the pole as a solid of the air, on a periodic grid around the paper's flag.
   static Scene emergent();
+  /// A flag on the mast of a boat rolling and pitching in a 6 m/s wind: flag.pin_motion moves the
+  /// pole and the pins together (roll about the boat's length, pitch across it, at the deck).
+  static Scene boat();
 };
 
 /// Built-in scenes: (name, one-line description), in display order.

@@ -17,12 +17,12 @@
 namespace flagsim {
 
 double EnergyLedger::unexplained_net() const {
-  return integrator + strain_limit + pole + self_collision;
+  return integrator + strain_limit + pole + solids + self_collision;
 }
 
 double EnergyLedger::unexplained_since(const EnergyLedger& b) const {
-  const double projections =
-      (strain_limit - b.strain_limit) + (pole - b.pole) + (self_collision - b.self_collision);
+  const double projections = (strain_limit - b.strain_limit) + (pole - b.pole) +
+                             (solids - b.solids) + (self_collision - b.self_collision);
   return std::max(integrator - b.integrator, 0.0) + std::max(projections, 0.0);
 }
 
@@ -47,10 +47,11 @@ Scene validated(const Scene& s) {
 }
 
 // Every enabled pole of the scene's flags, as solids of the air.
+// The poles at rest (a keyframed pin motion moves its pole: not a solid of the air).
 std::vector<ObstacleParams> pole_solids(const Scene& s) {
   std::vector<ObstacleParams> out;
   for (const FlagSpec& f : s.flags())
-    if (f.pole.enabled) out.push_back(AirParams::pole_solid(f.pole));
+    if (f.pole.enabled && f.flag.pin_motion.empty()) out.push_back(AirParams::pole_solid(f.pole));
   return out;
 }
 }  // namespace
@@ -68,6 +69,7 @@ Simulation::Simulation(const Scene& scene, Simulation* host)
   const Index N = topo_.num_vertices();
   x_ = initial_positions(topo_, scene_.flag);
   v_.setZero(N, 3);
+  setup_pins();
   u_.setZero(N, 3);
   x_start_ = x_;
   v_start_ = v_;
@@ -88,8 +90,13 @@ Simulation::Simulation(const Scene& scene, Simulation* host)
       build_fluid();
     }
   }
-  if (scene_.air.model == AirModel::kUniform && scene_.air.turbulence.enabled())
-    noise_ = CurlNoise(scene_.air.turbulence, pole_solids(whole));  // no air flows into a pole
+  if (scene_.air.model == AirModel::kUniform && scene_.air.turbulence.enabled()) {
+    // No air flows into a pole at rest or a solid of the air.
+    std::vector<ObstacleParams> solids = pole_solids(whole);
+    for (const SolidParams& solid : whole.solids)
+      if (solid.air) solids.push_back(solid);
+    noise_ = CurlNoise(scene_.air.turbulence, std::move(solids));
+  }
   if (built(Stage::kSelfCollision)) build_self_collision();
   n_.resize(N, 3);
   update_normals();
@@ -103,11 +110,7 @@ Simulation::Simulation(const Scene& scene, Simulation* host)
   for (int i = 0; i < num_flags(); ++i)  // two-way: every flag's reaction goes into the grid
     if (flag(i).built(Stage::kCoupling))
       reactions_.push_back({&flag(i).x_start_, &flag(i).reaction_});
-  for (int s = 0; s < kNumStages; ++s) {
-    bool any = false;
-    for (int i = 0; i < num_flags(); ++i) any = any || flag(i).built_[s];
-    if (any) stage_names_.emplace_back(name_of(Stage(s)));
-  }
+  name_stages();
 }
 
 Simulation& Simulation::flag(int i) {
@@ -143,9 +146,34 @@ void Simulation::choose_stages() {
   const FlapMode flap = scene_.flapping.mode;
   built(Stage::kFlap) = flap == FlapMode::kDisplace || flap == FlapMode::kForce;
   built(Stage::kFlapVisual) = flap == FlapMode::kVisual;
+  built(Stage::kPins) = pin_driver_ == PinDriver::kKeyframes;
   built(Stage::kPole) = scene_.pole.enabled;
+  built(Stage::kSolids) = !cloth_solids_.empty();
   built(Stage::kSelfCollision) = scene_.self_collision.enabled;
   built(Stage::kCheck) = true;
+}
+
+// The pinned vertices and their rest positions; with keyframes, the whole flag starts at pose(0).
+// The scene's solids the cloth collides with.
+void Simulation::setup_pins() {
+  for (Index i = 0; i < topo_.num_vertices(); ++i)
+    if (topo_.pinned(i)) pin_index_.push_back(i);
+  const Index P = Index(pin_index_.size());
+  pin_rest_.resize(P, 3);
+  for (Index k = 0; k < P; ++k) pin_rest_.row(k) = x_.row(pin_index_[k]);
+  if (!scene_.flag.pin_motion.empty()) {
+    pin_driver_ = PinDriver::kKeyframes;
+    pose_now_ = scene_.flag.pin_motion.at(0.0);
+    for (Index i = 0; i < x_.rows(); ++i) x_.row(i) = pose_now_.apply(row(x_, i)).transpose();
+  }
+  pin_hold_.resize(P, 3);
+  for (Index k = 0; k < P; ++k) pin_hold_.row(k) = x_.row(pin_index_[k]);
+  pin_goal_ = pin_at_ = pin_start_ = pin_hold_;
+  for (const SolidParams& s : scene_.solids)
+    if (s.cloth) {
+      cloth_solids_.emplace_back(s, s.thickness, s.friction);
+      solid_motions_.push_back(s.motion);
+    }
 }
 
 void Simulation::build_self_collision() {
@@ -238,6 +266,8 @@ void Simulation::build_fluid() {
   FluidParams fp = scene_.air;
   if (scene_.air.pole_obstacle)
     for (const ObstacleParams& o : pole_solids(scene_)) fp.obstacles.push_back(o);
+  for (const SolidParams& solid : scene_.solids)
+    if (solid.air) fp.obstacles.push_back(solid);
   struct Threads {  // the thread count the FFTW plans are made for, restored however we leave
     int before = num_threads();
     ~Threads() { set_num_threads(before); }
@@ -279,6 +309,89 @@ void Simulation::check_inside_grid() const {
 bool Simulation::pipelined() const { return beside_ != nullptr; }
 
 void Simulation::update_normals() { compute_vertex_normals(topo_, x_, n_); }
+
+// The stages any flag runs (a flag that starts moving its pins adds "pins" to its host's list).
+void Simulation::name_stages() {
+  if (host_) {
+    host_->name_stages();
+    return;
+  }
+  stage_names_.clear();
+  for (int s = 0; s < kNumStages; ++s) {
+    bool any = false;
+    for (int i = 0; i < num_flags(); ++i) any = any || flag(i).built_[s];
+    if (any) stage_names_.emplace_back(name_of(Stage(s)));
+  }
+}
+
+void Simulation::set_pin_targets(const MatX3& targets) {
+  if (pin_driver_ == PinDriver::kKeyframes)
+    throw InvalidArgument(
+        "set_pin_targets: flag.pin_motion is keyframed, and the keys drive the pins; set targets "
+        "on a scene without flag.pin_motion");
+  const Index P = Index(pin_index_.size());
+  if (targets.rows() != P)
+    fail_param("targets",
+               "an array of shape (" + std::to_string(P) + ", 3), one row per pinned vertex",
+               "(" + std::to_string(targets.rows()) + ", 3)");
+  for (Index k = 0; k < P; ++k)
+    check_position("targets[" + std::to_string(k) + "]", Vec3(targets.row(k).transpose()));
+  pin_goal_ = targets;
+  pin_driver_ = PinDriver::kTargets;
+  built(Stage::kPins) = true;
+  name_stages();
+}
+
+void Simulation::set_pin_pose(const Vec3& translation, const Vec3& rotation_degrees) {
+  if (pin_driver_ == PinDriver::kKeyframes)
+    throw InvalidArgument(
+        "set_pin_pose: flag.pin_motion is keyframed, and the keys drive the pins; set a pose on a "
+        "scene without flag.pin_motion");
+  check_position("translation", translation);
+  check_finite_vec("rotation", rotation_degrees);
+  MotionSchedule one;
+  one.pivot = scene_.flag.pin_motion.pivot;
+  one.keys.push_back({0.0, translation, rotation_degrees});
+  pose_goal_ = one.at(0.0);
+  pin_driver_ = PinDriver::kPose;
+  built(Stage::kPins) = true;
+  name_stages();
+}
+
+// The pose of the pins and the pole at time t within the step being stepped.
+Pose Simulation::pin_pose(double t) const {
+  switch (pin_driver_) {
+    case PinDriver::kKeyframes: return scene_.flag.pin_motion.at(t);
+    case PinDriver::kPose: {
+      const double s = std::clamp((t - time_) / scene_.dt, 0.0, 1.0);
+      Pose p;
+      p.R = Eigen::Quaterniond(pose_start_.R)
+                .slerp(s, Eigen::Quaterniond(pose_goal_.R))
+                .toRotationMatrix();
+      p.t = (1 - s) * pose_start_.t + s * pose_goal_.t;
+      return p;
+    }
+    default: return pose_now_;
+  }
+}
+
+// Where the pinned vertices are at time t within the step (P x 3).
+void Simulation::pin_targets(double t, MatX3& out) const {
+  switch (pin_driver_) {
+    case PinDriver::kKeyframes:
+    case PinDriver::kPose: {
+      const Pose p = pin_pose(t);
+      for (Index k = 0; k < out.rows(); ++k) out.row(k) = p.apply(row(pin_rest_, k)).transpose();
+      return;
+    }
+    case PinDriver::kTargets: {
+      const double s = std::clamp((t - time_) / scene_.dt, 0.0, 1.0);
+      out = (1 - s) * pin_start_ + s * pin_goal_;
+      return;
+    }
+    default: out = pin_hold_;
+  }
+}
 
 // One SelfCollision over the union of the flags (flag i's vertices from between_offset_[i]):
 // pairs within a flag come again, so a response between flags cannot leave a flag crossing
@@ -432,6 +545,10 @@ void Simulation::begin_step() {
   drag_impulse_.setZero();
   step_pin_impulse_.setZero();
   if (built(Stage::kFlap)) flap_.save_step_start();
+  if (built(Stage::kPins)) {
+    pose_start_ = pose_now_;
+    for (Index k = 0; k < pin_start_.rows(); ++k) pin_start_.row(k) = x_.row(pin_index_[k]);
+  }
 }
 
 void Simulation::halve_until_plausible(Implausible bad) {
@@ -449,6 +566,14 @@ void Simulation::halve_until_plausible(Implausible bad) {
 void Simulation::finish_step() {
   pole_force_ = step_pin_impulse_ / scene_.dt;
   pole_impulse_ += step_pin_impulse_;
+  if (built(Stage::kPins)) {
+    // A pose or targets from Python hold for one step; the pins then stay where they got to.
+    pose_now_ = pin_pose(time_ + scene_.dt);
+    if (pin_driver_ == PinDriver::kTargets || pin_driver_ == PinDriver::kPose) {
+      pin_driver_ = PinDriver::kHold;
+      pin_hold_ = pin_at_;
+    }
+  }
   ++step_count_;
   time_ = double(step_count_) * scene_.dt;  // no drift from summing dt
   update_normals();
@@ -544,8 +669,11 @@ Simulation::Implausible Simulation::step_piece() {
   x_piece_ = x_;
   stage_air();             // air velocity at the masses: the wind schedule or the grid (eq. 1, 2)
   stage_flap();            // eq. 5 as a drift of the positions or a force, held over the piece
+  stage_pins();            // moving pins: their velocity over the piece, the pole's motion
   stage_integrate();       // gravity, drag (eq. 3), springs (eq. 4); strain limiting per substep
+  place_pins();            // the pinned vertices exactly where their motion puts them
   stage_pole();            // the pole cylinder, alternating with strain limiting
+  stage_solids();          // boxes, spheres, capsules, meshes: swept, with thickness and friction
   stage_self_collision();  // vertex-triangle and edge-edge contacts (paper §1), pole kept out
   Implausible bad = stage_check();  // finite, strain within its promise, energy explained
   if (!bad.cause.empty()) return bad;
@@ -604,7 +732,8 @@ void Simulation::stage_pole() {
   Index moved;
   {
     StageClock::Scope t(&clock_, Stage::kPole);
-    moved = collide_pole(scene_.pole, x_piece_, x_, v_, topo_.inv_mass);
+    moved = collide_pole(scene_.pole, x_piece_, x_, v_, topo_.inv_mass, nullptr,
+                         pole_moves_ ? &pole_motion_ : nullptr);
   }
   const bool changed = moved > 0;  // a vertex left alone keeps its position and velocity
   for (int k = 0; k < kPoleStrainRounds && moved > 0 && built(Stage::kStrainLimit); ++k) {
@@ -613,9 +742,61 @@ void Simulation::stage_pole() {
       ledger_.strain_limit += limit_cloth_strain(x_, v_);
     }
     StageClock::Scope t(&clock_, Stage::kPole);
-    moved = collide_pole(scene_.pole, x_piece_, x_, v_, topo_.inv_mass);
+    moved = collide_pole(scene_.pole, x_piece_, x_, v_, topo_.inv_mass, nullptr,
+                         pole_moves_ ? &pole_motion_ : nullptr);
   }
   if (changed) book_energy_change(ledger_.pole, ledger_.strain_limit - strain_before);
+}
+
+// The pinned vertices' velocity over the piece: the secant of their prescribed path, so that the
+// integrator carries them to where the motion puts them at the piece's end (place_pins puts them
+// there to the last bit). The kinetic energy this gives the pinned masses is the pins' work.
+void Simulation::stage_pins() {
+  if (!built(Stage::kPins)) return;
+  StageClock::Scope t(&clock_, Stage::kPins);
+  pin_targets(t_piece_ + h_, pin_at_);
+  double kinetic = 0;
+  for (Index k = 0; k < Index(pin_index_.size()); ++k) {
+    const Index i = pin_index_[k];
+    const Vec3 vel = (row(pin_at_, k) - row(x_, i)) / h_;
+    kinetic += 0.5 * topo_.mass[i] * (vel.squaredNorm() - v_.row(i).squaredNorm());
+    v_.row(i) = vel.transpose();
+  }
+  ledger_.pins += kinetic;
+  energy_end_ += kinetic;  // not an edit between steps
+  pole_moves_ = scene_.pole.enabled && pin_driver_ != PinDriver::kNone;
+  if (pole_moves_) pole_motion_ = {pin_pose(t_piece_), pin_pose(t_piece_ + h_), h_};
+}
+
+void Simulation::place_pins() {
+  if (!built(Stage::kPins)) return;
+  {
+    StageClock::Scope t(&clock_, Stage::kPins);
+    for (Index k = 0; k < Index(pin_index_.size()); ++k) x_.row(pin_index_[k]) = pin_at_.row(k);
+  }
+  book_energy_change(ledger_.pins, 0.0);  // the last bits of the integrator's x + h v
+}
+
+// Each solid in turn, moving or at rest; the work a moving solid does (its surface's velocity
+// times the impulse it gave) is prescribed motion's, the rest the projection's.
+void Simulation::stage_solids() {
+  if (!built(Stage::kSolids)) return;
+  SolidContacts all;
+  {
+    StageClock::Scope t(&clock_, Stage::kSolids);
+    for (std::size_t k = 0; k < cloth_solids_.size(); ++k) {
+      RigidMotion m;
+      const MotionSchedule& keys = solid_motions_[k];
+      if (!keys.empty()) m = {keys.at(t_piece_), keys.at(t_piece_ + h_), h_};
+      const SolidContacts c = collide_solid(cloth_solids_[k], keys.empty() ? nullptr : &m, x_piece_,
+                                            x_, v_, topo_.inv_mass, topo_.mass);
+      all.moved += c.moved;
+      all.wall_work += c.wall_work;
+    }
+  }
+  if (all.moved == 0) return;
+  ledger_.pins += all.wall_work;
+  book_energy_change(ledger_.solids, all.wall_work);
 }
 
 void Simulation::stage_self_collision() {
@@ -623,7 +804,7 @@ void Simulation::stage_self_collision() {
   {
     StageClock::Scope t(&clock_, Stage::kSelfCollision);
     self_collision_->resolve(x_piece_, x_, v_, topo_.inv_mass,
-                             built(Stage::kPole) ? &scene_.pole : nullptr,
+                             built(Stage::kPole) && !pole_moves_ ? &scene_.pole : nullptr,
                              built(Stage::kStrainLimit) ? &strain_projector_ : nullptr);
   }
   book_energy_change(ledger_.self_collision, 0.0);
@@ -860,7 +1041,8 @@ Simulation::Implausible Simulation::check_energy() const {
   s << "the step (in pieces of " << h_ << " s) made " << gain
     << " J that no stage's work explains (integrator " << a.integrator - b.integrator
     << ", strain limiting " << a.strain_limit - b.strain_limit << ", pole " << a.pole - b.pole
-    << ", self-collision " << a.self_collision - b.self_collision << " J; since the start, net "
+    << ", solids " << a.solids - b.solids << ", self-collision "
+    << a.self_collision - b.self_collision << " J; since the start, net "
     << ledger_.unexplained_net() << " J, of which the flag can still hold " << held
     << " J), more than integrator.energy_tolerance x the energy scale = " << allowed << " J";
   return {"energy", -1, s.str()};

@@ -11,6 +11,7 @@
 #include "cloth/integrators.h"
 #include "cloth/topology.h"
 #include "collision/self_collision.h"
+#include "collision/solids.h"
 #include "common/parallel.h"
 #include "flapping/flap_stage.h"
 #include "fluid/fluid.h"
@@ -35,7 +36,10 @@ struct EnergyLedger {
   double pole = 0;            ///< the pole's collision projection
   double self_collision = 0;  ///< the self-collision response, with the strain limiting and
                               ///< pole passes inside its sweeps
-  double pins = 0;            ///< pinned vertices that move
+  double pins = 0;            ///< prescribed motion: pinned vertices that move (the pins'
+                              ///< reaction force . their velocity, and the kinetic energy they
+                              ///< give the pinned masses), and moving solids' pushes
+  double solids = 0;          ///< the solids' collision projection (less a moving solid's push)
   double edits = 0;           ///< the state written from outside between steps
   double integrator = 0;      ///< remainder: the integrator's numerical energy change
   /// The part no physical stage explains, from the ledger at `before` to this one: the positive
@@ -44,19 +48,20 @@ struct EnergyLedger {
   /// the projections should only take energy out; counted apart, neither can hide the other's
   /// gain (a projection pumping the springs that the next solve damps).
   double unexplained_since(const EnergyLedger& before) const;
-  /// Net since construction: integrator + strain limiting + pole + self-collision, J. What the
-  /// flag still holds of the energy no stage explains (dissipation counts back).
+  /// Net since construction: integrator + strain limiting + pole + solids + self-collision, J. What
+  /// the flag still holds of the energy no stage explains (dissipation counts back).
   double unexplained_net() const;
 };
 
 /// The ledger's entries by name, in the order energy_ledger() reports them (Python dict keys).
-inline constexpr std::array<std::pair<const char*, double EnergyLedger::*>, 10> kLedgerEntries{{
+inline constexpr std::array<std::pair<const char*, double EnergyLedger::*>, 11> kLedgerEntries{{
     {"gravity", &EnergyLedger::gravity},
     {"drag", &EnergyLedger::drag},
     {"damping", &EnergyLedger::damping},
     {"flap", &EnergyLedger::flap},
     {"strain_limit", &EnergyLedger::strain_limit},
     {"pole", &EnergyLedger::pole},
+    {"solids", &EnergyLedger::solids},
     {"self_collision", &EnergyLedger::self_collision},
     {"pins", &EnergyLedger::pins},
     {"edits", &EnergyLedger::edits},
@@ -174,6 +179,19 @@ class Simulation {
   /// after the other on one. Same bits as the serial order either way (docs/design.md "Air and
   /// cloth side by side").
   bool pipelined() const;
+  /// The pinned vertices, in the order set_pin_targets takes them.
+  const std::vector<Index>& pinned_vertices() const { return pin_index_; }
+  /// Where the pinned vertices are at the end of the next step (P x 3, m, in pinned_vertices()
+  /// order): they move there in a straight line at constant velocity over the step, and stay
+  /// there after it unless set again. The pole stays. InvalidArgument when flag.pin_motion is
+  /// keyframed (the keys drive the pins) or a target is not finite.
+  void set_pin_targets(const MatX3& targets);
+  /// The pins and the pole together at rigid pose (translation m, rotation vector in degrees
+  /// about flag.pin_motion.pivot, as a MotionKey) at the end of the next step, reached by a
+  /// linear translation and a slerp of the rotation over the step.
+  void set_pin_pose(const Vec3& translation, const Vec3& rotation_degrees);
+  /// The pole's rigid pose now (identity: where scene.pole puts it).
+  const Pose& pole_pose() const { return pose_now_; }
 
  private:
   static constexpr int kNumStages = int(Stage::kCount);
@@ -198,12 +216,16 @@ class Simulation {
   void restore_step_start();
   // Set-up (the constructor, in this order).
   void choose_stages();
+  void name_stages();
   void build_fluid();
   void check_inside_grid() const;
   void build_self_collision();
   void build_between_flags();
   void setup_flapping();
   void setup_energy();
+  void setup_pins();
+  Pose pin_pose(double t) const;
+  void pin_targets(double t, MatX3& out) const;
   void check_explicit_step() const;
   // The stages of a piece (step_piece), each timed by its own StageClock scope.
   void stage_air();
@@ -211,7 +233,10 @@ class Simulation {
   void scale_drag_for_air_response();
   void stage_flap();
   void stage_integrate();
+  void stage_pins();
+  void place_pins();
   void stage_pole();
+  void stage_solids();
   void stage_self_collision();
   Implausible stage_check();
   // After every flag's pieces: contacts between flags (several flags, self_collision enabled).
@@ -274,6 +299,21 @@ class Simulation {
   double energy_end_ = 0, energy_run_ = 0, gravity_potential_0_ = 0, energy_scale_ = 0;
   MatX3 flap_drift_;  // (N x 3) m/s, "displace": dz n / h, the integrator's drift
   MatX3 flap_force_;  // (N x 3) N, "force": held over the piece by the integrator
+
+  // Moving pins (flag.pin_motion or set_pin_targets / set_pin_pose): the pinned vertices, their
+  // rest positions (P x 3) and where they are held when nothing drives them (P x 3); the pose of
+  // the pins and pole now and, for a pose set from Python, the one asked for the end of the next
+  // step. kNone: the pins move with whatever velocity they have (as before moving pins).
+  enum class PinDriver { kNone, kKeyframes, kHold, kTargets, kPose };
+  PinDriver pin_driver_ = PinDriver::kNone;
+  std::vector<Index> pin_index_;
+  MatX3 pin_rest_, pin_hold_, pin_goal_, pin_at_, pin_start_;  // (P x 3) m
+  Pose pose_now_, pose_goal_, pose_start_;
+  RigidMotion pole_motion_;  // the pole over the piece being stepped
+  bool pole_moves_ = false;
+  // The scene's solids the flag collides with (cloth = true), and their motions (empty: at rest).
+  std::vector<ClothSolid> cloth_solids_;
+  std::vector<MotionSchedule> solid_motions_;
 
   std::unique_ptr<SelfCollision> self_collision_;
   std::atomic<bool> stepping_{false};          // a step() is running (one thread at a time)

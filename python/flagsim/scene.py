@@ -18,6 +18,15 @@ A TOML scene mirrors the Scene's sections; every key is optional and unknown key
     [integrator]
     method = "implicit"
 
+    [flag.pin_motion]         # pins and pole moved rigidly (keys: time, translation, rotation)
+    pivot = [0.0, -2.5, 0.0]
+    keys = [[0.0, [0, 0, 0], [0, 0, 0]], [1.0, [0, 0.2, 0], [10, 0, 0]]]
+
+    [[solids]]                # one description for the air and the cloth
+    shape = "mesh"
+    mesh = "wall.obj"         # an OBJ file beside this one (or vertices = [...], faces = [...])
+    air = false
+
 Several flags share one scene (its air, gravity, dt and self_collision) as an array of tables;
 each entry starts from the scene's own flag, drag, integrator, flapping and pole (from ``base``
 and the sections above) and changes what it names (docs/multiflag.md)::
@@ -51,6 +60,7 @@ Scene = _core.Scene
 LIST_ITEM_TYPES: dict[tuple[type, str], type] = {
     (_core.AirParams, "fans"): _core.FanParams,
     (_core.AirParams, "obstacles"): _core.ObstacleParams,
+    (_core.Scene, "solids"): _core.SolidParams,
 }
 
 # The section a struct's own setters name in their errors when it stands alone (a FanParams says
@@ -58,6 +68,8 @@ LIST_ITEM_TYPES: dict[tuple[type, str], type] = {
 OWN_SECTION: dict[type, str] = {
     _core.FanParams: "fan",
     _core.ObstacleParams: "obstacle",
+    _core.SolidParams: "solid",
+    _core.MotionSchedule: "motion",
     _core.FlagSpec: "flag",
     _core.DragParams: "drag",
     _core.IntegratorParams: "integrator",
@@ -69,7 +81,14 @@ OWN_SECTION: dict[type, str] = {
 def fields(obj_or_type: Any) -> list[str]:
     """Public field names of a bound parameter struct, in definition order."""
     cls = obj_or_type if isinstance(obj_or_type, type) else type(obj_or_type)
-    return [k for k, v in vars(cls).items() if isinstance(v, property) and not k.startswith("_")]
+    out: list[str] = []
+    for klass in reversed(cls.__mro__):  # a base's fields first (SolidParams: ObstacleParams')
+        out += [
+            k
+            for k, v in vars(klass).items()
+            if isinstance(v, property) and not k.startswith("_") and k not in out
+        ]
+    return out
 
 
 def _is_struct(value: Any) -> bool:
@@ -89,6 +108,8 @@ def to_dict(obj: Any) -> dict[str, Any]:
 def _plain(v: Any) -> Any:
     if _is_struct(v):
         return to_dict(v)
+    if hasattr(v, "tolist"):  # numpy arrays (a mesh solid's vertices and faces)
+        return v.tolist()
     if isinstance(v, (list, tuple)):
         return [_plain(x) for x in v]
     return v
@@ -147,10 +168,70 @@ def _flag_entries(scene: Scene, entries: Any) -> list:
 
 
 def _renamed(message: str, cls: type, section: str) -> str:
-    own = OWN_SECTION.get(cls)
-    if own and own != section and message.startswith(own + "."):
-        return section + message[len(own) :]
+    for klass in cls.__mro__:  # a SolidParams' ObstacleParams fields say "obstacle."
+        own = OWN_SECTION.get(klass)
+        if own and own != section and message.startswith(own + "."):
+            return section + message[len(own) :]
     return message
+
+
+def load_obj(path: str | os.PathLike[str]) -> tuple[Any, Any]:
+    """Vertices (M, 3) and triangles (F, 3) of a Wavefront OBJ file.
+
+    Reads `v x y z` and `f a b c ...` lines (1-based indices, negative ones from the end,
+    `a/t/n` forms; polygons split into triangle fans); other lines are skipped. ValueError names
+    the file and line of anything it cannot read.
+    """
+    import numpy as np
+
+    path = os.fspath(path)
+    vertices: list[list[float]] = []
+    faces: list[list[int]] = []
+    try:
+        with open(path, encoding="utf-8") as f:
+            lines = f.readlines()
+    except FileNotFoundError:
+        raise ValueError(f"mesh file not found: {path}") from None
+    for n, line in enumerate(lines, 1):
+        parts = line.split()
+        try:
+            if parts[:1] == ["v"]:
+                vertices.append([float(x) for x in parts[1:4]])
+                if len(vertices[-1]) != 3:
+                    raise ValueError("a vertex needs 3 coordinates")
+            elif parts[:1] == ["f"]:
+                idx = [int(p.split("/")[0]) for p in parts[1:]]
+                if len(idx) < 3:
+                    raise ValueError("a face needs 3 vertices at least")
+                idx = [i - 1 if i > 0 else len(vertices) + i for i in idx]
+                faces += [[idx[0], idx[k], idx[k + 1]] for k in range(1, len(idx) - 1)]
+        except ValueError as e:
+            raise ValueError(f"{path}:{n}: not a valid OBJ line ({e}): {line.strip()!r}") from None
+    return np.array(vertices, dtype=float).reshape(-1, 3), np.array(faces, dtype=np.int32).reshape(
+        -1, 3
+    )
+
+
+def _read_meshes(data: dict[str, Any], directory: str) -> None:
+    """[[solids]] entries with `mesh = "file.obj"` (relative to `directory`): the file's vertices
+    and faces, shape "mesh" unless given."""
+    solids = data.get("solids")
+    if not isinstance(solids, list):
+        return
+    out = []
+    for i, item in enumerate(solids):
+        if isinstance(item, dict) and "mesh" in item:
+            item = dict(item)
+            mesh = item.pop("mesh")
+            if not isinstance(mesh, (str, os.PathLike)):
+                raise ValueError(
+                    f"solids[{i}].mesh should be the path of an OBJ file, got {mesh!r}"
+                )
+            v, f = load_obj(os.path.join(directory, os.fspath(mesh)))
+            item.setdefault("shape", "mesh")
+            item["vertices"], item["faces"] = v, f
+        out.append(item)
+    data["solids"] = out
 
 
 def builtins() -> dict[str, str]:
@@ -183,8 +264,10 @@ def named(name: str) -> Scene:
     return _core.Scene._named(name)
 
 
-def from_dict(data: dict[str, Any], source: str = "scene") -> Scene:
-    """A Scene from a dict shaped like the TOML file (optional `base` names a built-in)."""
+def from_dict(data: dict[str, Any], source: str = "scene", directory: str = ".") -> Scene:
+    """A Scene from a dict shaped like the TOML file (optional `base` names a built-in).
+
+    Mesh files named by [[solids]] `mesh` keys are read relative to `directory`."""
     data = dict(data)
     base = data.pop("base", None)
     if base is not None and not isinstance(base, str):
@@ -192,6 +275,7 @@ def from_dict(data: dict[str, Any], source: str = "scene") -> Scene:
     scene = named(base) if base else Scene()
     flags = data.pop("flags", None)
     try:
+        _read_meshes(data, directory)
         apply_dict(scene, data, "")
         if flags is not None:
             scene.flags = _flag_entries(scene, flags)
@@ -213,7 +297,7 @@ def load(path: str | os.PathLike[str]) -> Scene:
         raise ValueError(f"{path}: not valid TOML: {e}") from None
     except RecursionError:
         raise ValueError(f"{path}: not valid TOML: arrays or tables nested too deeply") from None
-    scene = from_dict(data, source=path)
+    scene = from_dict(data, source=path, directory=os.path.dirname(os.path.abspath(path)))
     if "name" not in data:
         scene.name = os.path.splitext(os.path.basename(path))[0]
     return scene
@@ -253,6 +337,7 @@ def _install() -> None:
     Scene.named = staticmethod(named)
     Scene.gallery = staticmethod(gallery)
     Scene.from_dict = staticmethod(from_dict)
+    Scene.load_obj = staticmethod(load_obj)
     Scene.to_dict = to_dict
     Scene.__reduce__ = lambda self: (from_dict, (to_dict(self),))
     for key in fields(_core.FlagParams):  # a [[flags]] entry reads like a [flag] section
@@ -266,6 +351,8 @@ def _install() -> None:
         _core.IntegratorParams,
         _core.FanParams,
         _core.ObstacleParams,
+        _core.SolidParams,
+        _core.MotionSchedule,
         _core.FlappingParams,
         _core.SelfCollisionParams,
         _core.PoleParams,

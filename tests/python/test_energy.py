@@ -17,6 +17,7 @@ ENTRIES = (
     "flap",
     "strain_limit",
     "pole",
+    "solids",
     "self_collision",
     "pins",
     "edits",

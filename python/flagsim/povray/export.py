@@ -330,6 +330,7 @@ def _export_frames(
             facing += _area_normal(positions, triangles)
             path = out / scenefiles.frame_file(k)
             text = format_mesh2(sim, comment=f"flagsim frame {k}, t = {target * dt:.6f} s")
+            text += scenefiles.pole_pose_text(sim)
             if scenefiles.write_text(path, text):
                 written += 1
             else:

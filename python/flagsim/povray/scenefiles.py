@@ -232,20 +232,47 @@ def pole_enabled(pole):
     )
 
 
+def pole_pose_text(sim):
+    """A frame's `#declare PolePose`: the pole's rigid pose (moving pins, `sim.pole_pose`; flag 0's
+    in a scene of several flags) in POV-Ray's frame, or "" when there is no pose or it is the
+    identity."""
+    pose = getattr(sim, "pole_pose", None)
+    if pose is None:
+        return ""
+    R, t = (np.asarray(a, dtype=float) for a in pose)
+    if np.array_equal(R, np.eye(3)) and not t.any():
+        return ""
+    S = np.diag([1.0, 1.0, -1.0])  # z mirrored: p' = S p, so R' = S R S and t' = S t
+    R, t = S @ R @ S, S @ t
+    # POV-Ray's matrix maps row vectors: its 3 x 3 block is R' transposed, then the translation.
+    values = list(R.T.ravel()) + list(t)
+    return (
+        "#declare PolePose = transform { matrix <" + ", ".join(f"{v:.9g}" for v in values) + "> }\n"
+    )
+
+
 def _as_list(pole):
     if pole is None:
         return []
     return list(pole) if isinstance(pole, (list, tuple)) else [pole]
 
 
-def pole_text(pole):
-    """Cylinder from the scene's pole (base, height, radius) with a ball finial on top; a list
-    of poles (a scene of several flags): one each."""
+def pole_text(pole, *, moving=True):
+    """Cylinder from the scene's pole (base, height, radius) with a ball finial on top, moved by
+    the frame's PolePose when it declares one (moving pins; `moving`); a list of poles (a scene
+    of several flags): one each, the first one moved."""
     poles = [p for p in _as_list(pole) if pole_enabled(p)]
     if not poles:
         return "// (the scene has no pole)\n"
     if len(poles) > 1:
-        return "".join(pole_text(p) for p in poles)
+        return pole_text(poles[0]) + "".join(pole_text(p, moving=False) for p in poles[1:])
+    parts = _pole_parts(poles[0])
+    if not moving:
+        return parts
+    return "union {\n" + parts + "  #ifdef (PolePose) transform { PolePose } #end\n}\n"
+
+
+def _pole_parts(pole):
     base = np.asarray(pole.base, dtype=float)
     r = float(pole.radius)
     top = base + np.array([0.0, float(pole.height), 0.0])

@@ -42,4 +42,47 @@ TEST(ScalarSchedule, FallbackWhenEmpty) {
   EXPECT_DOUBLE_EQ(s.at(0.5), 0.25);
 }
 
+TEST(MotionSchedule, RotatesAboutThePivotAndTranslatesLinearly) {
+  MotionSchedule m;
+  m.pivot = Vec3(1, 0, 0);
+  m.keys = {{0.0, Vec3::Zero(), Vec3::Zero()}, {2.0, Vec3(0, 2, 0), Vec3(0, 0, 90)}};
+  // halfway: 45 degrees about z through the pivot, then up 1 m
+  const Pose p = m.at(1.0);
+  const double c = std::sqrt(0.5);
+  EXPECT_TRUE(p.apply(Vec3(1, 0, 0)).isApprox(Vec3(1, 1, 0)));  // the pivot only translates
+  EXPECT_TRUE(p.apply(Vec3(2, 0, 0)).isApprox(Vec3(1 + c, 1 + c, 0)));
+  EXPECT_TRUE(p.inverse(p.apply(Vec3(0.3, -2, 5))).isApprox(Vec3(0.3, -2, 5)));
+  EXPECT_TRUE(m.at(-1.0).R.isApprox(Mat3::Identity()));  // first key held before
+  EXPECT_TRUE(m.at(5.0).apply(Vec3(2, 0, 0)).isApprox(Vec3(1, 3, 0), 1e-12));  // last after
+  EXPECT_TRUE(MotionSchedule().at(3.0).R.isIdentity());
+}
+
+TEST(MotionSchedule, RepeatPlaysTheKeysAgain) {
+  MotionSchedule m;
+  m.repeat = true;
+  m.keys = {{0.0, Vec3::Zero(), Vec3::Zero()},
+            {1.0, Vec3(1, 0, 0), Vec3::Zero()},
+            {2.0, Vec3::Zero(), Vec3::Zero()}};
+  for (double t : {0.25, 0.5, 1.75})
+    EXPECT_NEAR((m.at(t + 2.0).t - m.at(t).t).norm(), 0.0, 1e-12) << t;
+  EXPECT_NEAR(m.at(-0.5).t.x(), 0.5, 1e-12);
+}
+
+TEST(MotionSchedule, RejectsNonMonotoneKeysNamingThem) {
+  MotionSchedule m;
+  m.keys = {{0.0, Vec3::Zero(), Vec3::Zero()},
+            {1.0, Vec3::Zero(), Vec3::Zero()},
+            {0.5, Vec3::Zero(), Vec3::Zero()}};
+  try {
+    m.validate("flag.pin_motion");
+    FAIL() << "accepted keys out of order";
+  } catch (const InvalidArgument& e) {
+    EXPECT_NE(std::string(e.what()).find("flag.pin_motion.keys[2].time"), std::string::npos);
+  }
+  m.keys.resize(1);
+  m.repeat = true;  // no period: the one pose holds
+  m.validate("m");
+  EXPECT_TRUE(m.at(7.0).R.isIdentity());
+}
+
 }  // namespace flagsim

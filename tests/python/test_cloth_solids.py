@@ -1,0 +1,165 @@
+"""Solids the cloth collides with (issue 30 item 4): boxes, spheres, capsules and triangle meshes,
+one description for the air and the cloth ([[solids]]), continuous collision."""
+
+import flagsim
+import numpy as np
+import pytest
+
+BOX = {"center": (0.3, -0.2, -0.1), "half_size": (0.12, 0.08, 0.05)}
+
+
+def box_mesh(center, half):
+    """The box as 8 vertices and 12 outward triangles."""
+    c, h = np.asarray(center), np.asarray(half)
+    v = np.array([[(-1, 1)[i & 1], (-1, 1)[(i >> 1) & 1], (-1, 1)[(i >> 2) & 1]] for i in range(8)])
+    f = [[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+         [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]]  # fmt: skip
+    return c + v * h, np.array(f)
+
+
+def falling_flag(**solid):
+    """A free 10 x 12 flag in the x-y plane falling along -z (gravity) onto a solid below it."""
+    s = flagsim.Scene()
+    s.flag.rows, s.flag.cols = 10, 12
+    s.flag.width, s.flag.height = 0.6, 0.4
+    s.flag.origin = (0.0, 0.0, 0.0)
+    s.flag.pin = "none"
+    s.flag.damping = 0.05
+    s.pole.enabled = False
+    s.air.model = "none"
+    s.gravity = (0.0, 0.0, -9.81)
+    s.dt = 0.005
+    if solid:
+        s.solids = [flagsim.SolidParams(**solid)]
+    return s
+
+
+def test_flag_dropped_on_a_box_and_on_its_mesh_rests_the_same():
+    v, f = box_mesh(BOX["center"], BOX["half_size"])
+    rests = []
+    for solid in ({"shape": "box", **BOX}, {"shape": "mesh", "vertices": v, "faces": f}):
+        sim = flagsim.Simulation(falling_flag(air=False, friction=0.5, **solid))
+        assert "solids" in sim.stages
+        sim.step(200)  # 1 s: falls 2 cm, drapes and settles
+        rests.append(sim.positions.copy())
+    np.testing.assert_allclose(rests[1], rests[0], rtol=0, atol=1e-6)
+    # resting on the top face (z = -0.05), the thickness kept, nothing inside the box
+    x = rests[0]
+    d = np.abs(x - BOX["center"]) - BOX["half_size"]
+    outside = np.linalg.norm(np.maximum(d, 0), axis=1) + np.minimum(d.max(axis=1), 0)
+    assert outside.min() > 0.005 * (1 - 1e-2)
+    on_top = (np.abs(x[:, 0] - 0.3) < 0.1) & (np.abs(x[:, 1] + 0.2) < 0.06)
+    assert on_top.sum() > 4
+    np.testing.assert_allclose(x[on_top, 2], -0.05 + 0.005, atol=2e-3)
+    assert x[:, 2].min() < -0.1  # the rest hangs down over the edges
+
+
+@pytest.mark.parametrize("shape", ["box", "mesh"])
+def test_flag_thrown_at_30_m_s_does_not_pass_through_a_thin_wall(shape):
+    wall = {"center": (0.3, -0.2, 0.05), "half_size": (1.0, 1.0, 0.001)}  # 2 mm thick at z = 5 cm
+    solid = {"shape": "box", **wall}
+    if shape == "mesh":
+        v, f = box_mesh(wall["center"], wall["half_size"])
+        solid = {"shape": "mesh", "vertices": v, "faces": f}
+    ends = {}
+    for with_wall in (False, True):
+        s = falling_flag(air=False, **solid) if with_wall else falling_flag()
+        s.gravity = (0.0, 0.0, 0.0)
+        s.dt = 0.01  # 0.3 m per step: 150 times the wall's thickness
+        sim = flagsim.Simulation(s)
+        sim.velocities = np.tile([0.0, 0.0, 30.0], (sim.positions.shape[0], 1))
+        sim.step(5)
+        ends[with_wall] = sim.positions[:, 2].copy()
+    assert ends[False].min() > 0.051  # without the wall the whole flag is past it
+    assert ends[True].max() < 0.049 - 0.005 * (1 - 1e-2)  # with it, every vertex before it
+
+
+def test_one_description_serves_the_air_and_the_cloth():
+    s = flagsim.Scene.from_dict(
+        {
+            "base": "paper",
+            "air": {"pressure": "multigrid"},
+            "solids": [
+                {
+                    "shape": "capsule",
+                    "center": [1.2, -0.5, 0.0],
+                    "radius": 0.15,
+                    "length": 0.4,
+                    "axis": [0, 0, 1],
+                }
+            ],  # fmt: skip
+        }
+    )
+    with pytest.warns(UserWarning, match="cells across"):  # coarse for its wake: a warning
+        sim = flagsim.Simulation(s)
+    assert "solids" in sim.stages
+    obstacles = sim.fluid.obstacles
+    assert any(o.shape == "capsule" for o in obstacles)  # the air's solid too
+    assert obstacles[-1].contains((1.2, -0.5, 0.3)) and not obstacles[-1].contains((1.2, -0.3, 0))
+    sim.step(5)
+    i = next(k for k, o in enumerate(obstacles) if o.shape == "capsule")
+    assert abs(sim.fluid.obstacle_force(i)[0]) > 0  # the air pushes on it
+    s.solids[0].air = False  # a list copy: nothing changes
+    cloth_only = s.solids
+    cloth_only[0].air = False
+    s.solids = cloth_only
+    sim = flagsim.Simulation(s)
+    assert "solids" in sim.stages
+    assert not any(o.shape == "capsule" for o in sim.fluid.obstacles)
+
+
+def test_obj_file_solids_from_toml(tmp_path):
+    v, f = box_mesh(BOX["center"], BOX["half_size"])
+    lines = [f"v {a} {b} {c}" for a, b, c in v] + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in f]
+    (tmp_path / "box.obj").write_text("# a box\n" + "\n".join(lines) + "\n")
+    (tmp_path / "scene.toml").write_text(
+        '[[solids]]\nmesh = "box.obj"\nair = false\nthickness = 0.004\n'
+    )
+    s = flagsim.Scene.load(tmp_path / "scene.toml")
+    assert s.solids[0].shape == "mesh" and s.solids[0].thickness == 0.004
+    np.testing.assert_array_equal(s.solids[0].faces, f)
+    assert s.solids[0].contains(BOX["center"])
+
+
+def test_bad_solids_name_the_parameter(tmp_path):
+    with pytest.raises(ValueError, match=r"solids\[0\].shape"):
+        flagsim.Scene.from_dict({"solids": [{"shape": "cone"}]})
+    v, f = box_mesh(BOX["center"], BOX["half_size"])
+    f[3, 1] = 8
+    with pytest.raises(
+        ValueError, match=r"solids\[0\].faces\[3\] should be vertex indices in \[0, 8\)"
+    ):
+        flagsim.Scene.from_dict({"solids": [{"shape": "mesh", "vertices": v.tolist(),
+                                             "faces": f.tolist()}]})  # fmt: skip
+    with pytest.raises(ValueError, match=r"solids\[0\].vertices should be at least 4 points"):
+        flagsim.Scene.from_dict({"solids": [{"shape": "mesh"}]})
+    with pytest.raises(ValueError, match=r"solids\[0\].air should be false for a keyframed solid"):
+        flagsim.Scene.from_dict(
+            {
+                "solids": [
+                    {"motion": {"keys": [[0, [0, 0, 0], [0, 0, 0]], [1, [1, 0, 0], [0, 0, 0]]]}}
+                ]
+            }
+        )
+    with pytest.raises(ValueError, match=r"solids\[0\].motion.keys\[1\].time"):
+        flagsim.Scene.from_dict(
+            {"solids": [{"air": False,
+                         "motion": {"keys": [[1, [0, 0, 0], [0, 0, 0]],
+                                             [0, [1, 0, 0], [0, 0, 0]]]}}]}
+        )  # fmt: skip
+    (tmp_path / "bad.obj").write_text("v 0 0 0\nf 1 x 3\n")
+    with pytest.raises(ValueError, match=r"bad.obj:2"):
+        flagsim.Scene.from_dict({"solids": [{"mesh": "bad.obj"}]}, directory=str(tmp_path))
+
+
+def test_a_scene_with_a_mesh_solid_round_trips_through_plain_data():
+    """to_dict gives plain lists (JSON for export manifests, pickling for workers)."""
+    import json
+    import pickle
+
+    v, f = box_mesh(BOX["center"], BOX["half_size"])
+    s = falling_flag(air=False, shape="mesh", vertices=v, faces=f)
+    data = json.loads(json.dumps(s.to_dict()))
+    back = flagsim.Scene.from_dict(data)
+    np.testing.assert_array_equal(back.solids[0].faces, f)
+    np.testing.assert_array_equal(pickle.loads(pickle.dumps(s)).solids[0].vertices, v)

@@ -1,0 +1,204 @@
+"""Moving pins and poles (issue 30 item 3): keyframed (flag.pin_motion) or set from Python every
+step (set_pin_targets, set_pin_pose). The pinned vertices follow their path to round-off with the
+velocity of that motion, the pole moves with them, and the energy ledger books the pins' work."""
+
+import flagsim
+import numpy as np
+import pytest
+
+DT = 0.01
+
+
+def small_flag(method="implicit"):
+    s = flagsim.Scene()
+    s.flag.rows, s.flag.cols = 6, 8
+    s.flag.width, s.flag.height = 0.6, 0.4
+    s.air.model = "uniform"
+    s.air.wind = [3.0, 0.0, 0.5]
+    s.integrator.method = method
+    s.dt = DT
+    return s
+
+
+def path(scene):
+    """A pole and its pins carried along a bend: up, sideways and turned about two axes."""
+    m = scene.flag.pin_motion
+    m.pivot = (0.0, -1.0, 0.0)
+    m.keys = [
+        (0.0, (0, 0, 0), (0, 0, 0)),
+        (0.4, (0.15, 0.1, 0.0), (0, 0, 12)),
+        (0.8, (0.0, 0.2, 0.1), (15, 0, 0)),
+        (1.2, (0.0, 0.0, 0.0), (0, 0, 0)),
+    ]
+    return scene
+
+
+@pytest.mark.parametrize("method", ["implicit", "explicit"])
+def test_keyframed_pins_follow_their_path_to_round_off(method):
+    scene = path(small_flag(method))
+    sim = flagsim.Simulation(scene)
+    pins = sim.pinned_vertices
+    rest = sim.rest_positions[pins]
+    motion = scene.flag.pin_motion
+    assert "pins" in sim.stages
+    previous = motion.apply(0.0, rest)
+    np.testing.assert_allclose(sim.positions[pins], previous, rtol=0, atol=1e-15)
+    for k in range(1, 121):
+        sim.step()
+        t = k * DT
+        target = motion.apply(t, rest)
+        np.testing.assert_allclose(sim.positions[pins], target, rtol=0, atol=1e-14)
+        # the velocity of the prescribed motion over the step, no more
+        np.testing.assert_allclose(
+            sim.velocities[pins], (target - previous) / DT, rtol=0, atol=1e-9
+        )
+        previous = target
+    R, t = sim.pole_pose
+    np.testing.assert_allclose(R, np.eye(3), atol=1e-12)  # back where it started at 1.2 s
+
+
+def test_moving_pins_work_balances_the_ledger():
+    """Pins dragging a flag without air or gravity: all its energy is the pins' work. The ledger
+    balances with it, and what no stage explains stays within round-off of symplectic Euler's
+    bounded oscillation (1 % of the work)."""
+    s = path(small_flag("explicit"))
+    s.air.model = "none"
+    s.gravity = (0.0, 0.0, 0.0)
+    sim = flagsim.Simulation(s)
+    e0 = sum(sim.energy().values())
+    sim.step(120)
+    ledger = sim.energy_ledger()
+    change = sum(sim.energy().values()) - e0
+    assert change == pytest.approx(sum(ledger.values()), abs=1e-12)
+    assert ledger["pins"] > 1e-3  # the pins did the work ...
+    unexplained = ledger["integrator"] + ledger["strain_limit"] + ledger["pole"]
+    assert abs(unexplained) < 0.01 * ledger["pins"], ledger  # ... and it explains the change
+    assert abs(ledger["edits"]) < 1e-12  # setting the pins' velocity is not an edit
+
+
+def test_pins_set_from_python_every_step():
+    sim = flagsim.Simulation(small_flag())
+    pins = sim.pinned_vertices
+    start = sim.positions[pins].copy()
+    previous = start
+    for k in range(1, 51):
+        target = start + 0.05 * np.array([np.sin(0.2 * k), 1 - np.cos(0.2 * k), 0.0])
+        sim.set_pin_targets(target)
+        sim.step()
+        np.testing.assert_allclose(sim.positions[pins], target, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(sim.velocities[pins], (target - previous) / DT, atol=1e-9)
+        previous = target
+    sim.step(5)  # not set again: the pins stay
+    np.testing.assert_allclose(sim.positions[pins], previous, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(sim.velocities[pins], 0.0, atol=1e-12)
+
+
+def test_pin_pose_moves_pins_and_pole_together():
+    sim = flagsim.Simulation(small_flag())
+    pins = sim.pinned_vertices
+    rest = sim.rest_positions[pins]
+    motion = flagsim.MotionSchedule()
+    motion.keys = [(0.0, (0.1, 0.0, 0.05), (0, 20, 0))]
+    for _ in range(3):
+        sim.set_pin_pose(translation=(0.1, 0.0, 0.05), rotation=(0, 20, 0))
+        sim.step()
+    np.testing.assert_allclose(sim.positions[pins], motion.apply(0.0, rest), atol=1e-12)
+    R, t = sim.pole_pose
+    np.testing.assert_allclose(t, [0.1, 0.0, 0.05], atol=1e-12)  # pivot at the origin
+    # no vertex inside the moved pole: in its frame, outside the radius along its height
+    local = (sim.positions - t) @ R  # R^T (x - t), row by row
+    pole = sim.scene.pole
+    r = np.hypot(local[:, 0] - pole.base[0], local[:, 2] - pole.base[2])
+    free = np.setdiff1d(np.arange(len(r)), pins)
+    assert (r[free] >= pole.radius * (1 - 1e-9)).all()
+
+
+def test_bad_pin_input_names_the_parameter():
+    s = small_flag()
+    with pytest.raises(ValueError, match=r"motion.keys\[1\].time"):
+        s.flag.pin_motion.keys = [(0.5, (0, 0, 0), (0, 0, 0)), (0.5, (0, 0, 0), (0, 0, 0))]
+    with pytest.raises(ValueError, match=r"flag.pin_motion.keys\[2\].time"):
+        flagsim.Scene.from_dict(
+            {
+                "flag": {
+                    "pin_motion": {
+                        "keys": [
+                            [0, [0, 0, 0], [0, 0, 0]],
+                            [1, [0, 0, 0], [0, 0, 0]],
+                            [0.5, [0, 0, 0], [0, 0, 0]],
+                        ]
+                    }
+                }
+            }
+        )
+    sim = flagsim.Simulation(s)
+    with pytest.raises(ValueError, match=r"targets should have shape \(6, 3\)"):
+        sim.set_pin_targets(np.zeros((5, 3)))
+    with pytest.raises(ValueError, match=r"targets\[0\]"):
+        sim.set_pin_targets(np.full((6, 3), np.nan))
+    keyed = flagsim.Simulation(path(small_flag()))
+    with pytest.raises(ValueError, match="flag.pin_motion is keyframed"):
+        keyed.set_pin_targets(np.zeros((6, 3)))
+
+
+def test_boat_scene_rolls_and_pitches_plausibly():
+    scene = flagsim.Scene.boat()
+    assert "boat" in flagsim.Scene.builtins()
+    sim = flagsim.Simulation(scene)
+    pins = sim.pinned_vertices
+    rest = sim.rest_positions[pins]
+    angles = []
+    for k in range(1, 101):  # 1 s: a quarter roll
+        sim.step()
+        np.testing.assert_allclose(
+            sim.positions[pins], scene.flag.pin_motion.apply(k * DT, rest), atol=1e-13
+        )
+        R, _ = sim.pole_pose
+        angles.append(np.degrees(np.arccos(np.clip(R[1, 1], -1, 1))))
+    assert max(angles) > 10  # the mast leans (roll 12 degrees at 1 s, pitch on top)
+    ledger = sim.energy_ledger()
+    assert ledger["pins"] != 0
+
+
+def test_povray_frames_draw_the_pole_where_the_pins_moved_it():
+    """PolePose, applied by POV-Ray to the pole at rest in its mirrored frame, is the mirrored
+    image of where the simulation's pole is."""
+    from flagsim.povray import scenefiles
+
+    sim = flagsim.Simulation(flagsim.Scene.boat())
+    assert scenefiles.pole_pose_text(sim) == ""  # at rest at t = 0: nothing declared
+    sim.step(70)
+    text = scenefiles.pole_pose_text(sim)
+    m = np.array([float(v) for v in text.split("<")[1].split(">")[0].split(",")])
+    block, shift = m[:9].reshape(3, 3), m[9:]
+    R, t = sim.pole_pose
+    mirror = np.array([1.0, 1.0, -1.0])
+    top = np.asarray(sim.scene.pole.base) + (0.0, sim.scene.pole.height, 0.0)
+    pov = (top * mirror) @ block + shift  # POV-Ray's row-vector matrix
+    np.testing.assert_allclose(pov, (R @ top + t) * mirror, atol=1e-8)
+    assert np.linalg.norm(R @ top + t - top) > 0.05  # it did move
+
+
+def test_each_flag_of_a_scene_moves_its_own_pins():
+    """Several flags (docs/multiflag.md): flag 1 carried along its path, flag 0 still."""
+    import copy
+
+    scene = small_flag()
+    second = copy.copy(scene.flags[0])
+    second.origin = (0.055, 0.0, 2.0)
+    second.pole.base = (0.0, -2.5, 2.0)
+    second.pin_motion.keys = [(0.0, (0, 0, 0), (0, 0, 0)), (0.5, (0.0, 0.2, 0.0), (0, 0, 0))]
+    scene.flags = [scene.flags[0], second]
+    sim = flagsim.Simulation(scene)
+    assert "pins" in sim.stages
+    still = sim.positions[sim.pinned_vertices].copy()
+    moved = sim.flags[1]
+    rest = moved.rest_positions[moved.pinned_vertices]
+    sim.step(30)
+    np.testing.assert_allclose(
+        moved.positions[moved.pinned_vertices],
+        second.pin_motion.apply(0.3, rest),
+        rtol=0,
+        atol=1e-14,
+    )
+    np.testing.assert_array_equal(sim.positions[sim.pinned_vertices], still)
