@@ -6,7 +6,7 @@ each integrator, with and without self-collision), ``air`` (flagsim.Fluid alone 
 128^3 for each advection scheme and pressure backend, the float grid, and the FFTW floor),
 ``solver`` (the pressure solvers at 16^3 .. 128^3: a tunnel with a solid plate for multigrid and
 pcg, the periodic box for multigrid and fft; iterations, projection time and memory), and
-with ``--peers`` the same cloth in PyBullet, MuJoCo and pyPBD and the numpy Stable Fluids
+with ``--peers`` the same cloth in PyBullet, MuJoCo and pyPBD and the numpy Stam FFT air
 baseline. Every workload runs at each requested thread count (1 and 2 by default) except the
 peers and baselines, which are single-threaded.
 """
@@ -325,11 +325,11 @@ def catalogue(
                     work.append(w)
         ok, why = baselines.get("numpy", (False, "not checked"))
         if not ok:
-            skipped.append(("numpy Stable Fluids baseline", why))
+            skipped.append(("numpy Stam FFT baseline", why))
         elif not features.get("fluid", (False, ""))[0]:
             skipped.append(
                 (
-                    "numpy Stable Fluids baseline",
+                    "numpy Stam FFT baseline",
                     "nothing to compare it with: " + features.get("fluid", (False, ""))[1],
                 )
             )
@@ -340,7 +340,7 @@ def catalogue(
                     Workload(
                         "peers",
                         "numpy",
-                        "stable fluids",
+                        "stam fft",
                         f"{n}^3",
                         n**3,
                         1,

@@ -432,10 +432,13 @@ void PaddedComponent<T>::unpad(T* dst) const {
 }
 
 template <class T>
-void PeriodicAdvectScratch<T>::resize(const GridGeometry& g) {
+void PeriodicAdvectScratch<T>::resize(const GridGeometry& g, bool maccormack) {
   for (int c = 0; c < 3; ++c) {
     u[c].resize(g.face_shape(c));
-    hat[c].resize(g.face_shape(c));
+    if (maccormack)
+      hat[c].resize(g.face_shape(c));
+    else
+      hat[c] = PaddedComponent<T>();
   }
 }
 

@@ -59,17 +59,18 @@ struct PaddedComponent {
   }
 };
 
-/// Scratch of advect_periodic: padded copies of u^n and of the MacCormack predictor.
+/// Scratch of advect_periodic: padded copies of u^n and of the MacCormack predictor (hat: only
+/// when resized for MacCormack).
 template <class T>
 struct PeriodicAdvectScratch {
   std::array<PaddedComponent<T>, 3> u, hat;
-  void resize(const GridGeometry& g);
+  void resize(const GridGeometry& g, bool maccormack = true);
 };
 
 /// Self-advection of a periodic grid in place (u <- A(u)), semi-Lagrangian or MacCormack, the
 /// same arithmetic as advect_semi_lagrangian / advect_maccormack (identical results) but reading
 /// ghost-padded copies: departure points within a cell of their node take a wrap-free path.
-/// hat: scratch of u's geometry (MacCormack). No allocation.
+/// hat: scratch of u's geometry (MacCormack; unused, and may be empty, otherwise). No allocation.
 template <class T>
 void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, PeriodicAdvectScratch<T>& scratch,
                      MacGrid<T>& hat);
