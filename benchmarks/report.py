@@ -807,8 +807,8 @@ def markdown(
                 "## Side by side with the peers",
                 "",
                 "flagsim's steps/s as a multiple of each peer's at the same size (cloth: implicit, "
-                "1 thread; air: flagsim.Fluid against the numpy baseline, the textbook Stam FFT solver "
-                "(collocated, vectorised gather, benchmarks/stam_numpy.py), 1 thread). "
+                "1 thread; air: flagsim.Fluid against the numpy baseline, the textbook Stam FFT "
+                "solver (collocated, vectorised gather, benchmarks/stam_numpy.py), 1 thread). "
                 "Same flag in each engine: size, mass, pole pins, dt = 0.01 s, gravity, comparable "
                 "stiffness, wind where the "
                 "peer has it.",

@@ -55,6 +55,16 @@ def _fft():
     )
 
 
+def _z_lerp(v, row, z0, z1, wz):
+    """v (3, N) gathered at row + z0 and row + z1 and interpolated along z (in place)."""
+    lo = v.take(row + z0, axis=1)
+    hi = v.take(row + z1, axis=1)
+    hi -= lo
+    hi *= wz
+    lo += hi
+    return lo
+
+
 def fft_backend() -> str:
     """'scipy.fft' or 'numpy.fft': what StamFftNumpy transforms with here."""
     return _fft()[2]
@@ -120,20 +130,11 @@ class StamFftNumpy:
             i1[i1 == n] = 0
             x0, x1, y0, y1, z0, z1 = i0[0] * nn, i1[0] * nn, i0[1] * n, i1[1] * n, i0[2], i1[2]
             wx, wy, wz = p
-
-            def z_lerp(x, y):
-                lo = v.take(x + y + z0, axis=1)
-                hi = v.take(x + y + z1, axis=1)
-                hi -= lo
-                hi *= wz
-                lo += hi
-                return lo
-
-            c0, c1 = z_lerp(x0, y0), z_lerp(x0, y1)
+            c0, c1 = _z_lerp(v, x0 + y0, z0, z1, wz), _z_lerp(v, x0 + y1, z0, z1, wz)
             c1 -= c0
             c1 *= wy
             c0 += c1
-            d0, d1 = z_lerp(x1, y0), z_lerp(x1, y1)
+            d0, d1 = _z_lerp(v, x1 + y0, z0, z1, wz), _z_lerp(v, x1 + y1, z0, z1, wz)
             d1 -= d0
             d1 *= wy
             d0 += d1
@@ -167,6 +168,6 @@ class StamFftNumpy:
         """Spectral divergence at the cell centres, (n, n, n), 1/s."""
         hat = self._rfftn(self.vel)
         kx, ky, kz = self._k
-        return self._irfftn(
-            (1j * (kx * hat[0] + ky * hat[1] + kz * hat[2]))[None], (self.n,) * 3
-        )[0]
+        return self._irfftn((1j * (kx * hat[0] + ky * hat[1] + kz * hat[2]))[None], (self.n,) * 3)[
+            0
+        ]
