@@ -124,7 +124,7 @@ double FluidParams::memory_bytes() const {
   // table in docs/design.md "Memory"; tests/cpp/fluid/test_fluid.cpp counts them):
   // u, phi, div; periodic: the ghost-padded u^n (and the MacCormack predictor's); tunnel: u^n;
   // hat (MacCormack, tunnel, pcg / multigrid); the CG vectors (pcg, multigrid); fft: 3 spectra.
-  constexpr double G = 2 * 2;  // PaddedComponent::kGhost on either side
+  constexpr double G = 2 * 3;  // PaddedComponent::kGhost on either side
   const double padded = 3 * (n0 + G) * (n1 + G) * (n2 + G);
   const double faces = 3 * n + (periodic ? 0.0 : n1 * n2 + n0 * n2 + n0 * n1);
   double values = faces + 2 * n;
