@@ -7,8 +7,9 @@ each integrator, with and without self-collision), ``air`` (flagsim.Fluid alone 
 ``solver`` (the pressure solvers at 16^3 .. 128^3: a tunnel with a solid plate for multigrid and
 pcg, the periodic box for multigrid and fft; iterations, projection time and memory), and
 with ``--peers`` the same cloth in PyBullet, MuJoCo and pyPBD and the numpy Stam FFT air
-baseline. Every workload runs at each requested thread count (1 and 2 by default) except the
-peers and baselines, which are single-threaded.
+baseline and Taichi's Stable Fluids (CPU) where Taichi is installed. Every workload runs at each
+requested thread count (1 and 2 by default) except the peers and baselines, which are
+single-threaded.
 """
 
 from __future__ import annotations
@@ -347,4 +348,20 @@ def catalogue(
                         {"kind": "numpy_fluid", "n": n},
                     )
                 )
+            ok, why = baselines.get("taichi", (False, "not checked"))
+            if not ok:
+                skipped.append(("air peer taichi", why))
+            else:
+                for n in numpy_sizes:
+                    work.append(
+                        Workload(
+                            "peers",
+                            "taichi",
+                            "stable fluids",
+                            f"{n}^3",
+                            n**3,
+                            1,
+                            {"kind": "taichi_fluid", "n": n},
+                        )
+                    )
     return work, skipped
