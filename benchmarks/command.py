@@ -142,7 +142,7 @@ def parse_sizes(text: str | None):
 
 def selection(args) -> tuple[wl.Selection, dict[str, Any]]:
     mode = "smoke" if args.smoke else "quick" if args.quick else "full"
-    groups = _choices("only", args.only, wl.GROUPS) or ("paper", "cloth", "air", "solver")
+    groups = _choices("only", args.only, wl.GROUPS) or wl.Selection().groups
     if args.peers and "peers" not in groups:
         groups = groups + ("peers",)
     cloth_sizes, air_sizes = parse_sizes(args.sizes)

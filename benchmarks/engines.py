@@ -138,6 +138,31 @@ def paper_scene(full: bool):
     return s
 
 
+def multiflag_scene(count: int):
+    """`count` (<= 16) paper flags on their poles, 2 m apart on a 4 x 4 plan, in one periodic
+    32^3 grid of 0.25 m cells with a 2 m/s mean flow (the paper's fan left out): the air is the
+    same for every count, so the cloth's share shows how the cost grows with the flags."""
+    import copy
+
+    import flagsim
+
+    s = flagsim.Scene.paper()
+    s.air.fans = []
+    s.air.resolution = (32, 32, 32)
+    s.air.cell_size = 0.25
+    s.air.origin = (-1.0, -4.0, -4.0)
+    s.air.wind = (2.0, 0.0, 0.0)
+    flags = []
+    for k in range(count):
+        f = copy.copy(s.flags[0])
+        x, z = 2.0 * (k % 4), -3.0 + 2.0 * (k // 4)
+        f.origin = (x + 0.055, 0.0, z)
+        f.pole.base = (x, -2.5, z)
+        flags.append(f)
+    s.flags = flags
+    return s
+
+
 class SimulationStepper:
     def __init__(self, scene):
         import flagsim

@@ -70,6 +70,8 @@ def build(spec: dict[str, Any]):
         )
     if kind == "paper":
         return engines.SimulationStepper(engines.paper_scene(p["full"]))
+    if kind == "multiflag":
+        return engines.SimulationStepper(engines.multiflag_scene(p["flags"]))
     if kind == "fluid":
         return engines.FluidStepper(p["n"], p["advection"], p["pressure"], p["precision"])
     if kind == "solver":

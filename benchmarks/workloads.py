@@ -5,7 +5,8 @@ self-collision, flapping), ``cloth`` (the flag alone in analytic wind at 8 x 11 
 each integrator, with and without self-collision), ``air`` (flagsim.Fluid alone at 16^3 ..
 128^3 for each advection scheme and pressure backend, the float grid, and the FFTW floor),
 ``solver`` (the pressure solvers at 16^3 .. 128^3: a tunnel with a solid plate for multigrid and
-pcg, the periodic box for multigrid and fft; iterations, projection time and memory), and
+pcg, the periodic box for multigrid and fft; iterations, projection time and memory),
+``multiflag`` (1, 4 and 16 paper flags in one 32^3 grid: the air once, the cloth per flag), and
 with ``--peers`` the same cloth in PyBullet, MuJoCo and pyPBD and the numpy Stam FFT air
 baseline and Taichi's Stable Fluids (CPU) where Taichi is installed. Every workload runs at each
 requested thread count (1 and 2 by default) except the peers and baselines, which are
@@ -17,7 +18,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-GROUPS = ("paper", "cloth", "air", "solver", "peers")
+GROUPS = ("paper", "cloth", "air", "solver", "multiflag", "peers")
+#: The multiflag group: paper flags in one 32^3 air grid (quick runs: 1 and 4; smoke: 1).
+FLAG_COUNTS = (1, 4, 16)
 CLOTH_SIZES = ((8, 11), (32, 32), (64, 64), (128, 128))
 AIR_SIZES = (16, 32, 64, 128)
 INTEGRATORS = ("implicit", "explicit")
@@ -68,7 +71,7 @@ class Workload:
 @dataclass
 class Selection:
     mode: str = "full"  # full | quick | smoke
-    groups: tuple[str, ...] = ("paper", "cloth", "air", "solver")
+    groups: tuple[str, ...] = ("paper", "cloth", "air", "solver", "multiflag")
     cloth_sizes: tuple[tuple[int, int], ...] | None = None  # None: the mode's default
     air_sizes: tuple[int, ...] | None = None
     threads: tuple[int, ...] | None = None
@@ -250,6 +253,25 @@ def catalogue(
                 )
         else:
             skipped.append(("FFTW floor (3 r2c + 3 c2r)", why))
+
+    if "multiflag" in sel.groups:
+        if not features.get("grid_air", (False, ""))[0]:
+            skipped.append(("several flags in one grid", features.get("grid_air", (False, ""))[1]))
+        else:
+            counts = {"smoke": FLAG_COUNTS[:1], "quick": FLAG_COUNTS[:2]}.get(sel.mode, FLAG_COUNTS)
+            for count in counts:
+                for t in threads[:1] if sel.mode != "full" else threads:
+                    work.append(
+                        Workload(
+                            "multiflag",
+                            "flagsim",
+                            "paper-flags/32^3",
+                            f"{count}x88",
+                            88 * count,
+                            t,
+                            {"kind": "multiflag", "flags": count},
+                        )
+                    )
 
     if "solver" in sel.groups:
         if not features.get("fluid", (False, ""))[0]:

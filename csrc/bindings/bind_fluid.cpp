@@ -190,8 +190,7 @@ void def_fluid_fields(py::class_<AirParams>& cls, const std::string& section) {
       "[FanParams, ...]: regions pushing the air ('grid'); a list copy: assign to change");
 }
 
-void bind_fluid(py::module_& m) {
-  bind_turbulence(m);
+void bind_fan(py::module_& m) {
   py::class_<FanParams> fan_cls(
       m, "FanParams",
       "A region pushing the air: force density (N/m^3) along direction inside a box "
@@ -237,7 +236,9 @@ void bind_fluid(py::module_& m) {
          },
          "(time s, factor) keyframes; empty = always 1")
       .def("validate", &FanParams::validate, py::arg("prefix") = "");
+}
 
+void bind_obstacle(py::module_& m) {
   py::class_<ObstacleParams> obs(
       m, "ObstacleParams",
       "A static solid in the air: a box, a sphere or a capped cylinder, free-slip or no-slip. "
@@ -279,7 +280,9 @@ void bind_fluid(py::module_& m) {
             return o.contains(from_py<Vec3>("point", x));
           },
           py::arg("point"), "True when the point (m) lies inside the solid.");
+}
 
+void bind_fluid_class(py::module_& m) {
   py::class_<Fluid>(m, "Fluid", R"doc(
 Stable Fluids (Stam 1999) on a staggered MAC grid: the air solver alone.
 
@@ -537,6 +540,13 @@ p = 0 at x-max, free-slip walls.
                name_of(p.pressure) + "', precision='" + name_of(p.precision) +
                "', time=" + detail::to_text(f.time()) + ")";
       });
+}
+
+void bind_fluid(py::module_& m) {
+  bind_turbulence(m);
+  bind_fan(m);
+  bind_obstacle(m);
+  bind_fluid_class(m);
 }
 
 }  // namespace flagsim::bindings

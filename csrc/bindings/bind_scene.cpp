@@ -94,6 +94,31 @@ void bind_scene(py::module_& m) {
       air, "pole_obstacle", &AirParams::pole_obstacle, "air",
       "the pole is a no-slip solid of the air grid too, so it sheds a wake ('grid', pole.enabled)");
 
+  py::class_<FlagSpec> spec(m, "FlagSpec", R"doc(One flag of a scene with several (TOML [[flags]]).
+
+Its keys are the flag's (rows, cols, width, origin, pin, ...), and its own drag, integrator,
+flapping and pole sections; Scene.flags lists them, flag 0 first.)doc");
+  spec.def(py::init<>());
+  // The flag's own fields are forwarded from `_flag` in python/flagsim/scene.py, so a [[flags]]
+  // table reads like a [flag] section with sub-tables.
+  auto spec_part = [&spec](const char* name, auto member, const char* doc) {
+    using T = std::remove_reference_t<decltype(std::declval<FlagSpec>().*member)>;
+    spec.def_property(
+        name, [member](FlagSpec& s) -> T& { return s.*member; },
+        [member, name](FlagSpec& s, const py::object& value) {
+          s.*member = from_py<T>(name, value);
+        },
+        py::return_value_policy::reference_internal, doc);
+  };
+  spec_part("_flag", &FlagSpec::flag, "FlagParams");
+  spec_part("drag", &FlagSpec::drag, "DragParams");
+  spec_part("integrator", &FlagSpec::integrator, "IntegratorParams");
+  spec_part("flapping", &FlagSpec::flapping, "FlappingParams (paper eq. 5)");
+  spec_part("pole", &FlagSpec::pole, "PoleParams");
+  spec.def("__copy__", [](const FlagSpec& s) { return FlagSpec(s); });
+  spec.def(
+      "__deepcopy__", [](const FlagSpec& s, py::dict) { return FlagSpec(s); }, py::arg("memo"));
+
   py::class_<Scene> scene(m, "Scene", R"doc(Everything a Simulation needs, in SI units.
 
 Sections: flag, air, drag, integrator (and the areas' own sections); top-level dt and gravity.
@@ -148,6 +173,17 @@ the scene unchanged. Build one with Scene.paper(), Scene.named(name) or Scene.lo
         s.gravity = g;
       },
       "m/s^2");
+  scene.def_property(
+      "flags", [](const Scene& s) { return s.flags(); },
+      [](Scene& s, const py::object& o) {
+        Scene copy = s;
+        copy.set_flags(from_py<std::vector<FlagSpec>>("flags", o));
+        copy.validate();
+        s = copy;
+      },
+      "[FlagSpec, ...]: every flag, flag 0 first (flag 0 is the scene's flag, drag, integrator, "
+      "flapping and pole); a list copy: assign to change. The flags share air, gravity, dt and "
+      "self_collision");
   scene.def("validate", &Scene::validate, "Raise ValueError naming the first bad parameter.");
   scene.def("__copy__", [](const Scene& s) { return Scene(s); });
   scene.def("__deepcopy__", [](const Scene& s, py::dict) { return Scene(s); }, py::arg("memo"));
@@ -180,6 +216,20 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
         s.step(n);
       },
       py::arg("n") = 1, "Advance n steps of scene.dt. Raises DivergenceError (state restored).");
+  sim.def_property_readonly("num_flags", &Simulation::num_flags, "flags in the scene");
+  sim.def_property_readonly(
+      "flags",
+      [](py::object self) {
+        Simulation& s = self.cast<Simulation&>();
+        py::list out;
+        for (int i = 0; i < s.num_flags(); ++i)
+          out.append(py::cast(&s.flag(i), py::return_value_policy::reference_internal, self));
+        return py::tuple(out);
+      },
+      "(Simulation, ...) one per flag, flag 0 (this Simulation itself) first: each flag's "
+      "positions, velocities, normals, uv, triangles, energy, ledger and stats as views without "
+      "a copy; they keep this Simulation alive. Step the scene through this Simulation (a flag's "
+      "own step() raises)");
   sim.def_property_readonly("time", &Simulation::time, "simulated time, s");
   sim.def_property_readonly("step_count", &Simulation::step_count);
   sim.def_property_readonly(
@@ -335,6 +385,22 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
       "the last step's self-collision counts (None when self_collision is off): candidate pairs, "
       "proximity contacts, continuous crossings stopped short, pole contacts, vertices frozen by "
       "the fallback, sweeps, broad phases");
+  sim.def_property_readonly(
+      "between_flags_stats",
+      [](const Simulation& s) -> py::object {
+        const SelfCollisionStats* st = s.between_flags_stats();
+        if (!st) return py::none();
+        py::dict d;
+        d["candidates"] = st->candidates;
+        d["contacts"] = st->contacts;
+        d["crossings"] = st->crossings;
+        d["frozen"] = st->frozen;
+        d["sweeps"] = st->sweeps;
+        return d;
+      },
+      "the last step's counts of the contact pass between flags (None with one flag or "
+      "self_collision off; zeros when no two flags came near): candidate pairs, proximity "
+      "contacts, crossings stopped short, vertices frozen by the fallback, sweeps");
   sim.def_property_readonly(
       "last_step_stats",
       [](const Simulation& s) {

@@ -14,6 +14,19 @@ std::string join(const std::string& prefix, const std::string& field) {
   return prefix.empty() ? field : prefix + "." + field;
 }
 
+// Half extents of a box: each in (0, 1e6] m.
+void check_half_size(const std::string& name, const Vec3& half_size) {
+  for (int d = 0; d < 3; ++d)
+    if (!(std::isfinite(half_size[d]) && half_size[d] > 0 && half_size[d] <= kMaxCoordinate))
+      fail_param(name, "in (0, 1e6] m in every component", detail::to_text(half_size.transpose()));
+}
+
+// A direction: finite and not zero (normalised where it is used).
+void check_direction(const std::string& name, const Vec3& v) {
+  check_finite_vec(name, v);
+  if (!(v.norm() > 0)) fail_param(name, "a non-zero vector", "(0 0 0)");
+}
+
 }  // namespace
 
 bool ObstacleParams::contains(const Vec3& x) const {
@@ -36,26 +49,17 @@ double ObstacleParams::thickness() const {
 
 void ObstacleParams::validate(const std::string& prefix) const {
   check_position(join(prefix, "center"), center);
-  for (int d = 0; d < 3; ++d)
-    if (!(std::isfinite(half_size[d]) && half_size[d] > 0 && half_size[d] <= kMaxCoordinate))
-      fail_param(join(prefix, "half_size"), "in (0, 1e6] m in every component",
-                 detail::to_text(half_size.transpose()));
+  check_half_size(join(prefix, "half_size"), half_size);
   check_length(join(prefix, "radius"), radius);
-  check_finite_vec(join(prefix, "axis"), axis);
-  if (!(axis.norm() > 0)) fail_param(join(prefix, "axis"), "a non-zero vector", "(0 0 0)");
+  check_direction(join(prefix, "axis"), axis);
   check_length(join(prefix, "length"), length);
 }
 
 void FanParams::validate(const std::string& prefix) const {
   check_position(join(prefix, "center"), center);
-  for (int d = 0; d < 3; ++d)
-    if (!(std::isfinite(half_size[d]) && half_size[d] > 0 && half_size[d] <= kMaxCoordinate))
-      fail_param(join(prefix, "half_size"), "in (0, 1e6] m in every component",
-                 detail::to_text(half_size.transpose()));
+  check_half_size(join(prefix, "half_size"), half_size);
   check_length(join(prefix, "radius"), radius);
-  check_finite_vec(join(prefix, "direction"), direction);
-  if (!(direction.norm() > 0))
-    fail_param(join(prefix, "direction"), "a non-zero vector", "(0 0 0)");
+  check_direction(join(prefix, "direction"), direction);
   check_finite(join(prefix, "force_density"), force_density);
   check_nonnegative(join(prefix, "max_speed"), max_speed);
   strength.validate(join(prefix, "strength"));

@@ -121,39 +121,28 @@ std::string format_mesh2(const Eigen::Ref<const MatX3>& positions,
   }
   out.put("#declare ");
   out.put(options.name);
-  out.put(" = mesh2 {\n  vertex_vectors {\n    ");
-  out.integer(n);
+  out.put(" = mesh2 {");
+  // One block of n vectors; `sign` multiplies the third column (the mirror below).
+  auto block = [&](const char* name, const auto& m, int digits, double sign) {
+    out.put("\n  ");
+    out.put(name);
+    out.put(" {\n    ");
+    out.integer(n);
+    for (Index i = 0; i < n; ++i) {
+      out.put(",\n    <");
+      for (Index c = 0; c < m.cols(); ++c) {
+        if (c > 0) out.put(',');
+        out.fixed(c == 2 ? sign * m(i, c) : m(i, c), digits);
+      }
+      out.put('>');
+    }
+    out.put("\n  }");
+  };
   // Handedness: (x, y, z) -> (x, y, -z) for positions and normals (see header).
-  for (Index i = 0; i < n; ++i) {
-    out.put(",\n    <");
-    out.fixed(positions(i, 0), dp);
-    out.put(',');
-    out.fixed(positions(i, 1), dp);
-    out.put(',');
-    out.fixed(-positions(i, 2), dp);
-    out.put('>');
-  }
-  out.put("\n  }\n  normal_vectors {\n    ");
-  out.integer(n);
-  for (Index i = 0; i < n; ++i) {
-    out.put(",\n    <");
-    out.fixed(normals(i, 0), dn);
-    out.put(',');
-    out.fixed(normals(i, 1), dn);
-    out.put(',');
-    out.fixed(-normals(i, 2), dn);
-    out.put('>');
-  }
-  out.put("\n  }\n  uv_vectors {\n    ");
-  out.integer(n);
-  for (Index i = 0; i < n; ++i) {
-    out.put(",\n    <");
-    out.fixed(uv(i, 0), dp);
-    out.put(',');
-    out.fixed(uv(i, 1), dp);
-    out.put('>');
-  }
-  out.put("\n  }\n  face_indices {\n    ");
+  block("vertex_vectors", positions, dp, -1.0);
+  block("normal_vectors", normals, dn, -1.0);
+  block("uv_vectors", uv, dp, 1.0);
+  out.put("\n  face_indices {\n    ");
   out.integer(t);
   // The mirror reverses orientation; swapping two corners restores it: (a, b, c) -> (a, c, b).
   for (Index f = 0; f < t; ++f) {

@@ -25,44 +25,95 @@ ObstacleParams AirParams::pole_solid(const PoleParams& pole) {
   return o;
 }
 
+std::vector<FlagSpec> Scene::flags() const {
+  std::vector<FlagSpec> out{FlagSpec{flag, drag, integrator, flapping, pole}};
+  out.insert(out.end(), more_flags.begin(), more_flags.end());
+  return out;
+}
+
+void Scene::set_flags(const std::vector<FlagSpec>& flags) {
+  if (flags.empty()) fail_param("flags", "at least one flag", "an empty list");
+  flag = flags[0].flag;
+  drag = flags[0].drag;
+  integrator = flags[0].integrator;
+  flapping = flags[0].flapping;
+  pole = flags[0].pole;
+  more_flags.assign(flags.begin() + 1, flags.end());
+}
+
+Scene Scene::flag_scene(int i) const {
+  if (i < 0 || i >= num_flags())
+    fail_param("flag", "an index in [0, " + std::to_string(num_flags()) + ")", i);
+  Scene s = *this;
+  s.more_flags.clear();
+  if (i > 0) s.set_flags({more_flags[std::size_t(i) - 1]});
+  return s;
+}
+
+namespace {
+// The name of flag `f`'s section: "flag", "pole", ... alone; "flags[2]", "flags[2].pole", ...
+// in a scene with several flags.
+struct FlagSections {
+  int index;  // -1: the scene has one flag
+  std::string operator()(const std::string& section) const {
+    if (index < 0) return section;
+    const std::string f = "flags[" + std::to_string(index) + "]";
+    return section == "flag" ? f : f + "." + section;
+  }
+};
+
+void validate_flag(const FlagSpec& f, const SelfCollisionParams& self_collision,
+                   const FlagSections& name) {
+  f.flag.validate(name("flag"));
+  f.drag.validate(name("drag"));
+  f.integrator.validate(name("integrator"));
+  // A strain beyond max_strain raises: at or below the strain limit's promise, so could a step
+  // the limit keeps within it.
+  const IntegratorParams& in = f.integrator;
+  if (in.strain_limit > 0 && !(in.max_strain > in.strain_limit + kStrainLimitSlack))
+    fail_param(name("integrator") + ".max_strain",
+               "> " + name("integrator") + ".strain_limit + " + detail::to_text(kStrainLimitSlack) +
+                   " = " + detail::to_text(in.strain_limit + kStrainLimitSlack) +
+                   " (the strain the limit promises)",
+               in.max_strain);
+  f.flapping.validate(name("flapping"));
+  if (self_collision.enabled) {
+    // A thickness beyond the rest gap would have the flat flag collide with itself.
+    const FlagParams& p = f.flag;
+    const double dx = p.width / (p.cols - 1), dy = p.height / (p.rows - 1);
+    const double gap = dx * dy / std::hypot(dx, dy);  // vertex to the diagonal of a neighbour cell
+    if (!(self_collision.thickness < gap))
+      fail_param("self_collision.thickness",
+                 "< " + detail::to_text(gap) +
+                     " m (the rest distance from a vertex to the nearest triangle it is not part "
+                     "of" +
+                     (name.index < 0 ? std::string() : " in " + name("flag")) + ")",
+                 self_collision.thickness);
+  }
+  f.pole.validate(name("pole"));
+}
+}  // namespace
+
 void Scene::validate() const {
-  flag.validate("flag");
+  self_collision.validate("self_collision");
+  const std::vector<FlagSpec> all = flags();
+  for (std::size_t i = 0; i < all.size(); ++i)
+    validate_flag(all[i], self_collision, FlagSections{all.size() > 1 ? int(i) : -1});
   air.validate("air");
-  if (air.pole_obstacle && !(air.model == AirModel::kGrid && pole.enabled))
+  bool any_pole = false;
+  for (const FlagSpec& f : all) any_pole = any_pole || f.pole.enabled;
+  if (air.pole_obstacle && !(air.model == AirModel::kGrid && any_pole))
     fail_param("air.pole_obstacle",
                "false unless air.model is \"grid\" and pole.enabled is true (the pole is a solid "
                "of the air grid)",
                "true");
   if (air.model == AirModel::kGrid) {
     AirParams with_pole = air;
-    if (air.pole_obstacle) with_pole.obstacles.push_back(AirParams::pole_solid(pole));
+    if (air.pole_obstacle)
+      for (const FlagSpec& f : all)
+        if (f.pole.enabled) with_pole.obstacles.push_back(AirParams::pole_solid(f.pole));
     with_pole.validate_combination("air");
   }
-  drag.validate("drag");
-  integrator.validate("integrator");
-  // A strain beyond max_strain raises: at or below the strain limit's promise, so could a step
-  // the limit keeps within it.
-  if (integrator.strain_limit > 0 &&
-      !(integrator.max_strain > integrator.strain_limit + kStrainLimitSlack))
-    fail_param("integrator.max_strain",
-               "> integrator.strain_limit + " + detail::to_text(kStrainLimitSlack) + " = " +
-                   detail::to_text(integrator.strain_limit + kStrainLimitSlack) +
-                   " (the strain the limit promises)",
-               integrator.max_strain);
-  flapping.validate("flapping");
-  self_collision.validate("self_collision");
-  if (self_collision.enabled) {
-    // A thickness beyond the rest gap would have the flat flag collide with itself.
-    const double dx = flag.width / (flag.cols - 1), dy = flag.height / (flag.rows - 1);
-    const double gap = dx * dy / std::hypot(dx, dy);  // vertex to the diagonal of a neighbour cell
-    if (!(self_collision.thickness < gap))
-      fail_param("self_collision.thickness",
-                 "< " + detail::to_text(gap) +
-                     " m (the rest distance from a vertex to the nearest triangle it is not part "
-                     "of)",
-                 self_collision.thickness);
-  }
-  pole.validate("pole");
   check_finite_vec("gravity", gravity);
   check_positive("dt", dt);
 }

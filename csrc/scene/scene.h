@@ -31,6 +31,16 @@ struct AirParams : FluidParams {
   void validate(const std::string& prefix = "air") const;
 };
 
+/// One flag of a scene with several (TOML [[flags]]): its cloth and fabric, pins, pole, drag,
+/// flapping and integrator. The flags of a scene share its air, gravity, dt and self_collision.
+struct FlagSpec {
+  FlagParams flag;
+  DragParams drag;
+  IntegratorParams integrator;
+  FlappingParams flapping;
+  PoleParams pole;
+};
+
 struct Scene {
   std::string name = "custom";
   FlagParams flag;
@@ -42,8 +52,20 @@ struct Scene {
   PoleParams pole;
   Vec3 gravity{0.0, -9.81, 0.0};  ///< m/s^2
   double dt = 0.01;               ///< s, one Simulation step
+  /// Flags 1, 2, ... of a scene with several; flag 0 is the fields flag, drag, integrator,
+  /// flapping and pole above (so a one-flag scene is exactly what it always was).
+  std::vector<FlagSpec> more_flags;
 
-  /// Throws InvalidArgument naming the first bad parameter ("flag.rows should be >= 2, got 1").
+  /// Every flag, flag 0 first (copies).
+  std::vector<FlagSpec> flags() const;
+  /// Replace every flag: flags[0] into the fields above, the rest into more_flags (>= 1 flag).
+  void set_flags(const std::vector<FlagSpec>& flags);
+  int num_flags() const { return 1 + int(more_flags.size()); }
+  /// Flag i alone: this scene with flag i's parts in the fields above and no more_flags.
+  Scene flag_scene(int i) const;
+
+  /// Throws InvalidArgument naming the first bad parameter ("flag.rows should be >= 2, got 1";
+  /// with several flags "flags[2].width ..." and "flags[2].pole.radius ...").
   void validate() const;
 
   /// Paper §5: flag of 8 x 11 masses, 0.54 m tall, dt = 0.01 s, air about 2 m/s along +x on a

@@ -62,15 +62,35 @@ inline constexpr std::array<std::pair<const char*, double EnergyLedger::*>, 10> 
     {"integrator", &EnergyLedger::integrator},
 }};
 
+/// A scene of one or several flags. Flag 0's state and topology are this object's own (so a
+/// one-flag scene reads as it always did); flags 1, 2, ... are Simulations of their own that
+/// this one owns and steps (flag(i)), each with its topology, state, stages, energy ledger and
+/// checks, sampling the one air grid, which this Simulation steps once per step. Contacts
+/// between flags: one self-collision pass over the union of the flags after they all stepped
+/// (stage_between_flags; docs/multiflag.md).
 class Simulation {
  public:
   /// Validates the scene (InvalidArgument on a bad parameter) and builds only the needed stages.
   explicit Simulation(const Scene& scene);
+  ~Simulation();
 
   /// Advance n steps of scene.dt. On divergence throws DivergenceError with the state restored
   /// to the start of the failed step (earlier steps of this call are kept). One thread at a
   /// time: a call while another thread is stepping this Simulation throws std::runtime_error.
   void step(long n = 1);
+
+  /// Flags in the scene (scene.num_flags()).
+  int num_flags() const { return 1 + int(others_.size()); }
+  /// Flag i (0 <= i < num_flags()): this Simulation for i = 0, else the one that holds flag i;
+  /// its positions(), velocities(), normals(), topology(), energy... are that flag's. Only the
+  /// Simulation that owns it steps it (its own step() throws).
+  Simulation& flag(int i);
+  const Simulation& flag(int i) const { return const_cast<Simulation*>(this)->flag(i); }
+  /// Statistics of the last pass between flags; nullptr with one flag or self-collision off
+  /// (all zeros after a step in which no two flags' swept boxes came within the thickness).
+  const SelfCollisionStats* between_flags_stats() const {
+    return between_ ? &between_stats_ : nullptr;
+  }
 
   const Scene& scene() const { return scene_; }
   const ClothTopology& topology() const { return topo_; }
@@ -102,9 +122,9 @@ class Simulation {
     return self_collision_ ? &self_collision_->stats() : nullptr;
   }
 
-  /// Names of the stages this scene runs, in step order.
+  /// Names of the stages this scene runs (any of its flags), in step order.
   const std::vector<std::string>& stages() const { return stage_names_; }
-  /// Seconds spent per built stage since construction.
+  /// Seconds spent per built stage since construction, summed over the flags.
   std::vector<std::pair<std::string, double>> timings() const;
   ClothEnergy energy() const;
   /// Work by stage since construction (EnergyLedger; `gravity` from the current positions).
@@ -122,8 +142,8 @@ class Simulation {
   void air_velocity(const MatX3& points, MatX3& out) const;
 
   /// The air grid (air.model "grid" with drag built), or nullptr: the air is analytic or absent.
-  Fluid* fluid() { return fluid_.get(); }
-  const Fluid* fluid() const { return fluid_.get(); }
+  Fluid* fluid() { return air_grid_; }
+  const Fluid* fluid() const { return air_grid_; }
   /// Masses that sampled the air grid from outside its domain (nearest boundary value used):
   /// in the last step, and since construction.
   long air_outside_last_step() const { return air_outside_last_; }
@@ -135,7 +155,12 @@ class Simulation {
  private:
   static constexpr int kNumStages = int(Stage::kCount);
 
+  Simulation(const Scene& scene, Simulation* host);  // host: the Simulation of flag 0, or null
   void step_once();
+  // A flag's part of a step: its pieces (halvings, checks), then, after the air, its end.
+  void step_pieces();
+  void finish_step();
+  void undo_step();     // back to the start of the step, normals too
   struct Implausible {  // a piece that failed a plausibility test; empty cause: it passed
     std::string cause;
     long vertex = -1;
@@ -146,7 +171,9 @@ class Simulation {
   // Set-up (the constructor, in this order).
   void choose_stages();
   void build_fluid();
+  void check_inside_grid() const;
   void build_self_collision();
+  void build_between_flags();
   void setup_flapping();
   void setup_energy();
   void check_explicit_step() const;
@@ -157,6 +184,9 @@ class Simulation {
   void stage_pole();
   void stage_self_collision();
   Implausible stage_check();
+  // After every flag's pieces: contacts between flags (several flags, self_collision enabled).
+  void stage_between_flags();
+  bool flags_may_touch() const;
   // After the step: the air grid advances, the "visual" flap displaces the exported geometry.
   void advance_fluid();
   void stage_flap_visual();
@@ -212,6 +242,21 @@ class Simulation {
   std::atomic<bool> stepping_{false};          // a step() is running (one thread at a time)
   SelfCollision::Projector strain_projector_;  // built once: no allocation per step
   long air_outside_last_ = 0, air_outside_total_ = 0;
+
+  // Several flags (docs/multiflag.md). host_: the Simulation stepping this flag (null for flag
+  // 0); others_: flags 1, 2, ...; air_grid_: the grid this flag samples (its own fluid_ or the
+  // host's). Between flags: one SelfCollision over the union of every flag's vertices (flag i's
+  // rows from between_offset_[i]) and triangles, gathered into the b*_ buffers around its pass.
+  Simulation* host_ = nullptr;
+  int flag_index_ = 0;
+  std::vector<std::unique_ptr<Simulation>> others_;
+  Fluid* air_grid_ = nullptr;
+  std::unique_ptr<SelfCollision> between_;
+  SelfCollisionStats between_stats_;
+  std::vector<Index> between_offset_;
+  MatX3 bx0_, bx_, bv_;  // (sum N x 3) union of the flags' step-start positions, positions, v
+  VecX binv_mass_;       // (sum N) union of the inverse masses
+  SelfCollision::Projector between_projector_;  // every flag's strain limit on its rows
 };
 
 }  // namespace flagsim

@@ -17,10 +17,23 @@ A TOML scene mirrors the Scene's sections; every key is optional and unknown key
 
     [integrator]
     method = "implicit"
+
+Several flags share one scene (its air, gravity, dt and self_collision) as an array of tables;
+each entry starts from the scene's own flag, drag, integrator, flapping and pole (from ``base``
+and the sections above) and changes what it names (docs/multiflag.md)::
+
+    [[flags]]
+    origin = [0.0, 0.0, 0.0]
+
+    [[flags]]
+    origin = [0.0, 0.0, 1.5]
+    width = 0.6
+    pole.base = [0.0, -2.5, 1.5]
 """
 
 from __future__ import annotations
 
+import copy
 import os
 from typing import Any
 
@@ -42,7 +55,15 @@ LIST_ITEM_TYPES: dict[tuple[type, str], type] = {
 
 # The section a struct's own setters name in their errors when it stands alone (a FanParams says
 # "fan.center"); apply_dict renames it to the item's path ("air.fans[1].center").
-OWN_SECTION: dict[type, str] = {_core.FanParams: "fan", _core.ObstacleParams: "obstacle"}
+OWN_SECTION: dict[type, str] = {
+    _core.FanParams: "fan",
+    _core.ObstacleParams: "obstacle",
+    _core.FlagSpec: "flag",
+    _core.DragParams: "drag",
+    _core.IntegratorParams: "integrator",
+    _core.FlappingParams: "flapping",
+    _core.PoleParams: "pole",
+}
 
 
 def fields(obj_or_type: Any) -> list[str]:
@@ -59,6 +80,8 @@ def to_dict(obj: Any) -> dict[str, Any]:
     """Nested plain-Python dict of a Scene or parameter struct (tuples become lists)."""
     out: dict[str, Any] = {}
     for k in fields(obj):
+        if k == "flags" and isinstance(obj, Scene) and len(obj.flags) == 1:
+            continue  # one flag: the flag, pole, ... sections say it all (as before [[flags]])
         out[k] = _plain(getattr(obj, k))
     return out
 
@@ -105,6 +128,24 @@ def apply_dict(obj: Any, data: dict[str, Any], section: str) -> None:
             raise ValueError(_renamed(str(e), type(obj), section)) from None
 
 
+def _flag_entries(scene: Scene, entries: Any) -> list:
+    """The [[flags]] array as FlagSpecs, each the scene's flag 0 with the entry's keys applied
+    (errors name the entry: ``flags[2].width``, ``flags[2].pole.radius``)."""
+    if (
+        not isinstance(entries, list)
+        or not entries
+        or not all(isinstance(e, dict) for e in entries)
+    ):
+        raise ValueError(f"flags should be a non-empty array of tables, got {entries!r}")
+    template = scene.flags[0]
+    out = []
+    for i, entry in enumerate(entries):
+        spec = copy.copy(template)
+        apply_dict(spec, entry, f"flags[{i}]")
+        out.append(spec)
+    return out
+
+
 def _renamed(message: str, cls: type, section: str) -> str:
     own = OWN_SECTION.get(cls)
     if own and own != section and message.startswith(own + "."):
@@ -115,6 +156,26 @@ def _renamed(message: str, cls: type, section: str) -> str:
 def builtins() -> dict[str, str]:
     """Built-in scenes: {name: one-line description}."""
     return dict(_core.Scene._builtins())
+
+
+GALLERY = os.path.join(os.path.dirname(__file__), "gallery")
+
+
+def gallery() -> dict[str, str]:
+    """Gallery scenes (TOML files shipped in flagsim/gallery/): {name: the file's first comment
+    line}."""
+    out = {}
+    for entry in sorted(os.listdir(GALLERY)) if os.path.isdir(GALLERY) else []:
+        if entry.endswith(".toml"):
+            with open(os.path.join(GALLERY, entry), encoding="utf-8") as f:
+                first = f.readline().lstrip("#").strip()
+            out[entry[: -len(".toml")]] = first
+    return out
+
+
+def gallery_path(name: str) -> str:
+    """The TOML file of gallery scene `name`."""
+    return os.path.join(GALLERY, name + ".toml")
 
 
 def named(name: str) -> Scene:
@@ -129,8 +190,11 @@ def from_dict(data: dict[str, Any], source: str = "scene") -> Scene:
     if base is not None and not isinstance(base, str):
         raise ValueError(f"base should be a built-in scene name, got {base!r}")
     scene = named(base) if base else Scene()
+    flags = data.pop("flags", None)
     try:
         apply_dict(scene, data, "")
+        if flags is not None:
+            scene.flags = _flag_entries(scene, flags)
         scene.validate()  # the rules that span fields (a file names its error here, not later)
     except ValueError as e:
         raise ValueError(f"{source}: {e}") from None
@@ -160,6 +224,8 @@ def resolve(spec: str | os.PathLike[str]) -> Scene:
     s = os.fspath(spec)
     if s in builtins():
         return named(s)
+    if s in gallery():
+        return load(gallery_path(s))
     if s.endswith(".toml") or os.path.sep in s or os.path.exists(s):
         return load(s)
     return named(s)  # raises, listing the built-in names
@@ -170,16 +236,30 @@ def _repr(obj: Any) -> str:
     return f"{type(obj).__name__}({inner})"
 
 
+def _forwarded(key: str, doc: str | None) -> property:
+    def get(spec):
+        return getattr(spec._flag, key)
+
+    def set_(spec, value):
+        setattr(spec._flag, key, value)
+
+    return property(get, set_, doc=doc)
+
+
 def _install() -> None:
     """Attach the Python-side helpers to the compiled classes."""
     Scene.load = staticmethod(load)
     Scene.builtins = staticmethod(builtins)
     Scene.named = staticmethod(named)
+    Scene.gallery = staticmethod(gallery)
     Scene.from_dict = staticmethod(from_dict)
     Scene.to_dict = to_dict
     Scene.__reduce__ = lambda self: (from_dict, (to_dict(self),))
+    for key in fields(_core.FlagParams):  # a [[flags]] entry reads like a [flag] section
+        setattr(_core.FlagSpec, key, _forwarded(key, _core.FlagParams.__dict__[key].__doc__))
     for cls in (
         Scene,
+        _core.FlagSpec,
         _core.FlagParams,
         _core.AirParams,
         _core.DragParams,

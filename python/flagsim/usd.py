@@ -15,6 +15,8 @@ The stage (decisions a reader relies on):
                   texture coordinates (texCoord2f, "vertex", u = 0 at the pole, v = 1 at the
                   top); displayColor the built-in flag's red
   /flagsim/pole   Cylinder along Y (radius, height of scene.pole), translated to its centre
+  several flags   flag i > 0 is /flagsim/flag_<i>, its pole /flagsim/pole_<i> (flag 0 keeps the
+                  names above), each mesh with its own points, normals and extent
   upAxis "Y"      flagsim's own frame is right-handed and y-up, USD's default: points are written
                   as simulated, so they equal sim.render_positions to float32 rounding. Blender
                   (z-up) turns a Y-up stage upright on import; Houdini is y-up itself.
@@ -82,7 +84,7 @@ class Recorder:
 
     def __init__(self, sim, *, fps, scene=None):
         from .povray import scenefiles
-        from .povray.mesh import mesh_arrays
+        from .povray.mesh import flags_of
 
         Gf, Kind, Sdf, Usd, UsdGeom, Vt = _pxr()
         self._Gf, self._Vt = Gf, Vt
@@ -101,9 +103,24 @@ class Recorder:
         stage.SetDefaultPrim(root.GetPrim())
         Usd.ModelAPI(root.GetPrim()).SetKind(Kind.Tokens.component)
 
-        _, _, uv, triangles = mesh_arrays(sim)
+        self._attrs = []  # per flag: (points, normals, extent) attributes
+        for i, flag in enumerate(flags_of(sim)):
+            self._attrs.append(self._define_flag(stage, f"{ROOT}/{_suffixed('flag', i)}", flag))
+        scene = scene if scene is not None else getattr(sim, "scene", None)
+        poles = _flag_poles(scene)
+        for i, pole in enumerate(poles):
+            if pole is not None and scenefiles.pole_enabled(pole):
+                self._define_pole(stage, f"{ROOT}/{_suffixed('pole', i)}", pole)
+        self.stage = stage
+
+    def _define_flag(self, stage, path, flag):
+        from .povray import scenefiles
+        from .povray.mesh import mesh_arrays
+
+        Gf, Kind, Sdf, Usd, UsdGeom, Vt = _pxr()
+        _, _, uv, triangles = mesh_arrays(flag)
         triangles = np.asarray(triangles)
-        mesh = UsdGeom.Mesh.Define(stage, f"{ROOT}/flag")
+        mesh = UsdGeom.Mesh.Define(stage, path)
         mesh.CreateFaceVertexCountsAttr(Vt.IntArray([3] * len(triangles)))
         mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(triangles.astype(np.int32).ravel()))
         mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
@@ -117,37 +134,35 @@ class Recorder:
         mesh.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(
             Vt.Vec3fArray([Gf.Vec3f(*scenefiles.FLAG_RED)])
         )
-        self._points = mesh.CreatePointsAttr()
-        self._normals = mesh.CreateNormalsAttr()
-        self._extent = mesh.CreateExtentAttr()
+        return mesh.CreatePointsAttr(), mesh.CreateNormalsAttr(), mesh.CreateExtentAttr()
 
-        pole = scenefiles.scene_pole(scene if scene is not None else getattr(sim, "scene", None))
-        if pole is not None and scenefiles.pole_enabled(pole):
-            r, h = float(pole.radius), float(pole.height)
-            cyl = UsdGeom.Cylinder.Define(stage, f"{ROOT}/pole")
-            cyl.CreateAxisAttr(UsdGeom.Tokens.y)
-            cyl.CreateRadiusAttr(r)
-            cyl.CreateHeightAttr(h)
-            cyl.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(-r, -h / 2, -r), Gf.Vec3f(r, h / 2, r)]))
-            centre = np.asarray(pole.base, dtype=float) + [0.0, h / 2, 0.0]
-            cyl.AddTranslateOp().Set(Gf.Vec3d(*centre))
-            cyl.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(
-                Vt.Vec3fArray([Gf.Vec3f(0.80, 0.80, 0.82)])
-            )
-        self.stage = stage
+    def _define_pole(self, stage, path, pole):
+        Gf, Kind, Sdf, Usd, UsdGeom, Vt = _pxr()
+        r, h = float(pole.radius), float(pole.height)
+        cyl = UsdGeom.Cylinder.Define(stage, path)
+        cyl.CreateAxisAttr(UsdGeom.Tokens.y)
+        cyl.CreateRadiusAttr(r)
+        cyl.CreateHeightAttr(h)
+        cyl.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(-r, -h / 2, -r), Gf.Vec3f(r, h / 2, r)]))
+        centre = np.asarray(pole.base, dtype=float) + [0.0, h / 2, 0.0]
+        cyl.AddTranslateOp().Set(Gf.Vec3d(*centre))
+        cyl.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set(
+            Vt.Vec3fArray([Gf.Vec3f(0.80, 0.80, 0.82)])
+        )
 
     def add_frame(self, sim):
         """Take sim's current geometry (mesh_arrays: the render geometry) as the next frame."""
-        from .povray.mesh import mesh_arrays
+        from .povray.mesh import flags_of, mesh_arrays
 
         Gf, Vt = self._Gf, self._Vt
-        positions, normals, _, _ = mesh_arrays(sim)
-        p = np.asarray(positions, dtype=np.float32)
         k = self.frames
-        self._points.Set(Vt.Vec3fArray.FromNumpy(p), k)
-        self._normals.Set(Vt.Vec3fArray.FromNumpy(np.asarray(normals, dtype=np.float32)), k)
-        lo, hi = p.min(axis=0), p.max(axis=0)
-        self._extent.Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, lo)), Gf.Vec3f(*map(float, hi))]), k)
+        for (points, normals_attr, extent), flag in zip(self._attrs, flags_of(sim)):
+            positions, normals, _, _ = mesh_arrays(flag)
+            p = np.asarray(positions, dtype=np.float32)
+            points.Set(Vt.Vec3fArray.FromNumpy(p), k)
+            normals_attr.Set(Vt.Vec3fArray.FromNumpy(np.asarray(normals, dtype=np.float32)), k)
+            lo, hi = p.min(axis=0), p.max(axis=0)
+            extent.Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, lo)), Gf.Vec3f(*map(float, hi))]), k)
         self.frames += 1
         self.stage.SetEndTimeCode(max(self.frames - 1, 0))
 
@@ -167,6 +182,22 @@ class Recorder:
         finally:
             tmp.unlink(missing_ok=True)
         return path.stat().st_size
+
+
+def _suffixed(name, i):
+    """Flag 0's prims keep their one-flag names (/flagsim/flag, /flagsim/pole); flag i > 0 gets
+    name_<i>."""
+    return name if i == 0 else f"{name}_{i}"
+
+
+def _flag_poles(scene):
+    """The pole of each flag (index = flag), or [scene_pole] for a scene without flags."""
+    from .povray import scenefiles
+
+    specs = getattr(scene, "flags", None) if scene is not None else None
+    if specs and len(specs) > 1:
+        return [s.pole for s in specs]
+    return [scenefiles.scene_pole(scene)]
 
 
 @dataclass

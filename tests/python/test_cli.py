@@ -35,10 +35,23 @@ def test_help_lists_commands_and_every_command_has_help(capsys):
 def test_scenes_lists_builtins_with_descriptions(capsys):
     code, out, _ = flagsim_cmd(capsys, "scenes")
     assert code == 0
-    lines = out.strip().splitlines()
-    assert len(lines) == len(flagsim.Scene.builtins())
-    for name, summary in flagsim.Scene.builtins().items():
+    lines = [line for line in out.strip().splitlines() if line and not line.endswith(":")]
+    listed = {**flagsim.Scene.builtins(), **flagsim.Scene.gallery()}
+    assert "flag_row" in flagsim.Scene.gallery()  # the gallery's row of flags is listed
+    assert len(lines) == len(listed)
+    for name, summary in listed.items():
         assert any(line.split()[0] == name and line.endswith(summary) for line in lines)
+
+
+def test_gallery_scene_runs_by_name(capsys, tmp_path):
+    scene = flagsim.scene.resolve("flag_row")
+    assert scene.name == "flag_row" and len(scene.flags) == 4
+    code, _, err = flagsim_cmd(
+        capsys, "run", "flag_row", "--seconds", "0.02", "--fps", "50", "--out", str(tmp_path / "o")
+    )
+    assert code == 0, err
+    frame = (tmp_path / "o" / "frames" / "flag_00001.inc").read_text()
+    assert f"vertex_vectors {{\n    {sum(f.rows * f.cols for f in scene.flags)}," in frame
 
 
 def test_run_without_render_exports_frames(capsys, tmp_path):

@@ -113,6 +113,27 @@ def test_the_issues_cases_end_plausible():
     assert sim.energy()["spring"] < 10.0 and sim.max_strain() <= 0.12
 
 
+def test_a_flag_hanging_at_its_strain_limit_is_not_counted_as_holding_what_it_never_kept():
+    # The paper's flag meshed 32 x 32 in its 1.5 m/s wind (no grid, no flapping) hangs with its
+    # top springs at the 10 % strain limit: each step the projection lifts what the solve lets
+    # down, and the net the integrator and projections leave over 10 s exceeds the allowance
+    # (0.07 against 0.06 J) although the flag holds under 0.01 J of kinetic and spring energy.
+    # The run net check counts the net only as far as the flag can still hold it.
+    s = flagsim.Scene.paper()
+    s.air.model = "uniform"
+    s.self_collision.enabled = False
+    s.flapping.mode = "off"
+    s.flag.rows = s.flag.cols = 32
+    sim = flagsim.Simulation(s)
+    sim.step(1000)
+    ledger, e = sim.energy_ledger(), sim.energy()
+    net = sum(ledger[k] for k in ("integrator", "strain_limit", "pole", "self_collision"))
+    allowed = s.integrator.energy_tolerance * sim.energy_scale
+    assert net > allowed  # the unbounded net would have raised
+    assert e["kinetic"] + e["spring"] < 0.25 * allowed
+    assert sim.max_strain() <= s.integrator.strain_limit + 0.02
+
+
 def test_energy_tolerance_and_ramp_are_validated_fields():
     s = flagsim.Scene.paper()
     with pytest.raises(ValueError, match=r"integrator\.energy_tolerance should be finite and >= 0"):

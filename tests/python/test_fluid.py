@@ -5,6 +5,7 @@ import math
 import flagsim
 import numpy as np
 import pytest
+from _air import close_solid_faces, max_abs_diff, plate, random_field
 from flagsim.testing.stable_fluids_numpy import StableFluidsNumpy
 
 BACKENDS = [
@@ -15,16 +16,6 @@ BACKENDS = [
     "multigrid",
 ]
 SCHEMES = ["semi_lagrangian", "maccormack"]
-
-
-def random_field(fluid, seed):
-    rng = np.random.default_rng(seed)
-    for name in "uvw":
-        setattr(fluid, name, rng.standard_normal(getattr(fluid, name).shape))
-
-
-def max_abs_diff(a, b):
-    return max(float(np.abs(getattr(a, n) - getattr(b, n)).max()) for n in "uvw")
 
 
 # ---- projection ----------------------------------------------------------------------------------
@@ -76,57 +67,6 @@ def test_fft_and_pcg_agree_on_a_periodic_field():
 # ---- solid cells (the pressure solve's mask) -------------------------------------------------
 
 
-def plate(shape):
-    """A solid plate across the middle of the cross-section, a quarter of the way along x."""
-    nx, ny, nz = shape
-    m = np.zeros(shape, bool)
-    m[nx // 4 : nx // 4 + 2, ny // 4 : 3 * ny // 4, nz // 4 : 3 * nz // 4] = True
-    return m
-
-
-def zero_solid_faces(fluid, mask):
-    """No flux through a face beside a solid cell (the obstacles do this for a real scene)."""
-    periodic = fluid.boundary == "periodic"
-    for axis, name in enumerate("uvw"):
-        a = getattr(fluid, name)
-        if periodic:  # face i lies between cells i - 1 and i
-            closed = mask | np.roll(mask, 1, axis=axis)
-        else:  # faces 0 .. n
-            pad = np.zeros_like(mask.take([0], axis=axis))
-            closed = np.concatenate([pad, mask], axis=axis) | np.concatenate([mask, pad], axis=axis)
-        a[closed] = 0.0
-
-
-@pytest.mark.parametrize("precision", ["double", "float"])
-@pytest.mark.parametrize("boundary", ["periodic", "tunnel"])
-def test_multigrid_and_pcg_agree_with_solid_cells(boundary, precision):
-    tol = 1e-10 if precision == "double" else 1e-5
-    fluids = {}
-    for pressure in ("multigrid", "pcg"):
-        fluid = flagsim.Fluid(
-            resolution=(16, 12, 10),
-            cell_size=0.1,
-            origin=(0, 0, 0),
-            boundary=boundary,
-            pressure=pressure,
-            precision=precision,
-            viscosity=0.0,
-            pcg_tolerance=tol,
-            wind=(1.0, 0.0, 0.0),
-        )
-        mask = plate(fluid.resolution)
-        fluid.set_solid_cells(mask)
-        random_field(fluid, 7)
-        zero_solid_faces(fluid, mask)
-        fluid.step(1e-4)  # advection moves the field by a thousandth of a cell: the projection
-        assert fluid.stats["pressure_converged"]
-        fluids[pressure] = fluid
-    mg, pcg = fluids["multigrid"], fluids["pcg"]
-    assert 0 < mg.stats["pressure_iterations"] <= 15 < pcg.stats["pressure_iterations"]
-    scale = max(float(np.abs(getattr(pcg, n)).max()) for n in "uvw")
-    assert max_abs_diff(mg, pcg) < 1e3 * tol * scale
-
-
 def test_multigrid_takes_the_same_steps_on_one_and_two_threads():
     def run(threads):
         flagsim.set_num_threads(threads)
@@ -142,7 +82,7 @@ def test_multigrid_takes_the_same_steps_on_one_and_two_threads():
         mask = plate(fluid.resolution)
         fluid.set_solid_cells(mask)
         random_field(fluid, 3)
-        zero_solid_faces(fluid, mask)
+        close_solid_faces(fluid)
         fluid.step(0.01, 3)
         return [getattr(fluid, n).copy() for n in "uvw"]
 

@@ -5,6 +5,7 @@ import math
 import flagsim
 import numpy as np
 import pytest
+from _air import close_solid_faces, max_abs_diff, plate, random_field, solid_face_masks
 from flagsim import forces
 from flagsim.study import accuracy_solids
 
@@ -13,32 +14,6 @@ ITERATIVE = ["pcg", "multigrid"]
 # Most solids here are a few cells across, which warns (the wake is not resolved): tests about
 # the warning catch it with pytest.warns; the others do not need the wake.
 pytestmark = pytest.mark.filterwarnings("ignore:air.obstacles.*cells across:UserWarning")
-
-
-def random_field(fluid, seed):
-    rng = np.random.default_rng(seed)
-    for name in "uvw":
-        setattr(fluid, name, rng.standard_normal(getattr(fluid, name).shape))
-
-
-def solid_face_masks(fluid):
-    """Per component, True on faces with a solid cell on either side (they must carry 0)."""
-    solid = fluid.solid_cells() > 0
-    periodic = fluid.boundary == "periodic"
-    masks = []
-    for axis in range(3):
-        if periodic:
-            masks.append(solid | np.roll(solid, 1, axis=axis))
-        else:
-            pad = [(0, 0)] * 3
-            pad[axis] = (1, 1)
-            s = np.pad(solid, pad)  # air beyond the ends
-            lo = [slice(None)] * 3
-            hi = [slice(None)] * 3
-            lo[axis] = slice(0, -1)
-            hi[axis] = slice(1, None)
-            masks.append(s[tuple(lo)] | s[tuple(hi)])
-    return masks
 
 
 def obstacles():
@@ -77,6 +52,35 @@ def test_projection_with_solids_leaves_no_divergence_and_no_flux(boundary, press
         assert np.all(div[fluid.solid_cells() > 0] == 0)
         for name, mask in zip("uvw", solid_face_masks(fluid)):
             assert np.all(getattr(fluid, name)[mask] == 0), name  # zero flux, exactly
+
+
+@pytest.mark.parametrize("precision", ["double", "float"])
+@pytest.mark.parametrize("boundary", ["periodic", "tunnel"])
+def test_multigrid_and_pcg_agree_with_solid_cells(boundary, precision):
+    tol = 1e-10 if precision == "double" else 1e-5
+    fluids = {}
+    for pressure in ("multigrid", "pcg"):
+        fluid = flagsim.Fluid(
+            resolution=(16, 12, 10),
+            cell_size=0.1,
+            origin=(0, 0, 0),
+            boundary=boundary,
+            pressure=pressure,
+            precision=precision,
+            viscosity=0.0,
+            pcg_tolerance=tol,
+            wind=(1.0, 0.0, 0.0),
+        )
+        fluid.set_solid_cells(plate(fluid.resolution))
+        random_field(fluid, 7)
+        close_solid_faces(fluid)
+        fluid.step(1e-4)  # advection moves the field by a thousandth of a cell: the projection
+        assert fluid.stats["pressure_converged"]
+        fluids[pressure] = fluid
+    mg, pcg = fluids["multigrid"], fluids["pcg"]
+    assert 0 < mg.stats["pressure_iterations"] <= 15 < pcg.stats["pressure_iterations"]
+    scale = max(float(np.abs(getattr(pcg, n)).max()) for n in "uvw")
+    assert max_abs_diff(mg, pcg) < 1e3 * tol * scale
 
 
 @pytest.mark.parametrize("precision", ["double", "float"])

@@ -10,8 +10,17 @@ class UnknownScene(ValueError):
     pass
 
 
+def add_scene_argument(parser):
+    """The SCENE positional every scene command takes (load it with load_scene)."""
+    parser.add_argument(
+        "scene",
+        metavar="SCENE",
+        help="a built-in scene name ('flagsim scenes' lists them) or a TOML scene file",
+    )
+
+
 def load_scene(spec):
-    """(scene, description) for SCENE: a TOML file, or a built-in scene name.
+    """(scene, description) for SCENE: a TOML file, a built-in or a gallery scene name.
 
     The description (JSON-able) identifies what the frames depend on, for the export's resume
     check: the source and every scene field (flagsim.scene.to_dict).
@@ -28,12 +37,21 @@ def load_scene(spec):
             "file": str(path.resolve()),
             "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
         }
+    elif spec in flagsim.Scene.gallery():
+        from flagsim.scene import gallery_path
+
+        scene = flagsim.Scene.load(gallery_path(spec))
+        source = {
+            "gallery": spec,
+            "sha256": hashlib.sha256(Path(gallery_path(spec)).read_bytes()).hexdigest(),
+        }
     else:
         known = flagsim.Scene.builtins()
         if spec not in known:
             raise UnknownScene(
                 f"unknown scene '{spec}': the built-in scenes are "
-                f"{', '.join(sorted(known))} (or give a .toml scene file)"
+                f"{', '.join(sorted(known))}, the gallery scenes "
+                f"{', '.join(sorted(flagsim.Scene.gallery()))} (or give a .toml scene file)"
             )
         scene = flagsim.Scene.named(spec)
         source = {"builtin": spec}

@@ -23,15 +23,17 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from ._common import add_animation_options, check_animation_tools, load_scene, render_and_assemble
+from ._common import (
+    add_animation_options,
+    add_scene_argument,
+    check_animation_tools,
+    load_scene,
+    render_and_assemble,
+)
 
 
 def configure(p):
-    p.add_argument(
-        "scene",
-        metavar="SCENE",
-        help="a built-in scene name ('flagsim scenes' lists them) or a TOML scene file",
-    )
+    add_scene_argument(p)
     p.add_argument(
         "--out", "-o", metavar="DIR", help="output folder of the POV-Ray export (or use --usd)"
     )

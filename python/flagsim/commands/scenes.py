@@ -1,5 +1,5 @@
-"""List the built-in scenes, one per line with a one-line description. Any of them can be run
-with `flagsim run NAME --out DIR`."""
+"""List the built-in scenes, then the gallery scenes (TOML files shipped with flagsim), one per
+line with a one-line description. Any of them can be run with `flagsim run NAME --out DIR`."""
 
 from __future__ import annotations
 
@@ -12,7 +12,12 @@ def run(args):
     import flagsim
 
     scenes = flagsim.Scene.builtins()
-    width = max((len(name) for name in scenes), default=0)
+    gallery = flagsim.Scene.gallery()
+    width = max((len(name) for name in [*scenes, *gallery]), default=0)
     for name, summary in sorted(scenes.items()):
         print(f"{name:<{width}}  {summary}")
+    if gallery:
+        print("\ngallery (TOML scenes in flagsim/gallery/, also examples/scenes/):")
+        for name, summary in sorted(gallery.items()):
+            print(f"{name:<{width}}  {summary}")
     return 0

@@ -22,15 +22,17 @@ from __future__ import annotations
 
 import sys
 
-from ._common import add_cluster_options, cluster_executor, load_scene, local_jobs
+from ._common import (
+    add_cluster_options,
+    add_scene_argument,
+    cluster_executor,
+    load_scene,
+    local_jobs,
+)
 
 
 def configure(p):
-    p.add_argument(
-        "scene",
-        metavar="SCENE",
-        help="a built-in scene name ('flagsim scenes' lists them) or a TOML scene file",
-    )
+    add_scene_argument(p)
     p.add_argument(
         "--vary",
         action="append",

@@ -22,17 +22,13 @@ from __future__ import annotations
 import sys
 
 from ..viewer.controls import KEYS
-from ._common import load_scene
+from ._common import add_scene_argument, load_scene
 
 __doc__ = __doc__.format(keys="\n".join(f"  {key:<6} {what}" for key, what, _, _ in KEYS))
 
 
 def configure(p):
-    p.add_argument(
-        "scene",
-        metavar="SCENE",
-        help="a built-in scene name ('flagsim scenes' lists them) or a TOML scene file",
-    )
+    add_scene_argument(p)
     p.add_argument(
         "--screenshot",
         metavar="PNG",

@@ -238,6 +238,7 @@ def export(
             povray_binary,
             fps,
             on_frame,
+            scenefiles.solids_text(scene),
         )
 
 
@@ -253,7 +254,20 @@ def output_folder(out_dir) -> Path:
 
 
 def _export_frames(
-    sim, out, steps, dt, key, pole, width, height, texture, progress, povray_binary, fps, on_frame
+    sim,
+    out,
+    steps,
+    dt,
+    key,
+    pole,
+    width,
+    height,
+    texture,
+    progress,
+    povray_binary,
+    fps,
+    on_frame,
+    solids="",
 ):
     manifest = {
         "format": MANIFEST_FORMAT,
@@ -331,6 +345,7 @@ def _export_frames(
         final_frame=len(steps) - 1,
         final_clock=steps[-1] * dt,
         povray_binary=povray_binary,
+        solids=solids,
     )
     manifest["complete"] = True
     manifest["texture"] = None if texture is None else Path(texture).name

@@ -9,8 +9,33 @@ import numpy as np
 from .. import _core
 
 
+def flags_of(sim):
+    """The flags to draw for ``sim``: ``sim.flags`` of a Simulation (flag 0 first), or ``(sim,)``
+    for anything without them."""
+    flags = getattr(sim, "flags", None)
+    return tuple(flags) if flags else (sim,)
+
+
 def mesh_arrays(sim):
-    """(positions, normals, uv, triangles) of what should be drawn for ``sim``.
+    """(positions, normals, uv, triangles) of what should be drawn for ``sim``: every flag of a
+    scene with several as one mesh (flag i's vertices after those of flags 0 .. i-1, each with
+    its own uv in [0, 1]), so one mesh2 per frame draws them all.
+    """
+    flags = flags_of(sim)
+    if len(flags) == 1:
+        return _flag_arrays(flags[0])
+    parts = [_flag_arrays(f) for f in flags]
+    offsets = np.cumsum([0] + [len(p[0]) for p in parts[:-1]])
+    return (
+        np.concatenate([p[0] for p in parts]),
+        np.concatenate([p[1] for p in parts]),
+        np.concatenate([p[2] for p in parts]),
+        np.concatenate([np.asarray(p[3]) + o for p, o in zip(parts, offsets)]).astype(np.int32),
+    )
+
+
+def _flag_arrays(sim):
+    """(positions, normals, uv, triangles) of what should be drawn for one flag ``sim``.
 
     ``sim`` is any object with ``positions`` and ``normals`` (N, 3), ``uv`` (N, 2) and
     ``triangles`` (T, 3). When it also has ``render_positions`` that are not None (flapping in

@@ -159,14 +159,16 @@ def frame_view(lo, hi, pole=None, *, facing=None, aspect=4 / 3, angle=40.0):
     lo = np.asarray(lo, dtype=float).copy()
     hi = np.asarray(hi, dtype=float).copy()
     ground_y = lo[1] - 1.0
-    if pole is not None and pole_enabled(pole):
-        base = np.asarray(pole.base, dtype=float)
-        top = base + np.array([0.0, float(pole.height), 0.0])
-        r = float(pole.radius)
+    poles = [p for p in _as_list(pole) if pole_enabled(p)]
+    flag_lo_y, flag_span_y = lo[1], hi[1] - lo[1]
+    for i, p in enumerate(poles):
+        base = np.asarray(p.base, dtype=float)
+        top = base + np.array([0.0, float(p.height), 0.0])
+        r = float(p.radius)
         finial = top + np.array([0.0, 3.2 * r, 0.0])
-        lo = np.minimum(lo, [top[0] - r, max(base[1], lo[1] - 0.2 * (hi[1] - lo[1])), top[2] - r])
+        lo = np.minimum(lo, [top[0] - r, max(base[1], flag_lo_y - 0.2 * flag_span_y), top[2] - r])
         hi = np.maximum(hi, finial + r)
-        ground_y = float(base[1])
+        ground_y = float(base[1]) if i == 0 else min(ground_y, float(base[1]))
     pad = 0.05 * float(np.max(hi - lo))
     lo, hi = lo - pad, hi + pad
     target = 0.5 * (lo + hi)
@@ -198,10 +200,23 @@ def frame_view(lo, hi, pole=None, *, facing=None, aspect=4 / 3, angle=40.0):
 DEFAULT_POLE = SimpleNamespace(enabled=True, radius=0.055, height=2.6, base=(0.0, -2.5, 0.0))
 
 
+def scene_poles(scene):
+    """Every pole to draw, one per flag that has one (scene_pole for each of scene.flags)."""
+    specs = getattr(scene, "flags", None) if scene is not None else None
+    if not specs or len(specs) == 1:
+        pole = scene_pole(scene)
+        return [] if pole is None else [pole]
+    return [s.pole for s in specs if pole_enabled(s.pole)]
+
+
 def scene_pole(scene):
-    """The pole to draw: scene.pole, else the default pole for a pole-pinned flag, else None."""
+    """The pole to draw: scene.pole, else the default pole for a pole-pinned flag, else None.
+    A scene of several flags: the list of their poles (scene_poles)."""
     if scene is None:
         return None
+    specs = getattr(scene, "flags", None)
+    if specs and len(specs) > 1:
+        return scene_poles(scene)
     pole = getattr(scene, "pole", None)
     if pole is not None:
         return pole
@@ -217,10 +232,20 @@ def pole_enabled(pole):
     )
 
 
+def _as_list(pole):
+    if pole is None:
+        return []
+    return list(pole) if isinstance(pole, (list, tuple)) else [pole]
+
+
 def pole_text(pole):
-    """Cylinder from the scene's pole (base, height, radius) with a ball finial on top."""
-    if pole is None or not pole_enabled(pole):
+    """Cylinder from the scene's pole (base, height, radius) with a ball finial on top; a list
+    of poles (a scene of several flags): one each."""
+    poles = [p for p in _as_list(pole) if pole_enabled(p)]
+    if not poles:
         return "// (the scene has no pole)\n"
+    if len(poles) > 1:
+        return "".join(pole_text(p) for p in poles)
     base = np.asarray(pole.base, dtype=float)
     r = float(pole.radius)
     top = base + np.array([0.0, float(pole.height), 0.0])
@@ -319,7 +344,26 @@ def fill_template(name, **values):
     return string.Template(text).substitute(values)
 
 
-def scene_text(view, pole, texture_name):
+def solids_text(scene):
+    """The air's box obstacles (air.model "grid"), drawn as pale stone blocks (a building behind
+    a row of flags); "" when there are none. Spheres and cylinders are not drawn."""
+    air = getattr(scene, "air", None)
+    if air is None or getattr(air, "model", None) != "grid":
+        return ""
+    out = []
+    for o in getattr(air, "obstacles", []):
+        if o.shape != "box":
+            continue
+        c, h = np.asarray(o.center, dtype=float), np.asarray(o.half_size, dtype=float)
+        out.append(
+            f"box {{\n  {pov_vector(c - h)}, {pov_vector(c + h)}\n"
+            "  texture {\n    pigment { color rgb <0.78, 0.74, 0.66> }\n"
+            "    finish { ambient 0.10 diffuse 0.75 }\n  }\n}\n"
+        )
+    return "".join(out)
+
+
+def scene_text(view, pole, texture_name, solids=""):
     fill = view.location + np.array([0.0, 0.5, 0.0])
     return fill_template(
         "flag.pov.in",
@@ -330,6 +374,7 @@ def scene_text(view, pole, texture_name):
         fill_position=pov_vector(fill),
         ground_y=f"{view.ground_y:.6f}",
         pole=pole_text(pole),
+        solids=solids,
         flag_pigment=texture_pigment(texture_name),
     )
 
@@ -383,7 +428,17 @@ def povray_home_files(povray_binary=None):
 
 
 def write_static_files(
-    out_dir, *, view, pole, texture, width, height, final_frame, final_clock, povray_binary=None
+    out_dir,
+    *,
+    view,
+    pole,
+    texture,
+    width,
+    height,
+    final_frame,
+    final_clock,
+    povray_binary=None,
+    solids="",
 ):
     """Write flag.pov, flag.ini, the texture copy and POV-Ray's private config (unchanged files
     are left alone). Returns the list of files written."""
@@ -393,7 +448,7 @@ def write_static_files(
     (out / ".povray" / "3.7").mkdir(parents=True, exist_ok=True)
     texture_name = copy_texture(out, texture)
     files = {
-        SCENE_FILE: scene_text(view, pole, texture_name),
+        SCENE_FILE: scene_text(view, pole, texture_name, solids),
         INI_FILE: ini_text(width, height, final_frame, final_clock),
     }
     files.update(povray_home_files(povray_binary))
