@@ -385,7 +385,8 @@ def test_quick_selection_is_smaller_and_flags_narrow_it():
         (["--threads", "0"], "--threads should be"),
         (
             ["--only", "cloth,wind"],
-            "--only should be a comma-separated list among paper, cloth, air, solver, multiflag, peers",
+            "--only should be a comma-separated list among paper, cloth, air, solver, multiflag, "
+            "peers",
         ),
         (["--pressure", "jacobi"], "--pressure should be"),
         (["--repeats", "0"], "--repeats should be >= 1, got 0"),
