@@ -44,8 +44,8 @@ struct AlignedAllocator {
     return static_cast<T*>(p);
   }
   void deallocate(T* p, std::size_t n) {
-    std::free(p);
-    count_aligned_bytes(-std::int64_t(rounded(n)));
+    count_aligned_bytes(-std::int64_t(rounded(n)));  // before free: GCC 12 warns (falsely) of a
+    std::free(p);                                    // use after free the other way round
   }
   template <class U>
   bool operator==(const AlignedAllocator<U>&) const {
