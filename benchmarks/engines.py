@@ -125,9 +125,9 @@ def _spacing(flag) -> float:
     return min(flag.width / (flag.cols - 1), flag.height / (flag.rows - 1))
 
 
-def paper_scene(full: bool):
+def paper_scene(full: bool, pipeline: bool = True):
     """Scene.paper() as built in (whatever it switches on); full: with grid air, self-collision
-    and flapping switched on."""
+    and flapping switched on. pipeline: air.pipeline (the air beside the cloth on two threads)."""
     import flagsim
 
     s = flagsim.Scene.paper()
@@ -135,6 +135,17 @@ def paper_scene(full: bool):
         s.air.model = "grid"
         s.self_collision.enabled = True
         s.flapping.mode = "displace"
+    s.air.pipeline = pipeline
+    return s
+
+
+def large_scene(pipeline: bool = True):
+    """Scene.large(): the paper scene meshed finer (64 x 64 flag, 64^3 air, self-collision,
+    eq. 5, dt = 0.01 s), with air.pipeline as given."""
+    import flagsim
+
+    s = flagsim.Scene.large()
+    s.air.pipeline = pipeline
     return s
 
 
@@ -176,7 +187,11 @@ class SimulationStepper:
         return dict(self.sim.timings)
 
     def info(self) -> dict[str, Any]:
+        import flagsim
+
+        pipelined = self.sim.pipelined and flagsim.num_threads() > 1
         return {
+            "notes": "air beside the cloth (air.pipeline)" if pipelined else "",
             "vertices": int(self.sim.positions.shape[0]),
             "stages": list(self.sim.stages),
             "last_step": dict(self.sim.last_step_stats),

@@ -69,7 +69,9 @@ def build(spec: dict[str, Any]):
             engines.cloth_scene(p["rows"], p["cols"], p["integrator"], p["self_collision"])
         )
     if kind == "paper":
-        return engines.SimulationStepper(engines.paper_scene(p["full"]))
+        return engines.SimulationStepper(engines.paper_scene(p["full"], p.get("pipeline", True)))
+    if kind == "large":
+        return engines.SimulationStepper(engines.large_scene(p["pipeline"]))
     if kind == "multiflag":
         return engines.SimulationStepper(engines.multiflag_scene(p["flags"]))
     if kind == "fluid":

@@ -34,6 +34,8 @@ SOLVERS = (
     ("periodic", "fft"),
 )
 THREADS = (1, 2)
+#: Scene.large(): a 64 x 64 flag in a 64^3 air grid (the paper scene meshed finer).
+LARGE_SIZE = "64x64+64^3"
 SHORT = {"semi_lagrangian": "sl", "maccormack": "maccormack"}
 
 #: Protocol per mode: seconds a run must last at least, runs measured, steps dropped first.
@@ -103,6 +105,32 @@ def _thread_counts(sel: Selection, threads, is_largest: bool, main_variant: bool
     return threads[:1]
 
 
+def _pipeline_workloads(sel: Selection, threads) -> list[Workload]:
+    """Issue 28: the air beside the cloth (air.pipeline, the default: "full", "large") against
+    the serial order ("/serial": air.pipeline = false, every thread in each stage's loops) at
+    each thread count above one, so the ratio comes from one run; and the large scene (Scene.large:
+    64 x 64 flag, 64^3 air, self-collision, eq. 5, dt = 0.01) at every thread count. Smoke runs
+    take the paper scene's serial row alone."""
+    multi = [t for t in threads if t > 1]
+    serial = {"kind": "paper", "full": True, "pipeline": False}
+    work = [
+        Workload("paper", "flagsim", "full/serial", "8x11", 88, t, serial)
+        for t in (multi if sel.mode != "smoke" else threads[:1])
+    ]
+    if sel.mode == "smoke":
+        return work
+    # quick runs: the large scene at the largest thread count only (a step is ~10 ms)
+    counts = threads if sel.mode == "full" or sel.threads is not None else threads[-1:]
+    for variant, pipeline, ts in (("large", True, counts), ("large/serial", False, multi)):
+        params = {"kind": "large", "pipeline": pipeline}
+        work += [
+            Workload("paper", "flagsim", variant, LARGE_SIZE, 64 * 64, t, params)
+            for t in ts
+            if t in counts
+        ]
+    return work
+
+
 def catalogue(
     sel: Selection,
     features: dict[str, tuple[bool, str]],
@@ -143,6 +171,7 @@ def catalogue(
                         "paper", "flagsim", "full", "8x11", 88, t, {"kind": "paper", "full": True}
                     )
                 )
+            work += _pipeline_workloads(sel, threads)
 
     want_cloth = "cloth" in sel.groups
     if want_cloth:

@@ -93,6 +93,9 @@ void bind_scene(py::module_& m) {
   def_field<AirParams, bool>(
       air, "pole_obstacle", &AirParams::pole_obstacle, "air",
       "the pole is a no-slip solid of the air grid too, so it sheds a wake ('grid', pole.enabled)");
+  def_field<AirParams, bool>(air, "pipeline", &AirParams::pipeline, "air",
+                             "'grid' on >= 2 threads: the air steps on its own thread beside the "
+                             "cloth (same results); false: one after the other");
 
   py::class_<FlagSpec> spec(m, "FlagSpec", R"doc(One flag of a scene with several (TOML [[flags]]).
 
@@ -132,6 +135,9 @@ the scene unchanged. Build one with Scene.paper(), Scene.named(name) or Scene.lo
   scene.def_static("flapping_demo", &Scene::flapping_demo,
                    "Paper §4.3 (Fig. 6): eq. 5 flapping alone; no air solver, no gravity, every "
                    "mass pulled along +x.");
+  scene.def_static("large", &Scene::large,
+                   "The paper scene meshed finer: 64 x 64 flag with self-collision and eq. 5 in a "
+                   "64^3 air grid, dt = 0.01 s (real time: 100 steps/s).");
   scene.def_static("_builtins", &builtin_scenes);
   scene.def_static("_named", &builtin_scene, py::arg("name"));
   scene.def_property(
@@ -232,6 +238,9 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
       "own step() raises)");
   sim.def_property_readonly("time", &Simulation::time, "simulated time, s");
   sim.def_property_readonly("step_count", &Simulation::step_count);
+  sim.def_property_readonly("pipelined", &Simulation::pipelined,
+                            "True when the air steps beside the cloth (air.pipeline and a grid; "
+                            "on two threads when flagsim.num_threads() >= 2); same results");
   sim.def_property_readonly(
       "scene", [](const Simulation& s) { return Scene(s.scene()); },
       "a copy of the scene this simulation was built from");

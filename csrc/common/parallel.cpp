@@ -1,5 +1,12 @@
 #include "common/parallel.h"
 
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <future>
+#include <mutex>
+#include <thread>
+
 #include "common/errors.h"
 #ifdef _OPENMP
 #include <omp.h>
@@ -28,6 +35,97 @@ bool has_openmp() {
 #else
   return false;
 #endif
+}
+
+namespace {
+enum JobState : int { kIdle, kPosted, kTaken, kDone };
+
+inline void cpu_relax() {
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_ia32_pause();
+#endif
+}
+}  // namespace
+
+struct SideBySide::State {
+  std::atomic<int> job{kIdle};  // JobState of the posted job
+  std::atomic<bool> stop{false};
+  Job fn = nullptr;  // the posted job, written before job = kPosted
+  const void* arg = nullptr;
+  std::mutex m;
+  std::condition_variable posted, done;
+  std::thread helper;
+
+  // Spins for up to kSpinMicroseconds until ready(), then sleeps on cv until ready(). The
+  // notifier changes the atomics, then locks and unlocks m, then notifies: no wake-up is lost.
+  template <class Ready>
+  void wait(std::condition_variable& cv, const Ready& ready) {
+    const auto until =
+        std::chrono::steady_clock::now() + std::chrono::microseconds(kSpinMicroseconds);
+    for (int k = 1; !ready(); ++k) {
+      cpu_relax();
+      if (k % 64 == 0 && std::chrono::steady_clock::now() > until) {
+        std::unique_lock<std::mutex> lock(m);
+        cv.wait(lock, ready);
+        return;
+      }
+    }
+  }
+
+  void notify(std::condition_variable& cv) {
+    { std::lock_guard<std::mutex> lock(m); }
+    cv.notify_one();
+  }
+
+  void helper_loop() {
+    for (;;) {
+      wait(posted, [&] { return job.load(std::memory_order_acquire) == kPosted || stop.load(); });
+      if (stop.load()) return;
+      int expected = kPosted;
+      if (!job.compare_exchange_strong(expected, kTaken, std::memory_order_acq_rel)) continue;
+      fn(arg);
+      job.store(kDone, std::memory_order_release);
+      notify(done);
+    }
+  }
+};
+
+SideBySide::SideBySide() : s_(std::make_unique<State>()) {
+  // The helper's loops run on its own thread (libgomp gives a thread its own settings on the
+  // first change, an allocation: here, before run() is ever called).
+  std::promise<void> ready;
+  std::future<void> started = ready.get_future();
+  s_->helper = std::thread([this, &ready] {
+    set_num_threads(1);
+    ready.set_value();
+    s_->helper_loop();
+  });
+  started.wait();
+}
+
+SideBySide::~SideBySide() {
+  s_->stop.store(true);
+  s_->notify(s_->posted);
+  s_->helper.join();
+}
+
+void SideBySide::run_jobs(Job first, const void* first_arg, Job second, const void* second_arg) {
+  State& s = *s_;
+  s.fn = second;
+  s.arg = second_arg;
+  s.job.store(kPosted, std::memory_order_release);
+  s.notify(s.posted);
+  const int threads = num_threads();
+  set_num_threads(1);
+  first(first_arg);
+  int expected = kPosted;
+  if (s.job.compare_exchange_strong(expected, kIdle, std::memory_order_acq_rel)) {
+    second(second_arg);  // the helper has not started it: no waiting for a thread without a core
+  } else {
+    s.wait(s.done, [&] { return s.job.load(std::memory_order_acquire) == kDone; });
+    s.job.store(kIdle, std::memory_order_relaxed);
+  }
+  set_num_threads(threads);
 }
 
 }  // namespace flagsim

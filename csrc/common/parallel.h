@@ -1,6 +1,8 @@
 // Thread-count control for OpenMP loops. Results are deterministic for a given thread count.
 #pragma once
 
+#include <memory>
+
 #include "common/types.h"
 
 namespace flagsim {
@@ -52,8 +54,47 @@ inline void parallel_for_cells(Index n, const Body& body) {
   parallel_for_if(n > kGridParallelGrain, n, body);
 }
 
-/// Set the thread count for flagsim's loops; n >= 1. Throws InvalidArgument otherwise.
+/// Set the thread count for flagsim's loops; n >= 1. Throws InvalidArgument otherwise. Inside a
+/// parallel region it sets the count for the calling thread's loops until the region ends.
 void set_num_threads(int n);
+
+/// A helper thread that runs one job beside the calling thread (the Simulation's air step beside
+/// its cloth step). run(first, second) runs first() on the calling thread and second() on the
+/// helper, at the same time, when num_threads() >= 2; when the helper has not picked second()
+/// up by the time first() returns (asleep, or without a core on a loaded machine), the calling
+/// thread runs it itself, so it never waits for a thread that has not started. On one thread:
+/// first() then second() on the calling thread. Inside both, num_threads() is 1: their loops run
+/// on their own thread (no OpenMP team inside, never more than two busy threads), and since every
+/// flagsim loop gives the same bits on any thread count, each gives the bits it would give alone.
+/// The two must not touch the same data and must not throw (catch inside, rethrow after).
+/// Waiting threads spin for up to kSpinMicroseconds, then sleep. No heap allocation in run().
+class SideBySide {
+ public:
+  static constexpr int kSpinMicroseconds = 50;
+  SideBySide();   // starts the helper thread
+  ~SideBySide();  // stops and joins it
+  SideBySide(const SideBySide&) = delete;
+  SideBySide& operator=(const SideBySide&) = delete;
+
+  template <class First, class Second>
+  void run(const First& first, const Second& second) {
+    if (!use_team(true)) {
+      first();
+      second();
+      return;
+    }
+    run_jobs([](const void* f) { (*static_cast<const First*>(f))(); }, &first,
+             [](const void* f) { (*static_cast<const Second*>(f))(); }, &second);
+  }
+
+  struct State;  // the helper's thread, its job slot and how the two threads wait
+
+ private:
+  using Job = void (*)(const void*);
+  void run_jobs(Job first, const void* first_arg, Job second, const void* second_arg);
+  std::unique_ptr<State> s_;
+};
+
 /// True when compiled with OpenMP.
 bool has_openmp();
 

@@ -42,7 +42,12 @@ struct Fluid::Solver {
   virtual void rebuild_solids() = 0;
   virtual Vec3 obstacle_force(int index) const = 0;
   SolidMap solids;
-  double last_dt = 0;  ///< s, the last step's dt (pressure = rho phi / dt)
+  double last_dt = 0;     ///< s, the last step's dt (pressure = rho phi / dt)
+  double step_start = 0;  ///< s, the time at the start of the last step (undo_step)
+  /// Copies the iterative solve's warm start at the start of every step from now on.
+  virtual void keep_warm_start() = 0;
+  /// Back to the warm start kept at the start of the last step (zero when none is kept).
+  virtual void restore_warm_start() = 0;
   /// Copies the solid-cell mask (nx*ny*nz, 1 = solid; nullptr: none) and rebuilds what the
   /// pressure backend precomputes (MIC factor, multigrid hierarchy).
   virtual void set_solid(const uint8_t* mask) = 0;
@@ -54,8 +59,9 @@ template <class T>
 struct TypedSolver final : Fluid::Solver {
   // Grid-sized arrays, each allocated only where a stage of this configuration uses it (counted
   // in docs/design.md "Memory"; tests/cpp/fluid/test_fluid.cpp GridArrays.* hold the counts).
-  MacGrid<T> u, prev, hat;  // current field; tunnel advection source; MacCormack / rhs scratch
-  AlignedVector<T> phi;     // nx*ny*nz: potential dt p / rho (m^2/s)
+  MacGrid<T> u, prev, hat;     // current field; tunnel advection source; MacCormack / rhs scratch
+  AlignedVector<T> phi;        // nx*ny*nz: potential dt p / rho (m^2/s)
+  AlignedVector<T> phi_start;  // nx*ny*nz or empty (fft): phi at the step's start (undo_step)
   // nx*ny*nz, 1/s: the pcg / multigrid right-hand side in a step, divergence() between steps
   mutable AlignedVector<T> div;
   std::unique_ptr<FftProjector<T>> fft;
@@ -193,9 +199,21 @@ struct TypedSolver final : Fluid::Solver {
     apply_boundary(Vec3(v.x(), 0, 0));
   }
 
+  void keep_warm_start() override {
+    if (!use_fft) phi_start.assign(phi.size(), T(0));  // fft: phi is an output only
+  }
+
+  void restore_warm_start() override {
+    if (phi_start.empty())
+      std::fill(phi.begin(), phi.end(), T(0));
+    else
+      std::copy(phi_start.begin(), phi_start.end(), phi.begin());
+  }
+
   bool step(double dt) override {
     const double t0 = time, t1 = time + dt;
     const FluidParams& p = params;
+    if (!phi_start.empty()) std::copy(phi.begin(), phi.end(), phi_start.begin());
     SampleBoundary bc;
     if (!geo.periodic) {
       bc.inflow = p.wind.at(t0);
@@ -391,6 +409,7 @@ Fluid& Fluid::operator=(Fluid&&) noexcept = default;
 void Fluid::step(double dt) {
   check_positive("dt", dt);
   const double t0 = s_->time;
+  s_->step_start = t0;
   if (s_->step(dt) || s_->all_finite()) return;
   s_->undo_step(t0);
   std::ostringstream s;
@@ -400,6 +419,13 @@ void Fluid::step(double dt) {
     << s_->geo.h << " m)";
   throw DivergenceError(s.str(), s_->stats.steps, t0, -1, "non-finite");
 }
+
+void Fluid::undo_step() {
+  s_->undo_step(s_->step_start);
+  s_->restore_warm_start();
+}
+
+void Fluid::keep_warm_start() { s_->keep_warm_start(); }
 
 double Fluid::time() const { return s_->time; }
 const FluidParams& Fluid::params() const { return s_->params; }

@@ -44,6 +44,17 @@ class Fluid {
 
   /// Advances the air by dt (s, finite and > 0). No heap allocation.
   void step(double dt);
+  /// Takes back the last step, which returned normally: the field and the time as they were
+  /// before it (from the copy of u^n the step keeps anyway) and, after keep_warm_start(), the
+  /// iterative pressure solve's warm start too, so that taking the step again gives the same
+  /// bits (without it the warm start restarts from zero). Once per step; no heap allocation.
+  /// The Simulation's pipeline takes back an air step that ran beside a cloth step which failed
+  /// or is redone in pieces.
+  void undo_step();
+  /// From now on every step keeps the iterative pressure solve's warm start for undo_step (one
+  /// cell array, copied per step; fft and air without an iterative solve keep nothing more).
+  /// Allocates: call it before stepping.
+  void keep_warm_start();
   double time() const;  ///< s
   const FluidParams& params() const;
   const GridGeometry& geometry() const;

@@ -14,6 +14,18 @@ namespace {
 /// Position of cell k in a row of n2 cells stored as its even k, then its odd k.
 inline int split_pos(int k, int n2) { return (k & 1) ? (n2 + 1) / 2 + (k >> 1) : (k >> 1); }
 
+/// Each row of n2 values of v (C order) to its even k, then its odd k (at split_pos).
+template <class V>
+void split_rows(AlignedVector<V>& v, int n2) {
+  if (v.empty()) return;
+  AlignedVector<V> row(static_cast<std::size_t>(n2));
+  for (std::size_t r = 0; r < v.size() / std::size_t(n2); ++r) {
+    V* p = v.data() + r * std::size_t(n2);
+    for (int k = 0; k < n2; ++k) row[std::size_t(split_pos(k, n2))] = p[k];
+    std::copy(row.begin(), row.end(), p);
+  }
+}
+
 /// The other two axes of axis d, in order: a face of axis d is indexed (i_a * n_b + i_b).
 inline void other_axes(int d, int& a, int& b) {
   a = d == 0 ? 1 : 0;
@@ -451,24 +463,15 @@ void PoissonMultigrid<T>::finish_build() {
   MultigridLevel<MgScalar>& L0 = levels_[0];
   L0.unit = true;
   for (int d = 0; d < 3; ++d) AlignedVector<MgScalar>().swap(L0.c[d]);
-  // Every level's per-cell arrays to rows split by the parity of k (see the cycle's kernels).
+  // Every level's per-cell arrays, and CG's diagonal, to rows split by the parity of k (see the
+  // cycle's kernels): CG runs on the split rows too.
   for (MultigridLevel<MgScalar>& L : levels_) {
-    const int n2 = L.shape.n[2];
-    const std::size_t rows = L.shape.size() / std::size_t(n2);
-    auto split = [&](AlignedVector<MgScalar>& v) {
-      if (v.empty()) return;
-      AlignedVector<MgScalar> row(static_cast<std::size_t>(n2));
-      for (std::size_t r = 0; r < rows; ++r) {
-        MgScalar* p = v.data() + r * std::size_t(n2);
-        for (int k = 0; k < n2; ++k) row[std::size_t(split_pos(k, n2))] = p[k];
-        std::copy(row.begin(), row.end(), p);
-      }
-    };
-    for (int d = 0; d < 3; ++d) split(L.c[d]);
-    split(L.diag);
-    split(L.inv_diag);
-    split(L.inv_norm);
+    for (int d = 0; d < 3; ++d) split_rows(L.c[d], L.shape.n[2]);
+    split_rows(L.diag, L.shape.n[2]);
+    split_rows(L.inv_diag, L.shape.n[2]);
+    split_rows(L.inv_norm, L.shape.n[2]);
   }
+  split_rows(product_.diag, product_.shape.n[2]);
   MultigridLevel<MgScalar>& C = levels_.back();
   const int n2 = C.shape.n[2];
   for (int32_t& q : cell_of_) q = q - q % n2 + split_pos(q % n2, n2);
@@ -510,122 +513,19 @@ struct LevelArgs {
   const void* in = nullptr;
   void* out = nullptr;
   bool io_double = false;
+  bool io_split = false;          // in (entry) already split by the parity of k; exit: no z out
   bool first_half_sweep = false;  // entry: also the first half-sweep from x = 0
   const T* parity = nullptr;      // 1, 0, 1, 0, ... (a row and one more)
   // CG on level 0 (in the grid's precision), per-plane partial sums (fixed order in a plane):
-  double* sums = nullptr;   // product: s . q; exit: r . z; update: sum r
-  double* sums2 = nullptr;  // exit: sum z; update: max |r|
-  const T* cg_r = nullptr;  // exit: r (its dot with z); s update: z
+  double* sums = nullptr;          // product: s . q; exit: r . z; update: sum r
+  double* sums2 = nullptr;         // exit: sum z; update: max |r|
+  const T* cg_r = nullptr;         // exit: r (its dot with z)
+  const MgScalar* cg_z = nullptr;  // s update: z (level 0's x of the V-cycle)
   T *cg_x = nullptr, *cg_s = nullptr, *cg_q = nullptr, *cg_rw = nullptr;
   double alpha = 0, beta = 0, mean = 0;
 };
 
 namespace {
-
-/// The neighbours of row (i, j): x of rows (i-1, j), (i+1, j), (i, j-1), (i, j+1) and the
-/// conductances to them, c[2] of the row itself (ck[k] couples k and k+1).
-template <class T>
-struct RowPtrs {
-  const T *xim, *xip, *xjm, *xjp;
-  const T *cim, *cip, *cjm, *cjp, *ck;
-  std::size_t base;
-};
-
-template <class T>
-FLAGSIM_INLINE RowPtrs<T> row_ptrs(const LevelArgs<T>& a, int i, int j) {
-  const MultigridLevel<T>& L = *a.L;
-  const Shape3& sh = L.shape;
-  auto nb = [&](int m, int d) { return sh.n[d] > 1 ? wrap(m, sh.n[d], L.periodic[d]) : -1; };
-  const int im = nb(i - 1, 0), ip = nb(i + 1, 0), jm = nb(j - 1, 1), jp = nb(j + 1, 1);
-  RowPtrs<T> p;
-  p.base = sh.index(i, j, 0);
-  const T* x = a.x;
-  p.xim = im >= 0 ? x + sh.index(im, j, 0) : a.zero;
-  p.xip = ip >= 0 ? x + sh.index(ip, j, 0) : a.zero;
-  p.xjm = jm >= 0 ? x + sh.index(i, jm, 0) : a.zero;
-  p.xjp = jp >= 0 ? x + sh.index(i, jp, 0) : a.zero;
-  if (L.unit) {
-    p.cim = p.cip = p.cjm = p.cjp = p.ck = nullptr;
-  } else {
-    p.cim = im >= 0 ? L.c[0].data() + sh.index(im, j, 0) : a.zero;
-    p.cip = L.c[0].data() + p.base;
-    p.cjm = jm >= 0 ? L.c[1].data() + sh.index(i, jm, 0) : a.zero;
-    p.cjp = L.c[1].data() + p.base;
-    p.ck = L.c[2].data() + p.base;
-  }
-  return p;
-}
-
-/// sum over the six neighbours of conductance * x at cell k, S one lane type (T or a vector of
-/// T); xkm, xkp (and ckm, ckp) the k-neighbours. Unit: conductance 1 (level 0, where a solid
-/// neighbour holds x = 0 and the mask lives in the diagonal only). One expression for every lane
-/// width: the same bits.
-template <bool Unit, class S, class T>
-FLAGSIM_INLINE S neighbour_sum(const RowPtrs<T>& p, int k, const S& xkm, const S& xkp, const S& ckm,
-                               const S& ckp) {
-  const S xim = load_lanes<S>(p.xim + k), xip = load_lanes<S>(p.xip + k);
-  const S xjm = load_lanes<S>(p.xjm + k), xjp = load_lanes<S>(p.xjp + k);
-  if constexpr (Unit) {
-    (void)ckm;
-    (void)ckp;
-    return ((((xim + xip) + xjm) + xjp) + xkm) + xkp;
-  } else {
-    return ((((load_lanes<S>(p.cim + k) * xim + load_lanes<S>(p.cip + k) * xip) +
-              load_lanes<S>(p.cjm + k) * xjm) +
-             load_lanes<S>(p.cjp + k) * xjp) +
-            ckm * xkm) +
-           ckp * xkp;
-  }
-}
-
-/// The sum at a single cell k (any k: the row's ends wrap or see zero).
-template <bool Unit, class T>
-FLAGSIM_INLINE T cell_sum(const LevelArgs<T>& a, const RowPtrs<T>& p, const T* xr, int k) {
-  const MultigridLevel<T>& L = *a.L;
-  const int n2 = L.shape.n[2];
-  const bool wrap2 = L.periodic[2] && n2 > 1;
-  T xkm = T(0), xkp = T(0), ckm = T(0), ckp = T(0);
-  if (k > 0) {
-    xkm = xr[k - 1];
-    if (!Unit) ckm = p.ck[k - 1];
-  } else if (wrap2) {
-    xkm = xr[n2 - 1];
-    if (!Unit) ckm = p.ck[n2 - 1];
-  }
-  if (k + 1 < n2) {
-    xkp = xr[k + 1];
-    if (!Unit) ckp = p.ck[k];
-  } else if (wrap2) {
-    xkp = xr[0];
-    if (!Unit) ckp = p.ck[k];
-  }
-  return neighbour_sum<Unit, T>(p, k, xkm, xkp, ckm, ckp);
-}
-
-/// Interior cells [1, n2 - 1) of a row by vectors of L::W lanes: body(k, sum) for each chunk,
-/// then the rest one by one; returns the first k not done.
-template <bool Unit, class L, class T, class Body>
-FLAGSIM_INLINE int interior_chunks(const RowPtrs<T>& p, const T* xr, int n2, const Body& body) {
-  int k = 1;
-#ifdef FLAGSIM_HAVE_VECTORS
-  if constexpr (!std::is_void<L>::value) {
-    using S = typename L::V;
-    for (; k + L::W <= n2 - 1; k += L::W) {
-      S ckm{}, ckp{};
-      if constexpr (!Unit) {
-        ckm = load_lanes<S>(p.ck + k - 1);
-        ckp = load_lanes<S>(p.ck + k);
-      }
-      body(k, neighbour_sum<Unit, S>(p, k, load_lanes<S>(xr + k - 1), load_lanes<S>(xr + k + 1),
-                                     ckm, ckp));
-    }
-  }
-#endif
-  (void)p;
-  (void)xr;
-  (void)body;
-  return k;
-}
 
 // ---- the V-cycle's kernels, on rows split by the parity of k
 // -------------------------------------- A level stores each row as its even k (positions [0, ne))
@@ -649,21 +549,29 @@ struct SplitRow {
 
 template <class T>
 FLAGSIM_INLINE SplitRow<T> split_row(const LevelArgs<T>& a, int i, int j) {
-  const RowPtrs<T> p = row_ptrs(a, i, j);
+  const MultigridLevel<T>& L = *a.L;
+  const Shape3& sh = L.shape;
+  auto nb = [&](int m, int d) { return sh.n[d] > 1 ? wrap(m, sh.n[d], L.periodic[d]) : -1; };
+  const int im = nb(i - 1, 0), ip = nb(i + 1, 0), jm = nb(j - 1, 1), jp = nb(j + 1, 1);
   SplitRow<T> w;
-  w.xim = p.xim;
-  w.xip = p.xip;
-  w.xjm = p.xjm;
-  w.xjp = p.xjp;
-  w.cim = p.cim;
-  w.cip = p.cip;
-  w.cjm = p.cjm;
-  w.cjp = p.cjp;
-  w.ck = p.ck;
-  w.base = p.base;
-  w.n2 = a.L->shape.n[2];
+  w.base = sh.index(i, j, 0);
+  const T* x = a.x;
+  w.xim = im >= 0 ? x + sh.index(im, j, 0) : a.zero;
+  w.xip = ip >= 0 ? x + sh.index(ip, j, 0) : a.zero;
+  w.xjm = jm >= 0 ? x + sh.index(i, jm, 0) : a.zero;
+  w.xjp = jp >= 0 ? x + sh.index(i, jp, 0) : a.zero;
+  if (L.unit) {
+    w.cim = w.cip = w.cjm = w.cjp = w.ck = nullptr;
+  } else {
+    w.cim = im >= 0 ? L.c[0].data() + sh.index(im, j, 0) : a.zero;
+    w.cip = L.c[0].data() + w.base;
+    w.cjm = jm >= 0 ? L.c[1].data() + sh.index(i, jm, 0) : a.zero;
+    w.cjp = L.c[1].data() + w.base;
+    w.ck = L.c[2].data() + w.base;
+  }
+  w.n2 = sh.n[2];
   w.ne = (w.n2 + 1) / 2;
-  w.wrap2 = a.L->periodic[2] && w.n2 > 1;
+  w.wrap2 = L.periodic[2] && w.n2 > 1;
   return w;
 }
 
@@ -796,33 +704,38 @@ struct SmoothPlane {
   }
 };
 
+/// f(q, sum) for every position q of row w (x of the row: xr), sum the neighbour sum there: by
+/// vectors of L::W lanes inside each half, one by one at its ends. f takes a lane type or T and
+/// must give the same result when called twice for a position (see split_interior).
+template <bool Unit, class L, class T, class F>
+FLAGSIM_INLINE void each_cell_sum(const SplitRow<T>& w, const T* xr, const F& f) {
+  for (int h = 0; h < 2; ++h) {
+    int lo, hi;
+    split_interior<Unit, L>(w, xr, h, lo, hi, f);
+    for_each_end(half_len(w.n2, h), lo, hi, [&](int e) FLAGSIM_INLINE_LAMBDA {
+      const int k = 2 * e + h;
+      f(split_pos(k, w.n2), split_cell_sum<Unit>(w, xr, k));
+    });
+  }
+}
+
 /// r = (b - A x) * inv_norm on plane i: the residual, weighted for the restriction.
 struct ResidualPlane {
   template <class L, bool Unit, class T>
   FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
     const MultigridLevel<T>& Lv = *a.L;
-    const int n1 = Lv.shape.n[1], n2 = Lv.shape.n[2];
-    for (int j = 0; j < n1; ++j) {
+    for (int j = 0; j < Lv.shape.n[1]; ++j) {
       const SplitRow<T> w = split_row(a, i, j);
       const T* xr = a.x + w.base;
       const T* br = a.b + w.base;
       const T* dg = Lv.diag.data() + w.base;
       const T* nr = Lv.inv_norm.data() + w.base;
       T* rr = a.r + w.base;
-      for (int h = 0; h < 2; ++h) {
-        int lo, hi;
-        split_interior<Unit, L>(
-            w, xr, h, lo, hi, [&](int q, const auto& sum) FLAGSIM_INLINE_LAMBDA {
-              using S = std::decay_t<decltype(sum)>;
-              const S ax = load_lanes<S>(dg + q) * load_lanes<S>(xr + q) - sum;
-              store_lanes(rr + q, load_lanes<S>(nr + q) * (load_lanes<S>(br + q) - ax));
-            });
-        for_each_end(half_len(n2, h), lo, hi, [&](int e) FLAGSIM_INLINE_LAMBDA {
-          const int k = 2 * e + h, q = split_pos(k, n2);
-          const T ax = dg[q] * xr[q] - split_cell_sum<Unit>(w, xr, k);
-          rr[q] = nr[q] * (br[q] - ax);
-        });
-      }
+      each_cell_sum<Unit, L>(w, xr, [&](int q, const auto& sum) FLAGSIM_INLINE_LAMBDA {
+        using S = std::decay_t<decltype(sum)>;
+        const S ax = load_lanes<S>(dg + q) * load_lanes<S>(xr + q) - sum;
+        store_lanes(rr + q, load_lanes<S>(nr + q) * (load_lanes<S>(br + q) - ax));
+      });
     }
   }
 };
@@ -908,7 +821,27 @@ struct UpdatePlane {
   }
 };
 
-/// CG's new direction on plane i: s = (z - mean) + beta s, the mean only on unknowns (diag != 0).
+#ifdef FLAGSIM_HAVE_VECTORS
+/// A vector of floats, Bytes long: a lane type's lanes as the V-cycle's scalar.
+template <int Bytes>
+struct FloatLanes;
+template <>
+struct FloatLanes<8> {
+  typedef float V __attribute__((vector_size(8)));
+};
+template <>
+struct FloatLanes<16> {
+  typedef float V __attribute__((vector_size(16)));
+};
+template <>
+struct FloatLanes<32> {
+  typedef float V __attribute__((vector_size(32)));
+};
+static_assert(std::is_same<MgScalar, float>::value, "FloatLanes: the V-cycle runs in float");
+#endif
+
+/// CG's new direction on plane i: s = (z - mean) + beta s, z = the V-cycle's level-0 x (float,
+/// split as s), the mean only on unknowns (diag != 0).
 struct DirectionPlane {
   template <class L, bool Unit, class T>
   FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
@@ -916,59 +849,75 @@ struct DirectionPlane {
     const std::size_t base = sh.index(i, 0, 0);
     const int n = sh.n[1] * sh.n[2];
     T* s = a.cg_s + base;
-    const T* z = a.cg_r + base;
+    const MgScalar* z = a.cg_z + base;
     const T* dg = a.L->diag.data() + base;
     const T be = T(a.beta), m = T(a.mean);
     int k = 0;
 #ifdef FLAGSIM_HAVE_VECTORS
     if constexpr (!std::is_void<L>::value) {
       using S = typename L::V;
+      using Z = typename FloatLanes<int(sizeof(MgScalar)) * L::W>::V;
       const S zero{};
       for (; k + L::W <= n; k += L::W) {
+        const S zk = __builtin_convertvector(load_lanes<Z>(z + k), S);
         const S mk = load_lanes<S>(dg + k) == zero ? zero : zero + m;
-        store_lanes(s + k, (load_lanes<S>(z + k) - mk) + be * load_lanes<S>(s + k));
+        store_lanes(s + k, (zk - mk) + be * load_lanes<S>(s + k));
       }
     }
 #endif
-    for (; k < n; ++k) s[k] = (z[k] - (dg[k] == T(0) ? T(0) : m)) + be * s[k];
+    for (; k < n; ++k) s[k] = (T(z[k]) - (dg[k] == T(0) ? T(0) : m)) + be * s[k];
   }
 };
 
 /// y = A x on plane i (0 on inactive cells, where diag is 0), x = 0 on solid cells: level 0's
-/// product for CG.
+/// product for CG, on rows split by the parity of k as the cycle's; with sums, x . y per plane in
+/// storage order.
 struct ProductPlane {
   template <class L, bool Unit, class T>
   FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
     const MultigridLevel<T>& Lv = *a.L;
     const int n1 = Lv.shape.n[1], n2 = Lv.shape.n[2];
-    Lanes8 dots;
     for (int j = 0; j < n1; ++j) {
-      const RowPtrs<T> p = row_ptrs(a, i, j);
-      const T* xr = a.x + p.base;
-      const T* dg = Lv.diag.data() + p.base;
-      T* yr = a.r + p.base;
-      int k = 1;
-      if (n2 > 2) {
-#ifdef FLAGSIM_HAVE_VECTORS
-        if constexpr (!std::is_void<L>::value) {
-          using S = typename L::V;
-          const S zero{};
-          k = interior_chunks<Unit, L>(p, xr, n2, [&](int k0, const S& sum) FLAGSIM_INLINE_LAMBDA {
-            const S d = load_lanes<S>(dg + k0);
-            store_lanes(yr + k0, d == zero ? zero : d * load_lanes<S>(xr + k0) - sum);
-          });
-        }
-#endif
-      }
-      auto one = [&](int q) FLAGSIM_INLINE_LAMBDA {
-        yr[q] = dg[q] == T(0) ? T(0) : dg[q] * xr[q] - cell_sum<Unit>(a, p, xr, q);
-      };
-      for (; k < n2 - 1; ++k) one(k);
-      one(0);
-      if (n2 > 1) one(n2 - 1);
-      if (a.sums) dots.add(n2, [&](int q) { return double(xr[q]) * double(yr[q]); });
+      const SplitRow<T> w = split_row(a, i, j);
+      const T* xr = a.x + w.base;
+      const T* dg = Lv.diag.data() + w.base;
+      T* yr = a.r + w.base;
+      each_cell_sum<Unit, L>(w, xr, [&](int q, const auto& sum) FLAGSIM_INLINE_LAMBDA {
+        using S = std::decay_t<decltype(sum)>;
+        const S zero{};
+        const S d = load_lanes<S>(dg + q);
+        store_lanes(yr + q, d == zero ? zero : d * load_lanes<S>(xr + q) - sum);
+      });
     }
-    if (a.sums) a.sums[i] = dots.sum();
+    if (!a.sums) return;
+    const std::size_t base = Lv.shape.index(i, 0, 0);
+    const T* x = a.x + base;
+    const T* y = a.r + base;
+    Lanes8 dots;
+    dots.add(n1 * n2, [&](int q) { return double(x[q]) * double(y[q]); });
+    a.sums[i] = dots.sum();
+  }
+};
+
+/// v's plane i between the natural order (natural[k]) and rows split by the parity of k
+/// (split[split_pos(k)]): to_split copies natural into split, else split into natural.
+struct SplitCopyPlane {
+  template <class L, bool Unit, class T>
+  FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
+    const Shape3& sh = a.L->shape;
+    const int n1 = sh.n[1], n2 = sh.n[2], ne = (n2 + 1) / 2, no = n2 / 2;
+    for (int j = 0; j < n1; ++j) {
+      const std::size_t base = sh.index(i, j, 0);
+      T* sp = a.cg_s + base;
+      T* nat = a.cg_x + base;
+      if (a.colour == 1) {
+        for (int e = 0; e < ne; ++e) sp[e] = nat[2 * e];
+        for (int o = 0; o < no; ++o) sp[ne + o] = nat[2 * o + 1];
+      } else {
+        for (int e = 0; e < ne; ++e) nat[2 * e] = sp[e];
+        for (int o = 0; o < no; ++o) nat[2 * o + 1] = sp[ne + o];
+      }
+    }
   }
 };
 
@@ -986,8 +935,12 @@ struct EntryPlane {
       T* br = const_cast<T*>(a.b) + base;
       T* xr = a.x + base;
       const T* dr = Lv.inv_diag.data() + base;
-      for (int e = 0; e < ne; ++e) br[e] = T(in[2 * e]);
-      for (int o = 0; o < no; ++o) br[ne + o] = T(in[2 * o + 1]);
+      if (a.io_split) {
+        for (int q = 0; q < n2; ++q) br[q] = T(in[q]);
+      } else {
+        for (int e = 0; e < ne; ++e) br[e] = T(in[2 * e]);
+        for (int o = 0; o < no; ++o) br[ne + o] = T(in[2 * o + 1]);
+      }
       if (a.first_half_sweep) {
         const int h = (i + j) & 1;  // colour 0's half
         const int lo = h == 0 ? 0 : ne, hi = h == 0 ? ne : n2;
@@ -1009,13 +962,24 @@ struct EntryPlane {
 };
 
 /// Level 0's exit: z = x in the grid's precision and natural order; with sums, per plane r . z
-/// (sums) and sum z (sums2), r = a.in.
+/// (sums) and sum z (sums2), r = a.in. With io_split (the solve's): no z (CG reads x), r split
+/// as x, the sums over the plane in storage order.
 struct ExitPlane {
   template <class Out, class T>
   FLAGSIM_INLINE static void body(const LevelArgs<T>& a, int i) {
     const Shape3& sh = a.L->shape;
     const int n1 = sh.n[1], n2 = sh.n[2], ne = (n2 + 1) / 2, no = n2 / 2;
     Lanes8 rz, zs;
+    if (a.io_split) {
+      const std::size_t base = sh.index(i, 0, 0);
+      const T* x = a.x + base;
+      const Out* r = static_cast<const Out*>(a.in) + base;
+      rz.add(n1 * n2, [&](int q) { return double(r[q]) * double(x[q]); });
+      zs.add(n1 * n2, [&](int q) { return double(x[q]); });
+      a.sums[i] = rz.sum();
+      a.sums2[i] = zs.sum();
+      return;
+    }
     for (int j = 0; j < n1; ++j) {
       const std::size_t base = sh.index(i, j, 0);
       const T* x = a.x + base;
@@ -1040,6 +1004,28 @@ struct ExitPlane {
   }
 };
 
+/// tmp = sum over the transfer entries (e0, e1) of row (I, J) (count[0] x count[1] of them) of
+/// w[0][e0] w[1][e1] times row (idx[0][e0], idx[1][e1]) of src (shape sh, rows of sh.n[2]): the
+/// rows a restriction or prolongation combines, summed in a fixed order.
+template <class T>
+FLAGSIM_INLINE void weighted_rows(const T* src, const Shape3& sh, int I, int J, const int count[3],
+                                  const std::array<AlignedVector<T>, 3>& w,
+                                  const std::array<std::vector<int32_t>, 3>& idx, T* tmp) {
+  const int n = sh.n[2];
+  std::fill(tmp, tmp + n, T(0));
+  for (int e0 = 0; e0 < count[0]; ++e0) {
+    const std::size_t ea = std::size_t(I * count[0] + e0);
+    if (w[0][ea] == T(0)) continue;
+    for (int e1 = 0; e1 < count[1]; ++e1) {
+      const std::size_t eb = std::size_t(J * count[1] + e1);
+      if (w[1][eb] == T(0)) continue;
+      const T wab = w[0][ea] * w[1][eb];
+      const T* row = src + sh.index(idx[0][ea], idx[1][eb], 0);
+      for (int k = 0; k < n; ++k) tmp[k] += wab * row[k];
+    }
+  }
+}
+
 /// C.b = P^T F.r on coarse plane I (F.r holds (b - A x) * inv_norm), 0 on inactive coarse cells:
 /// per coarse row the weighted fine rows summed into one (tmp), then along k (on a halved k the
 /// coarse K takes fine 2K - 1, 2K, 2K + 1, 2K + 2: odd K - 1, even K, odd K, even K + 1).
@@ -1050,21 +1036,9 @@ struct RestrictPlane {
     const MultigridLevel<T>& C = *a.coarse;
     const Shape3 &fs = F.shape, &cs = C.shape;
     const int nf2 = fs.n[2], nc2 = cs.n[2], nef = (nf2 + 1) / 2;
-    const int c0 = F.r_count[0], c1 = F.r_count[1];
     T tmp[4096], nat[2048 + 1];
     for (int J = 0; J < cs.n[1]; ++J) {
-      std::fill(tmp, tmp + nf2, T(0));
-      for (int e0 = 0; e0 < c0; ++e0) {
-        const std::size_t ea = std::size_t(I * c0 + e0);
-        if (F.r_w[0][ea] == T(0)) continue;
-        for (int e1 = 0; e1 < c1; ++e1) {
-          const std::size_t eb = std::size_t(J * c1 + e1);
-          if (F.r_w[1][eb] == T(0)) continue;
-          const T w = F.r_w[0][ea] * F.r_w[1][eb];
-          const T* rf = F.r.data() + fs.index(F.r_idx[0][ea], F.r_idx[1][eb], 0);
-          for (int k = 0; k < nf2; ++k) tmp[k] += w * rf[k];
-        }
-      }
+      weighted_rows(F.r.data(), fs, I, J, F.r_count, F.r_w, F.r_idx, tmp);
       const std::size_t cbase = cs.index(I, J, 0);
       T* out = a.b_coarse + cbase;
       const T* active = C.inv_diag.data() + cbase;
@@ -1108,21 +1082,9 @@ struct ProlongPlane {
     const MultigridLevel<T>& C = *a.coarse;
     const Shape3 &fs = F.shape, &cs = C.shape;
     const int nf2 = fs.n[2], nc2 = cs.n[2], nef = (nf2 + 1) / 2, nof = nf2 / 2;
-    const int c0 = F.p_count[0], c1 = F.p_count[1];
     T tmp[4096], nat[2048 + 1];
     for (int j = 0; j < fs.n[1]; ++j) {
-      std::fill(tmp, tmp + nc2, T(0));
-      for (int e0 = 0; e0 < c0; ++e0) {
-        const std::size_t ea = std::size_t(i * c0 + e0);
-        if (F.p_w[0][ea] == T(0)) continue;
-        for (int e1 = 0; e1 < c1; ++e1) {
-          const std::size_t eb = std::size_t(j * c1 + e1);
-          if (F.p_w[1][eb] == T(0)) continue;
-          const T w = F.p_w[0][ea] * F.p_w[1][eb];
-          const T* row = C.x.data() + cs.index(F.p_idx[0][ea], F.p_idx[1][eb], 0);
-          for (int q = 0; q < nc2; ++q) tmp[q] += w * row[q];
-        }
-      }
+      weighted_rows(C.x.data(), cs, i, j, F.p_count, F.p_w, F.p_idx, tmp);
       const std::size_t base = fs.index(i, j, 0);
       T* xr = a.x + base;
       const T* nr = F.inv_norm.data() + base;
@@ -1169,17 +1131,117 @@ FLAGSIM_TARGET_AVX void plane_wide(const LevelArgs<T>& a, int i) {
 }
 #endif
 
-/// Kernel on every plane of a level, on the widest vectors this CPU has (the same bits at every
-/// width), planes split over the threads (each plane's result is independent of the split).
+template <class T>
+using PlaneFn = void (*)(const LevelArgs<T>&, int);
+
+/// Kernel's plane function on the widest vectors this CPU has (the same bits at every width).
+template <class Kernel, class T>
+PlaneFn<T> plane_fn() {
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+  if (vector_bytes() == 32) return &plane_wide<Kernel, T>;
+#endif
+  return &plane_narrow<Kernel, T>;
+}
+
+/// Kernel on every plane of a level, planes split over the threads (each plane's result is
+/// independent of the split).
 template <class Kernel, class T>
 void for_each_plane(const LevelArgs<T>& a, int planes = -1) {
-  void (*fn)(const LevelArgs<T>&, int) = &plane_narrow<Kernel, T>;
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-  if (vector_bytes() == 32) fn = &plane_wide<Kernel, T>;
-#endif
+  const PlaneFn<T> fn = plane_fn<Kernel, T>();
   const MultigridLevel<T>& L = *a.L;
   parallel_for_if(Index(L.shape.size()) > kGridParallelGrain, planes < 0 ? L.shape.n[0] : planes,
                   [&](Index i) { fn(a, int(i)); });
+}
+
+/// One stage of a fused pass over a level: a plane kernel and its arguments.
+template <class T>
+struct PlaneStage {
+  PlaneFn<T> fn = nullptr;
+  LevelArgs<T> a;
+};
+
+template <class T>
+struct StageList;
+template <class T>
+void run_stages(const StageList<T>& list);
+
+/// The stages of a fused pass over one level, in order; a full list runs (run_stages) and starts
+/// again, which gives the same result: no allocation.
+template <class T>
+struct StageList {
+  static constexpr int kMaxStages = 24;
+  PlaneStage<T> st[kMaxStages];
+  int n = 0;
+  template <class Kernel>
+  void add(const LevelArgs<T>& a) {
+    if (n == kMaxStages) flush();
+    st[n].fn = plane_fn<Kernel, T>();
+    st[n].a = a;
+    ++n;
+  }
+  void flush() {
+    run_stages(*this);
+    n = 0;
+  }
+};
+
+/// Stage s of list on planes [first, last) of an n0-plane level (indices wrap on a ring).
+template <class T>
+void run_planes(const StageList<T>& list, int s, int first, int last, int n0) {
+  const PlaneStage<T>& st = list.st[s];
+  for (int p = first; p < last; ++p) st.fn(st.a, (p % n0 + n0) % n0);
+}
+
+/// The stages of list over every plane of their level, with the result of running each stage
+/// over all planes before the next begins (the same bits), provided stage s on plane p writes
+/// plane p only, and reads of the other planes only planes p - 1 and p + 1, and there only what
+/// stage s does not write (as every stage of the cycle: a colour's half-sweep reads the other
+/// colour there; the entry, the prolongation and the exit read no other plane; the residual
+/// writes r, which no stage reads). The schedule below runs stage s on plane p after stage s - 1
+/// on planes p - 1 .. p + 1 and before stage s + 1 on them. Temporal
+/// blocking, so a level's planes stream through the cache once per pass instead of once per
+/// stage: the planes are cut into slabs (one per thread); phase 1 runs each slab as a wavefront
+/// (stage s one plane behind stage s - 1) over a trapezoid that shrinks by a plane per stage at
+/// each end shared with another slab (or with itself across a periodic wrap), phase 2 fills the
+/// triangle at each shared end (stage s on the 2 s planes around it, stage by stage). A level
+/// with wrap passes (an odd periodic axis) or too few planes runs stage by stage.
+template <class T>
+void run_stages(const StageList<T>& list) {
+  const int S = list.n;
+  if (S == 0) return;
+  const MultigridLevel<T>& L = *list.st[0].a.L;
+  const int n0 = L.shape.n[0];
+  const bool ring = L.periodic[0] && n0 > 1;
+  const bool team = use_team(Index(L.shape.size()) > kGridParallelGrain);
+  int slabs = team ? std::min(num_threads(), n0 / (2 * S)) : 1;
+  if (!ring)
+    slabs = std::max(slabs, 1);  // no shared end: one slab of any length
+  else if (n0 < 2 * S)
+    slabs = 0;  // too short to shrink from both ends
+  if (L.passes != 1 || slabs < 1) {
+    for (int s = 0; s < S; ++s) {
+      const PlaneStage<T>& st = list.st[s];
+      parallel_for_if(team, n0, [&](Index i) { st.fn(st.a, int(i)); });
+    }
+    return;
+  }
+  auto bound = [&](int k) { return int(std::int64_t(k) * n0 / slabs); };
+  // Phase 1: slab k = [lo, hi), a wavefront over the planes its stages can reach on their own.
+  parallel_for_if(slabs > 1, slabs, [&](Index k) {
+    const int lo = bound(int(k)), hi = bound(int(k) + 1);
+    const int shrink_lo = (k > 0 || ring) ? 1 : 0, shrink_hi = (k + 1 < slabs || ring) ? 1 : 0;
+    for (int t = 0; t < hi - lo + S - 1; ++t)
+      for (int s = 0; s < S; ++s) {
+        const int p = lo + t - s;
+        if (p >= lo + shrink_lo * s && p < hi - shrink_hi * s) list.st[s].fn(list.st[s].a, p);
+      }
+  });
+  // Phase 2: the triangle around each shared end b (on a ring slab 0's start too).
+  const int ends = ring ? slabs : slabs - 1;
+  parallel_for_if(ends > 1, ends, [&](Index e) {
+    const int b = bound(ring ? int(e) : int(e) + 1);
+    for (int s = 1; s < S; ++s) run_planes(list, s, b - s, b + s, n0);
+  });
 }
 
 }  // namespace
@@ -1204,23 +1266,37 @@ LevelArgs<MgScalar> PoissonMultigrid<T>::args(int l) {
 
 template <class T>
 void PoissonMultigrid<T>::apply_operator(const T* x, T* y) {
-  LevelArgs<T> a;
-  a.L = &product_;
-  a.zero = zero_row_t_.data();
-  a.x = const_cast<T*>(x);  // read only
-  a.r = y;
+  const std::size_t n = product_.shape.size();
+  AlignedVector<T> xs(n), ys(n);
+  LevelArgs<T> a = cg_args();
+  a.sums = nullptr;
+  split_copy(a, const_cast<T*>(x), xs.data(), true);  // x is only read
+  a.x = xs.data();
+  a.r = ys.data();
   for_each_plane<ProductPlane>(a);
+  split_copy(a, y, ys.data(), false);
+}
+
+template <class T>
+void PoissonMultigrid<T>::split_copy(const LevelArgs<T>& a, T* natural, T* split, bool to_split) {
+  LevelArgs<T> c = a;
+  c.cg_x = natural;
+  c.cg_s = split;
+  c.colour = to_split ? 1 : 0;
+  for_each_plane<SplitCopyPlane>(c);
 }
 
 template <class T>
 void PoissonMultigrid<T>::apply(const T* r, T* z) {
-  vcycle(r, z, false);
+  vcycle(r, z);
 }
 
 template <class T>
-void PoissonMultigrid<T>::vcycle(const T* r_in, T* z, bool sums) {
+void PoissonMultigrid<T>::vcycle(const T* r_in, T* z) {
   using F32 = MgScalar;
   const int nl = int(levels_.size());
+  const bool split = z == nullptr;  // the solve's: r split as the levels, z = level 0's x
+  StageList<F32> list;
   // Red then black (forward) or black then red (backward), the wrap passes likewise; `skip`
   // half-sweeps of the first sweep already done.
   auto sweep = [&](LevelArgs<F32> a, bool forward, int sweeps, int skip) {
@@ -1229,7 +1305,7 @@ void PoissonMultigrid<T>::vcycle(const T* r_in, T* z, bool sums) {
         a.colour = forward ? h : 1 - h;
         for (int p = 0; p < a.L->passes; ++p) {
           a.pass = forward ? p : a.L->passes - 1 - p;
-          for_each_plane<SmoothPlane>(a);
+          list.add<SmoothPlane>(a);
         }
       }
   };
@@ -1239,20 +1315,22 @@ void PoissonMultigrid<T>::vcycle(const T* r_in, T* z, bool sums) {
     const bool first = a.L->passes == 1;
     if (l == 0) {
       a.in = r_in;
+      a.io_split = split;
       a.first_half_sweep = first;
-      for_each_plane<EntryPlane>(a);
+      list.add<EntryPlane>(a);
     } else if (first) {
-      for_each_plane<FirstHalfSweepPlane>(a);
+      list.add<FirstHalfSweepPlane>(a);
     } else {
       std::fill(a.x, a.x + a.L->shape.size(), F32(0));
     }
     sweep(a, true, sweeps, first ? 1 : 0);
   };
-  // Down: smooth from x = 0, restrict the residual.
+  // Down: smooth from x = 0 and take the residual (one fused pass), restrict it.
   for (int l = 0; l + 1 < nl; ++l) {
     const LevelArgs<F32> a = args(l);
     presmooth(a, l, kSmoothSweeps);
-    for_each_plane<ResidualPlane>(a);
+    list.add<ResidualPlane>(a);
+    list.flush();
     for_each_plane<RestrictPlane>(a, a.coarse->shape.n[0]);
   }
   // Coarsest: the dense factor, or symmetric sweeps.
@@ -1262,6 +1340,7 @@ void PoissonMultigrid<T>::vcycle(const T* r_in, T* z, bool sums) {
       if (nl == 1) {  // level 0 is the coarsest: b from r
         LevelArgs<F32> e = a;
         e.in = r_in;
+        e.io_split = split;
         for_each_plane<EntryPlane>(e);
       }
       std::fill(a.x, a.x + a.L->shape.size(), F32(0));
@@ -1281,22 +1360,27 @@ void PoissonMultigrid<T>::vcycle(const T* r_in, T* z, bool sums) {
     } else {
       presmooth(a, nl - 1, kCoarsestSweeps);
       sweep(a, false, kCoarsestSweeps, 0);
+      list.flush();
     }
   }
-  // Up: add the coarse correction, smooth in the reverse order.
+  // Up: add the coarse correction and smooth in the reverse order (one fused pass; on level 0
+  // the exit too).
   for (int l = nl - 2; l >= 0; --l) {
     const LevelArgs<F32> a = args(l);
-    for_each_plane<ProlongPlane>(a);
+    list.add<ProlongPlane>(a);
     sweep(a, false, kSmoothSweeps, 0);
+    if (l > 0) list.flush();
   }
   LevelArgs<F32> a = args(0);
   a.out = z;
-  if (sums) {
+  a.io_split = split;
+  if (split) {
     a.in = r_in;
     a.sums = part_[0].data();
     a.sums2 = part_[1].data();
   }
-  for_each_plane<ExitPlane>(a);
+  list.add<ExitPlane>(a);
+  list.flush();
 }
 
 template <class T>
@@ -1311,14 +1395,16 @@ LevelArgs<T> PoissonMultigrid<T>::cg_args() {
 
 template <class T>
 CgResult PoissonMultigrid<T>::solve(const T* b, T* x, double tol, int max_iter, CgScratch<T>& w) {
+  // CG runs on rows split by the parity of k, as the levels: x in w.z, r, s, q in w's own.
   const std::size_t n = product_.shape.size();
   const int planes = product_.shape.n[0];
   T* r = w.r.data();
-  T* z = w.z.data();
+  T* xs = w.z.data();
   T* s = w.s.data();
   T* q = w.q.data();
-  const T* active = product_.diag.data();  // 0: not an unknown (solid, or no open face)
-  auto in_order = [&](int k) {             // the planes' partial sums, added in plane order
+  const MgScalar* z = levels_[0].x.data();  // M r: the cycle's level-0 x
+  const T* active = product_.diag.data();   // 0: not an unknown (solid, or no open face)
+  auto in_order = [&](int k) {              // the planes' partial sums, added in plane order
     double t = 0;
     for (int i = 0; i < planes; ++i) t += part_[std::size_t(k)][std::size_t(i)];
     return t;
@@ -1328,73 +1414,79 @@ CgResult PoissonMultigrid<T>::solve(const T* b, T* x, double tol, int max_iter, 
     for (int i = 0; i < planes; ++i) t = std::max(t, part_[1][std::size_t(i)]);
     return t;
   };
+  auto mean = [&](const T* v) {  // over the unknowns
+    return deterministic_sum(
+               n, [&](std::size_t i) { return active[i] == T(0) ? 0.0 : double(v[i]); }) /
+           double(n_active_);
+  };
   CgResult res;
+  LevelArgs<T> a = cg_args();
+  a.sums = nullptr;
+  split_copy(a, x, xs, true);
+  split_copy(a, const_cast<T*>(b), r, true);  // b is only read
   if (any_inactive_)
     parallel_for_cells(long(n), [&](Index i) {
-      if (active[i] == T(0)) x[i] = T(0);
+      if (active[i] == T(0)) xs[i] = T(0);
     });
+  // max|b| over the unknowns; for a singular K (constants over the unknowns are its null space:
+  // the solve is for the zero-mean part) of b - mean(b).
+  const double mb = singular_ ? mean(r) : 0.0;
+  const double b_max = parallel_max(
+      n, [&](std::size_t i) { return active[i] == T(0) ? 0.0 : std::fabs(double(r[i]) - mb); });
   // r = b - K x on the unknowns, 0 elsewhere.
-  LevelArgs<T> a = cg_args();
-  a.x = x;
+  a.x = xs;
   a.r = q;
-  a.sums = nullptr;
   for_each_plane<ProductPlane>(a);
   parallel_for_cells(
-      long(n), [&](Index i) { r[i] = active[i] == T(0) ? T(0) : T(double(b[i]) - double(q[i])); });
-  double b_max = 0, sum_r = 0;
+      long(n), [&](Index i) { r[i] = active[i] == T(0) ? T(0) : T(double(r[i]) - double(q[i])); });
+  double sum_r = 0;
   if (singular_) {
-    // Constants over the unknowns are K's null space: solve for the zero-mean part; max|b| is
-    // measured on b - mean(b).
-    auto mean = [&](const T* v) {
-      return deterministic_sum(
-                 n, [&](std::size_t i) { return active[i] == T(0) ? 0.0 : double(v[i]); }) /
-             double(n_active_);
-    };
-    const double mr = mean(r), mb = mean(b);
+    const double mr = mean(r);
     parallel_for_cells(long(n), [&](Index i) {
       if (active[i] != T(0)) r[i] = T(r[i] - mr);
     });
-    b_max = parallel_max(
-        n, [&](std::size_t i) { return active[i] == T(0) ? 0.0 : std::fabs(double(b[i]) - mb); });
     sum_r = deterministic_sum(n, [&](std::size_t i) { return double(r[i]); });
-  } else {
-    b_max = parallel_max(
-        n, [&](std::size_t i) { return active[i] == T(0) ? 0.0 : std::fabs(double(b[i])); });
   }
   double r_max = parallel_max(n, [&](std::size_t i) { return std::fabs(double(r[i])); });
   if (b_max == 0 || r_max <= tol * b_max) {
     res.residual = b_max == 0 ? 0.0 : r_max / b_max;
+    split_copy(a, x, xs, false);
     return res;
   }
   // z = M r; for a singular K, z's mean over the unknowns m is taken out of the direction
   // (s = z - m + beta s) and of r . z (r . (z - m) = r . z - m sum r).
   double m = 0;
   auto precondition = [&]() {
-    vcycle(r, z, true);
+    vcycle(r, nullptr);
     const double rz = in_order(0);
     m = singular_ ? in_order(1) / double(n_active_) : 0.0;
     return rz - m * sum_r;
   };
-  auto direction = [&](double beta) {
+  // s = (z - m) + beta s, then q = K s with s . q: one fused pass (the product of plane p reads
+  // s on planes p - 1 .. p + 1).
+  auto direction_and_product = [&](double beta) {
+    StageList<T> list;
     LevelArgs<T> d = cg_args();
+    d.sums = nullptr;
     d.cg_s = s;
-    d.cg_r = z;
+    d.cg_z = z;
     d.beta = beta;
     d.mean = m;
-    for_each_plane<DirectionPlane>(d);
-  };
-  double rz = precondition();
-  direction(0.0);
-  for (int it = 1; it <= max_iter; ++it) {
+    list.template add<DirectionPlane>(d);
     LevelArgs<T> p = cg_args();
     p.x = s;
     p.r = q;
-    for_each_plane<ProductPlane>(p);
+    list.template add<ProductPlane>(p);
+    list.flush();
+  };
+  double rz = precondition(), beta = 0.0;
+  for (int it = 1; it <= max_iter; ++it) {
+    direction_and_product(beta);
     const double sq = in_order(0);
     res.iterations = it;
     if (!(sq > 0)) break;  // breakdown (converged to round-off, or not SPD): stop here
     LevelArgs<T> u = cg_args();
-    u.cg_x = x;
+    u.cg_x = xs;
     u.cg_rw = r;
     u.cg_s = s;
     u.cg_q = q;
@@ -1404,10 +1496,10 @@ CgResult PoissonMultigrid<T>::solve(const T* b, T* x, double tol, int max_iter, 
     r_max = largest();
     if (r_max <= tol * b_max) break;
     const double rz_new = precondition();
-    const double beta = rz_new / rz;
+    beta = rz_new / rz;
     rz = rz_new;
-    direction(beta);
   }
+  split_copy(a, x, xs, false);
   res.residual = r_max / b_max;
   res.converged = r_max <= tol * b_max;
   return res;

@@ -15,6 +15,9 @@
 //   the coarsest level solved exactly by a dense Cholesky factor (with one rank-one term per
 //   pocket that touches no Dirichlet side, so singular systems factor too), or, when it is too
 //   large to factor, by kCoarsestSweeps symmetric Gauss-Seidel sweeps.
+// Each leg on a level (down: smoothing and the residual; up: the prolongation and smoothing) is
+// one temporally blocked pass over its planes, with the bits of the stage-by-stage order
+// (run_stages in the .cpp).
 // Deterministic for any thread count: every update of one colour is independent of the others,
 // transfers are per cell, the coarsest solve is sequential. All memory is taken in build().
 //
@@ -93,16 +96,19 @@ class PoissonMultigrid {
   /// z = M^-1 r: one V-cycle from z = 0 (r, z: op.shape.size(), z = 0 on solid cells). A
   /// symmetric positive (semi-)definite linear operator of r. No allocation.
   void apply(const T* r, T* z);
-  /// y = K x for x = 0 on solid cells (y = 0 there): CG's product, on level 0's arrays.
+  /// y = K x for x = 0 on solid cells (y = 0 there): CG's product (natural rows in and out; it
+  /// allocates split copies: a check for tests, not for a step).
   void apply_operator(const T* x, T* y);
   /// K x = b by CG preconditioned with apply (MGPCG), from the initial guess in x, as solve_cg
   /// (fluid/poisson.h) defines it: stops at max|r| <= tol max|b| over the unknowns or after
   /// max_iter iterations; a singular K solves for the part of b with zero mean over the
   /// unknowns. The unknowns are the cells with an open face or a Dirichlet side (x = 0 on the
-  /// others: solid cells, and fluid cells walled in on all six sides). Fused passes: the product
-  /// with s . q, the update with max|r|, the V-cycle's exit with r . z; each dot product is summed
-  /// per plane in a fixed order, then over the planes in order (any thread count: same bits).
-  /// No allocation.
+  /// others: solid cells, and fluid cells walled in on all six sides). CG runs on the levels'
+  /// split rows (x and b copied in, x out, once per solve: w.z holds the split x), z = M r is the
+  /// cycle's float level-0 x. Fused passes: the new direction with the product and s . q (one
+  /// temporally blocked pass), the update with max|r| and sum r, the V-cycle's exit with r . z;
+  /// each dot product is summed per plane in a fixed order, then over the planes in order (any
+  /// thread count: same bits). No allocation.
   CgResult solve(const T* b, T* x, double tol, int max_iter, CgScratch<T>& w);
 
   int levels() const { return int(levels_.size()); }
@@ -114,7 +120,11 @@ class PoissonMultigrid {
 
  private:
   void finish_build();
-  void vcycle(const T* r, T* z, bool sums);
+  /// One V-cycle: z = M r on natural rows; z == nullptr (the solve's): r split as the levels,
+  /// M r left in level 0's x, r . z and sum z per plane in part_.
+  void vcycle(const T* r, T* z);
+  /// natural <-> split rows (the levels' layout), plane by plane.
+  void split_copy(const LevelArgs<T>& a, T* natural, T* split, bool to_split);
   LevelArgs<MgScalar> args(int l);
   LevelArgs<T> cg_args();
   std::vector<MultigridLevel<MgScalar>> levels_;

@@ -135,6 +135,7 @@ double FluidParams::memory_bytes() const {
   values += periodic ? padded * (maccormack ? 2 : 1) : faces;
   if (maccormack || !periodic || !fft) values += faces;
   if (!fft) values += 4 * (faces / 3 + n1 * n2 + n0 * n2);  // CgScratch: the largest component
+  if (!fft) values += n;                                    // phi_start (undo_step's warm start)
   if (fft) values += 3 * n0 * n1 * (std::floor(n2 / 2) + 1) * 2;
   // The solid map (csrc/fluid/solids.h): 3 face kinds, an owner (2 bytes) and a mask per cell;
   // the pressure solve's mask (1 byte). Turbulence: psi on the edges now and at the last step, 6

@@ -25,6 +25,12 @@ struct AirParams : FluidParams {
   /// The scene's pole is a no-slip solid of the air too (a capped cylinder as pole.* gives it),
   /// so the air flows around it and sheds its wake. Needs model "grid" and an enabled pole.
   bool pole_obstacle = false;
+  /// With model "grid" and flagsim on two threads or more (set_num_threads), the air's step for
+  /// the next step runs on a thread of its own beside the cloth's step (one-way coupling: the air
+  /// never reads the flag), each with its loops on one thread; the same bits as the serial order
+  /// (docs/design.md "Air and cloth side by side"). false: one after the other, each with every
+  /// thread in its loops (better when one side dominates, e.g. a large grid and a small flag).
+  bool pipeline = true;
   /// The pole as an obstacle of the air (pole.radius, height, base; axis +y; no-slip).
   static ObstacleParams pole_solid(const PoleParams& pole);
   AirParams() { wind = WindSchedule(Vec3(2.0, 0.0, 0.0)); }
@@ -80,6 +86,10 @@ struct Scene {
   /// The paper's flag behind its pole, the pole a solid of the air (air.pole_obstacle): a tunnel
   /// at 2 m/s whose cells resolve the pole (kWakeCellsAcross across), eq. 5 off (issue 23).
   static Scene pole_wake();
+  /// The paper scene meshed finer, what real time at a detailed size means: a 64 x 64 flag with
+  /// self-collision (contact thickness at the paper's ratio to the spacing) and eq. 5 in a 64^3
+  /// air grid over the same box with the same fan, dt = 0.01 s (real time: 100 steps/s).
+  static Scene large();
 };
 
 /// Built-in scenes: (name, one-line description), in display order.

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <exception>
 #include <limits>
 #include <sstream>
 #include <stdexcept>
@@ -209,13 +210,25 @@ void Simulation::setup_flapping() {
 }
 
 // The air grid (paper §2): one-way coupling, so it only needs the flags to start inside it.
+// Pipelined (air.pipeline), the air steps on a thread of its own with its loops on that thread,
+// so its FFTs are planned for one thread, and it keeps its warm start so that a step the
+// pipeline takes back is taken again to the same bits.
 void Simulation::build_fluid() {
   check_inside_grid();
   FluidParams fp = scene_.air;
   if (scene_.air.pole_obstacle)
     for (const ObstacleParams& o : pole_solids(scene_)) fp.obstacles.push_back(o);
+  struct Threads {  // the thread count the FFTW plans are made for, restored however we leave
+    int before = num_threads();
+    ~Threads() { set_num_threads(before); }
+  } restore;
+  if (scene_.air.pipeline) set_num_threads(1);
   fluid_ = std::make_unique<Fluid>(fp, "air");
   air_grid_ = fluid_.get();
+  if (scene_.air.pipeline) {
+    fluid_->keep_warm_start();
+    beside_ = std::make_unique<SideBySide>();
+  }
 }
 
 void Simulation::check_inside_grid() const {
@@ -237,6 +250,10 @@ void Simulation::check_inside_grid() const {
     }
   }
 }
+
+// One-way coupling only: an air step that takes this step's drag reaction (two-way, issue 24)
+// cannot start before the cloth's step; a pipelined two-way scheme lags the reaction a step.
+bool Simulation::pipelined() const { return beside_ != nullptr; }
 
 void Simulation::update_normals() { compute_vertex_normals(topo_, x_, n_); }
 
@@ -362,8 +379,10 @@ void Simulation::step(long n) {
 // flag's pieces, then the contacts between flags, then the air once; a failure in any flag puts
 // every flag back to the start of the step.
 void Simulation::step_once() {
-  int i = 0;
+  int i = 0;  // flags whose pieces are done
+  bool air_advanced = false;
   try {
+    if (pipelined()) air_advanced = steps_beside_air(i);
     for (; i < num_flags(); ++i) flag(i).step_pieces();
   } catch (const DivergenceError& e) {
     for (int k = 0; k < i; ++k) flag(k).undo_step();
@@ -371,31 +390,32 @@ void Simulation::step_once() {
     throw DivergenceError("flags[" + std::to_string(i) + "]: " + e.what(), e.step, e.time, e.vertex,
                           e.cause);
   }
-  stage_between_flags();  // vertex-triangle and edge-edge contacts between flags
-  advance_fluid();        // after the check: a rolled-back step leaves the air as it was
+  stage_between_flags();               // vertex-triangle and edge-edge contacts between flags
+  if (!air_advanced) advance_fluid();  // after the check: a rolled-back step leaves the air
   for (int k = 0; k < num_flags(); ++k) flag(k).finish_step();
 }
 
 void Simulation::step_pieces() {
+  begin_step();
+  halve_until_plausible(pieces(0));
+}
+
+void Simulation::begin_step() {
   x_start_ = x_;
   v_start_ = v_;
   ledger_start_ = ledger_;
   energy_end_start_ = energy_end_;
   if (built(Stage::kFlap)) flap_.save_step_start();
+}
+
+void Simulation::halve_until_plausible(Implausible bad) {
   int level = 0;
-  for (;; ++level) {
-    const long pieces = 1L << level;
-    h_ = scene_.dt / double(pieces);
-    forces_.refine = 1.0 / double(pieces);
-    Implausible bad;
-    for (long k = 0; k < pieces && bad.cause.empty(); ++k) {
-      t_piece_ = time_ + double(k) * h_;
-      bad = step_piece();
-    }
-    if (bad.cause.empty()) break;
+  while (!bad.cause.empty()) {
     if (level == scene_.integrator.max_halvings)
-      diverge(bad.cause, bad.vertex, bad.why + " even in " + std::to_string(pieces) + " pieces");
+      diverge(bad.cause, bad.vertex,
+              bad.why + " even in " + std::to_string(1L << level) + " pieces");
     restore_step_start();
+    bad = pieces(++level);
   }
   stats_.energy_halvings += level;
 }
@@ -405,6 +425,89 @@ void Simulation::finish_step() {
   time_ = double(step_count_) * scene_.dt;  // no drift from summing dt
   update_normals();
   if (built(Stage::kFlapVisual)) stage_flap_visual();
+}
+
+Simulation::Implausible Simulation::pieces(int level) {
+  const long pieces = 1L << level;
+  h_ = scene_.dt / double(pieces);
+  forces_.refine = 1.0 / double(pieces);
+  Implausible bad;
+  for (long k = 0; k < pieces && bad.cause.empty(); ++k) {
+    t_piece_ = time_ + double(k) * h_;
+    bad = step_piece();
+  }
+  return bad;
+}
+
+// The first piece's reads of the air, at the masses and u_p along the pole, from the grid as it
+// is now (u^n); that piece's stage_air and stage_flap use them instead of sampling.
+void Simulation::sample_air_ahead() {
+  t_piece_ = time_;
+  stage_air();
+  if (built(Stage::kFlap)) {
+    StageClock::Scope t(&clock_, Stage::kFlap);
+    u_p_ = sample_pole_air_speed();
+  }
+  air_sampled_ = pole_air_sampled_ = true;
+}
+
+// The pipeline (one-way coupling): the air's step u^n -> u^n+1 reads nothing of the cloth, and
+// the cloth's step reads the air only at u^n. So every flag's first-piece reads of the air are
+// sampled first (sample_air_ahead); then the air advances on the helper thread while this thread
+// steps each flag's first piece. Each side runs the serial order's operations on the same data,
+// so the bits are the serial order's. When a flag's piece throws or must be redone in pieces,
+// whose later pieces read u^n at positions known only then, the air's step is taken back
+// (Fluid::undo_step) and the step finishes in the serial order from that flag on (the flags
+// after it keep their samples of u^n). True when the air advanced; `done`: the flags whose
+// pieces are done (on a throw, the one that threw restored itself).
+bool Simulation::steps_beside_air(int& done) {
+  for (int k = 0; k < num_flags(); ++k) flag(k).sample_air_ahead();
+  Implausible bad;
+  std::exception_ptr cloth_error, air_error;
+  beside_->run(
+      [&]() noexcept {
+        try {
+          for (; done < num_flags(); ++done) {
+            Simulation& f = flag(done);
+            f.begin_step();
+            bad = f.pieces(0);
+            f.air_sampled_ = f.pole_air_sampled_ = false;
+            if (!bad.cause.empty()) break;
+          }
+        } catch (...) {
+          cloth_error = std::current_exception();
+        }
+      },
+      [&]() noexcept {
+        try {
+          StageClock::Scope t(&air_clock_, Stage::kFluid);
+          fluid_->step(scene_.dt);
+        } catch (...) {
+          air_error = std::current_exception();
+        }
+      });
+  if (cloth_error || !bad.cause.empty()) {
+    if (!air_error) {  // a failed air step has taken itself back already
+      StageClock::Scope t(&clock_, Stage::kFluid);
+      fluid_->undo_step();
+    }
+    if (cloth_error) {
+      Simulation& f = flag(done);
+      f.air_sampled_ = f.pole_air_sampled_ = false;
+      std::rethrow_exception(cloth_error);
+    }
+    flag(done).halve_until_plausible(bad);
+    ++done;
+    return false;
+  }
+  if (air_error) {
+    try {
+      std::rethrow_exception(air_error);
+    } catch (const DivergenceError& e) {
+      air_diverged(e);
+    }
+  }
+  return true;
 }
 
 // One piece of h_ from t_piece_, the paper's method stage by stage: an empty cause when it passed
@@ -447,7 +550,7 @@ double Simulation::sample_pole_air_speed() {
 void Simulation::stage_flap() {
   if (!built(Stage::kFlap)) return;
   StageClock::Scope t(&clock_, Stage::kFlap);
-  u_p_ = sample_pole_air_speed();
+  if (!pole_air_sampled_) u_p_ = sample_pole_air_speed();  // else sample_air_ahead did
   compute_vertex_normals(topo_, x_, n_);
   if (scene_.flapping.mode == FlapMode::kDisplace)
     flap_.drift(topo_, n_, u_p_, t_piece_ + h_, h_, flap_drift_);
@@ -524,7 +627,7 @@ void Simulation::stage_air() {
         u_.row(i) += noise_.velocity(x_.row(i).transpose(), t_piece_).transpose();
       });
   }
-  if (built(Stage::kFluid)) {
+  if (built(Stage::kFluid) && !air_sampled_) {  // else sample_air_ahead did
     StageClock::Scope t(&clock_, Stage::kFluid);
     air_outside_last_ = air_grid_->sample(x_, u_);
     air_outside_total_ += air_outside_last_;
@@ -539,10 +642,14 @@ void Simulation::advance_fluid() {
   try {
     fluid_->step(scene_.dt);
   } catch (const DivergenceError& e) {
-    for (int k = 0; k < num_flags(); ++k) flag(k).undo_step();
-    throw DivergenceError(std::string(e.what()) + " (air.cell_size, air.resolution)", step_count_,
-                          time_, -1, e.cause);
+    air_diverged(e);
   }
+}
+
+void Simulation::air_diverged(const DivergenceError& e) {
+  for (int k = 0; k < num_flags(); ++k) flag(k).undo_step();
+  throw DivergenceError(std::string(e.what()) + " (air.cell_size, air.resolution)", step_count_,
+                        time_, -1, e.cause);
 }
 
 void Simulation::stage_integrate() {
@@ -697,7 +804,7 @@ std::vector<std::pair<std::string, double>> Simulation::timings() const {
     double seconds = 0;
     for (int i = 0; i < num_flags(); ++i) {
       any = any || flag(i).built_[s];
-      seconds += flag(i).clock_.seconds(Stage(s));
+      seconds += flag(i).clock_.seconds(Stage(s)) + flag(i).air_clock_.seconds(Stage(s));
     }
     if (any) out.emplace_back(name_of(Stage(s)), seconds);
   }

@@ -11,6 +11,7 @@
 #include "cloth/integrators.h"
 #include "cloth/topology.h"
 #include "collision/self_collision.h"
+#include "common/parallel.h"
 #include "flapping/flap_stage.h"
 #include "fluid/fluid.h"
 #include "fluid/turbulence.h"
@@ -124,7 +125,9 @@ class Simulation {
 
   /// Names of the stages this scene runs (any of its flags), in step order.
   const std::vector<std::string>& stages() const { return stage_names_; }
-  /// Seconds spent per built stage since construction, summed over the flags.
+  /// Seconds spent per built stage since construction, summed over the flags. Pipelined, the
+  /// fluid stage's air step runs beside the other stages, so the seconds add up to more than the
+  /// wall time.
   std::vector<std::pair<std::string, double>> timings() const;
   ClothEnergy energy() const;
   /// Work by stage since construction (EnergyLedger; `gravity` from the current positions).
@@ -152,6 +155,12 @@ class Simulation {
   /// Recompute normals after positions were edited from outside.
   void update_normals();
 
+  /// True when a step takes the air's step together with the cloth's first piece (air.pipeline
+  /// and a grid): side by side on two threads when flagsim has two or more (num_threads()), one
+  /// after the other on one. Same bits as the serial order either way (docs/design.md "Air and
+  /// cloth side by side").
+  bool pipelined() const;
+
  private:
   static constexpr int kNumStages = int(Stage::kCount);
 
@@ -166,6 +175,11 @@ class Simulation {
     long vertex = -1;
     std::string why;
   };
+  void begin_step();                            // the state the step may go back to
+  Implausible pieces(int level);                // this flag's step as 2^level pieces
+  void halve_until_plausible(Implausible bad);  // redo in shorter pieces while a piece fails
+  void sample_air_ahead();                      // the first piece's air, before the air steps
+  bool steps_beside_air(int& done);  // every flag's first piece while the air steps beside
   Implausible step_piece();
   void restore_step_start();
   // Set-up (the constructor, in this order).
@@ -189,6 +203,7 @@ class Simulation {
   bool flags_may_touch() const;
   // After the step: the air grid advances, the "visual" flap displaces the exported geometry.
   void advance_fluid();
+  [[noreturn]] void air_diverged(const DivergenceError& e);  // the cloth restored, e raised
   void stage_flap_visual();
   // Helpers of the stages.
   double sample_pole_air_speed();
@@ -216,9 +231,14 @@ class Simulation {
   std::array<bool, kNumStages> built_{};  // the stages this scene runs
   bool& built(Stage s) { return built_[std::size_t(s)]; }
   bool built(Stage s) const { return built_[std::size_t(s)]; }
-  StageClock clock_;  // seconds per stage (Simulation.timings)
+  StageClock clock_;      // seconds per stage (Simulation.timings)
+  StageClock air_clock_;  // the air's step when it runs beside the cloth (its own thread)
+  // The pipeline (steps_beside_air): the air at the masses and u_p sampled before the air starts
+  // its step, for the step's first piece.
+  bool air_sampled_ = false, pole_air_sampled_ = false;
   std::vector<std::string> stage_names_;
   std::unique_ptr<Fluid> fluid_;             // the air grid, when the scene needs one
+  std::unique_ptr<SideBySide> beside_;       // the air's thread when pipelined
   CurlNoise noise_{TurbulenceParams{}, {}};  // curl noise on the analytic wind (air "uniform")
 
   // Flapping (paper eq. 5), set up only when flapping.mode is not "off".

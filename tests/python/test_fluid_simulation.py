@@ -1,5 +1,7 @@
 """The air grid as the Simulation's air stage (issue 4, coupling and scenes)."""
 
+import copy
+
 import flagsim
 import numpy as np
 import pytest
@@ -53,6 +55,68 @@ def test_paper_scene_is_the_papers_set_up_with_a_non_uniform_grid_air():
     assert u.max() - u.min() > 0.3  # made non-uniform by the fan
     assert sim.last_step_stats["air_samples_outside"] == 0
     assert np.all(sim.positions[:, 0] > sim.rest_positions[:, 0].min() - 1e-9)  # blown downstream
+
+
+def test_large_scene_is_the_paper_scene_meshed_finer():
+    # issue 28: real time at 16x the paper's size; its step cost is a bench figure, not a test
+    s, paper = flagsim.Scene.large(), flagsim.Scene.paper()
+    assert flagsim.Scene.named("large").to_dict() == s.to_dict()
+    assert (s.flag.rows, s.flag.cols, s.dt) == (64, 64, 0.01)
+    assert s.air.model == "grid" and s.air.resolution == (64, 64, 64)
+    # the same box, fan and flag as the paper's
+    assert s.air.cell_size * 64 == paper.air.cell_size * 16 and s.air.origin == paper.air.origin
+    assert s.air.fans[0].center == paper.air.fans[0].center
+    assert (s.flag.width, s.flag.height) == (paper.flag.width, paper.flag.height)
+
+    # contact thickness at the paper's ratio to the mesh spacing
+    def spacing(f):
+        return min(f.width / (f.cols - 1), f.height / (f.rows - 1))
+
+    assert s.self_collision.enabled and s.self_collision.thickness / spacing(
+        s.flag
+    ) == pytest.approx(paper.self_collision.thickness / spacing(paper.flag), rel=1e-12)
+    sim = flagsim.Simulation(s)  # validates and builds
+    assert {"fluid", "self_collision", "flap", "pole"} <= set(sim.stages)
+    assert sim.pipelined and sim.fluid.u.shape == (64, 64, 64)
+
+
+@pytest.mark.parametrize("flags", [1, 2])
+@pytest.mark.parametrize("threads", [1, 2])
+def test_air_beside_the_cloth_is_an_option_with_the_same_results(threads, flags):
+    # issue 28: air.pipeline (on by default) takes the air's step beside the cloth's, on two
+    # threads when flagsim has them; off, one after the other. The C++ test runs 400 steps of
+    # one flag; here also two flags close enough to touch (every flag's first piece beside the
+    # air, the pass between flags after).
+    before = flagsim.num_threads()
+    flagsim.set_num_threads(threads)
+    try:
+        sims = []
+        for pipeline in (True, False):
+            s = flagsim.Scene.paper()
+            s.self_collision.enabled = True
+            if flags == 2:
+                second = copy.copy(s.flags[0])
+                second.origin = tuple(np.add(second.origin, (0.0, 0.0, 0.12)))
+                second.pole.base = tuple(np.add(second.pole.base, (0.0, 0.0, 0.12)))
+                s.flags = [s.flags[0], second]
+            assert s.air.pipeline
+            s.air.pipeline = pipeline
+            sim = flagsim.Simulation(s)
+            assert sim.pipelined == pipeline
+            sim.step(60)
+            sims.append(sim)
+    finally:
+        flagsim.set_num_threads(before)
+    a, b = sims
+    for i in range(flags):
+        assert a.flags[i].positions.tobytes() == b.flags[i].positions.tobytes(), i
+        assert a.flags[i].velocities.tobytes() == b.flags[i].velocities.tobytes(), i
+    assert a.fluid.u.tobytes() == b.fluid.u.tobytes()
+    assert a.timings["fluid"] > 0 and set(a.timings) == set(b.timings)
+    s = flagsim.Scene.from_dict({"air": {"pipeline": False}})
+    assert not s.air.pipeline and flagsim.Scene.from_dict(s.to_dict()).to_dict() == s.to_dict()
+    with pytest.raises(TypeError, match="air.pipeline"):
+        s.air.pipeline = 1
 
 
 def test_fluid_view_keeps_the_simulation_alive():

@@ -74,6 +74,24 @@ TEST(NoAlloc, PaperSceneStepsWithoutHeapAllocation) {
   }
 }
 
+// The air's step beside the cloth's (air.pipeline, issue 28) and one after the other, on one
+// thread and on two (the side-by-side sections: a cached two-thread team, each side's loops on
+// its own thread, no nested team).
+TEST(NoAlloc, PipelinedAndSerialStepsWithoutHeapAllocation) {
+  SKIP_WITHOUT_COUNTING();
+  const int before = num_threads();
+  for (int threads : {1, 2})
+    for (bool pipeline : {true, false}) {
+      set_num_threads(threads);
+      Scene s = paper_full();
+      s.air.pipeline = pipeline;
+      Simulation sim(s);
+      EXPECT_EQ(sim.pipelined(), pipeline);
+      EXPECT_EQ(allocations_in_steps(sim, 100), 0) << threads << " threads, pipeline " << pipeline;
+    }
+  set_num_threads(before);
+}
+
 // The same flag in the analytic wind (no grid): the cloth stages alone.
 TEST(NoAlloc, PaperFlagInUniformWindStepsWithoutHeapAllocation) {
   SKIP_WITHOUT_COUNTING();
