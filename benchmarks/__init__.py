@@ -4,7 +4,8 @@ Workloads: the paper scene (as built in, and the full pipeline: grid air, self-c
 flapping), the cloth alone at 8 x 11 .. 128 x 128 for each integrator with and without
 self-collision, the air alone at 16^3 .. 128^3 for each advection scheme and pressure backend
 (and the float grid, and the FFTW floor of an FFT projection), at 1 and 2 threads; with --peers
-the same cloth in PyBullet, MuJoCo and pyPBD and the same air in a numpy Stable Fluids script.
+the same cloth in PyBullet, MuJoCo and pyPBD and the same air in the textbook numpy Stam FFT
+solver.
 Workloads needing a part this build lacks are skipped with a line saying so.
 
 Each workload runs in its own process (its peak memory is its own): built outside the timing,

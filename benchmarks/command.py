@@ -259,7 +259,13 @@ def run(args) -> int:
 
     features = engines.features()
     peer_status = {p: peers.peer_available(p) for p in peers.PEERS} if "peers" in sel.groups else {}
-    baselines = {"fftw": engines.fftw_available(), "numpy": engines.numpy_baseline_available()}
+    from .taichi_air import taichi_available
+
+    baselines = {
+        "fftw": engines.fftw_available(),
+        "numpy": engines.numpy_baseline_available(),
+        "taichi": taichi_available(),
+    }
     work, skipped = wl.catalogue(sel, features, peer_status, baselines)
     for what, why in skipped:
         print(f"skip {what}: {why}", flush=True)

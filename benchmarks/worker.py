@@ -80,6 +80,10 @@ def build(spec: dict[str, Any]):
         return engines.SolverStepper(p["n"], p["boundary"], p["pressure"])
     if kind == "numpy_fluid":
         return engines.NumpyFluidStepper(p["n"])
+    if kind == "taichi_fluid":
+        from .taichi_air import TaichiFluid
+
+        return TaichiFluid(p["n"], engines.AIR_BOX, engines.smooth_periodic_field, engines.DT)
     if kind == "fftw_floor":
         return engines.FftwFloorStepper(p["n"])
     if kind == "peer":

@@ -7,9 +7,10 @@ each integrator, with and without self-collision), ``air`` (flagsim.Fluid alone 
 ``solver`` (the pressure solvers at 16^3 .. 128^3: a tunnel with a solid plate for multigrid and
 pcg, the periodic box for multigrid and fft; iterations, projection time and memory),
 ``multiflag`` (1, 4 and 16 paper flags in one 32^3 grid: the air once, the cloth per flag), and
-with ``--peers`` the same cloth in PyBullet, MuJoCo and pyPBD and the numpy Stable Fluids
-baseline. Every workload runs at each requested thread count (1 and 2 by default) except the
-peers and baselines, which are single-threaded.
+with ``--peers`` the same cloth in PyBullet, MuJoCo and pyPBD and the numpy Stam FFT air
+baseline and Taichi's Stable Fluids (CPU) where Taichi is installed. Every workload runs at each
+requested thread count (1 and 2 by default) except the peers and baselines, which are
+single-threaded.
 """
 
 from __future__ import annotations
@@ -376,11 +377,11 @@ def catalogue(
                     work.append(w)
         ok, why = baselines.get("numpy", (False, "not checked"))
         if not ok:
-            skipped.append(("numpy Stable Fluids baseline", why))
+            skipped.append(("numpy Stam FFT baseline", why))
         elif not features.get("fluid", (False, ""))[0]:
             skipped.append(
                 (
-                    "numpy Stable Fluids baseline",
+                    "numpy Stam FFT baseline",
                     "nothing to compare it with: " + features.get("fluid", (False, ""))[1],
                 )
             )
@@ -391,11 +392,27 @@ def catalogue(
                     Workload(
                         "peers",
                         "numpy",
-                        "stable fluids",
+                        "stam fft",
                         f"{n}^3",
                         n**3,
                         1,
                         {"kind": "numpy_fluid", "n": n},
                     )
                 )
+            ok, why = baselines.get("taichi", (False, "not checked"))
+            if not ok:
+                skipped.append(("air peer taichi", why))
+            else:
+                for n in numpy_sizes:
+                    work.append(
+                        Workload(
+                            "peers",
+                            "taichi",
+                            "stable fluids",
+                            f"{n}^3",
+                            n**3,
+                            1,
+                            {"kind": "taichi_fluid", "n": n},
+                        )
+                    )
     return work, skipped

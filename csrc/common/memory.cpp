@@ -1,6 +1,7 @@
 #include "common/memory.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -32,6 +33,16 @@ std::string gigabytes(double bytes) {
 }
 
 }  // namespace
+
+namespace {
+std::atomic<std::int64_t> g_aligned_bytes{0};
+}
+
+std::int64_t aligned_bytes_live() { return g_aligned_bytes.load(std::memory_order_relaxed); }
+
+void count_aligned_bytes(std::int64_t delta) {
+  g_aligned_bytes.fetch_add(delta, std::memory_order_relaxed);
+}
 
 std::uint64_t available_memory() {
   std::uint64_t avail = 0;

@@ -2,8 +2,9 @@
 //
 // The per-element figures are measured (peak resident set after construction and two steps,
 // docs/design.md "Size limits"): a flag vertex with the implicit integrator and its multigrid
-// preconditioner about 2.2 KB (explicit needs less); an air cell about 26 values of the grid's
-// precision (periodic: u, the MacCormack scratch, ghost-padded copies, FFT buffers; tunnel less).
+// preconditioner about 2.2 KB (explicit needs less); an air cell the grid-sized arrays its
+// configuration allocates (FluidParams::memory_bytes counts them: 11.5 values of the grid's
+// precision per cell for a periodic semi-Lagrangian fft grid at 128^3) plus a slack.
 #pragma once
 #include <cstdint>
 #include <string>
@@ -11,7 +12,16 @@
 namespace flagsim {
 
 constexpr double kBytesPerVertex = 2300;  ///< upper bound, implicit integrator
-constexpr double kValuesPerCell = 26;     ///< times sizeof(double) or sizeof(float)
+/// Measured peak resident set over the air's counted arrays (FFTW's plans, allocator rounding):
+/// 1.02 at 128^3 (186.6 MiB against 183 counted), more at small grids, where nothing matters.
+constexpr double kMemorySlack = 1.1;
+
+/// Bytes held right now by AlignedAllocator (fluid/grid.h: every grid-sized array of the air, its
+/// FFT spectra and multigrid levels), over the whole process. Tests count the air's grid-sized
+/// arrays with it (a Fluid's construction adds its arrays, destruction takes them back).
+std::int64_t aligned_bytes_live();
+/// AlignedAllocator's book-keeping: delta bytes allocated (> 0) or freed (< 0).
+void count_aligned_bytes(std::int64_t delta);
 
 /// Bytes this process can still allocate without swapping: MemAvailable, lowered to what the
 /// cgroup (container) limit leaves and to $FLAGSIM_MEMORY_LIMIT (bytes) when set; 0 when not

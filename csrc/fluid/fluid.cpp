@@ -58,10 +58,13 @@ namespace {
 
 template <class T>
 struct TypedSolver final : Fluid::Solver {
-  MacGrid<T> u, prev, hat;           // current field; advection source; MacCormack / rhs scratch
-  AlignedVector<T> phi, div;         // nx*ny*nz: potential dt p / rho (m^2/s), divergence (1/s)
-  AlignedVector<T> phi_start;        // nx*ny*nz or empty: phi at the step's start (undo_step)
-  mutable AlignedVector<T> div_out;  // divergence() scratch
+  // Grid-sized arrays, each allocated only where a stage of this configuration uses it (counted
+  // in docs/design.md "Memory"; tests/cpp/fluid/test_fluid.cpp GridArrays.* hold the counts).
+  MacGrid<T> u, prev, hat;     // current field; tunnel advection source; MacCormack / rhs scratch
+  AlignedVector<T> phi;        // nx*ny*nz: potential dt p / rho (m^2/s)
+  AlignedVector<T> phi_start;  // nx*ny*nz or empty (fft): phi at the step's start (undo_step)
+  // nx*ny*nz, 1/s: the pcg / multigrid right-hand side in a step, divergence() between steps
+  mutable AlignedVector<T> div;
   std::unique_ptr<FftProjector<T>> fft;
   Laplace7 pressure_op;
   std::array<Laplace7, 3> diffusion_op;
@@ -91,19 +94,20 @@ struct TypedSolver final : Fluid::Solver {
     geo.h = p.cell_size;
     geo.origin = p.origin;
     geo.periodic = p.boundary == Boundary::kPeriodic;
+    maccormack = p.advection == Advection::kMacCormack;
+    use_fft = p.pressure == Pressure::kFft;
+    use_mg = p.pressure == Pressure::kMultigrid;
     u = MacGrid<T>(geo);
-    hat = MacGrid<T>(geo);
+    // hat: MacCormack's predictor, the tunnel's, and the iterative and explicit diffusion's copy
+    // (pcg, multigrid); a periodic semi-Lagrangian fft grid never touches it.
+    if (maccormack || !geo.periodic || !use_fft) hat = MacGrid<T>(geo);
     if (geo.periodic)
-      padded.resize(geo);
+      padded.resize(geo, maccormack);
     else
       prev = MacGrid<T>(geo);
     const std::size_t cells = geo.cells().size();
     phi.assign(cells, T(0));
     div.assign(cells, T(0));
-    div_out.assign(cells, T(0));
-    maccormack = p.advection == Advection::kMacCormack;
-    use_fft = p.pressure == Pressure::kFft;
-    use_mg = p.pressure == Pressure::kMultigrid;
     solid.assign(cells, 0);
     // float cannot reach residuals near its epsilon: floor the relative tolerance there.
     tol = std::max(p.pcg_tolerance, 50.0 * double(std::numeric_limits<T>::epsilon()));
@@ -112,7 +116,7 @@ struct TypedSolver final : Fluid::Solver {
     if (use_fft) fft = std::make_unique<FftProjector<T>>(geo);  // MIC or multigrid: rebuild_solids
     std::size_t largest = cells;
     for (int c = 0; c < 3; ++c) largest = std::max(largest, u.shape[c].size());
-    cg.resize(largest);
+    if (!use_fft) cg.resize(largest);  // the CG solves: pcg, multigrid, iterative diffusion
     fans = build_fan_stencils<T>(geo, p.fans, p.density);
     if (!geo.periodic) {
       inflow_w = inflow_weights(geo, p);
@@ -378,15 +382,15 @@ struct TypedSolver final : Fluid::Solver {
     flagsim::sample_weight_squares(u, points, m, out);
   }
 
+  // div is free between steps: each step's pressure_rhs writes it before reading it.
   void divergence(double* out) const override {
-    divergence_into(div_out.data());
-    std::copy(div_out.begin(), div_out.end(), out);
+    divergence_into(div.data());
+    std::copy(div.begin(), div.end(), out);
   }
 
   double max_divergence() const override {
-    divergence_into(div_out.data());
-    return parallel_max(div_out.size(),
-                        [&](std::size_t i) { return std::fabs(double(div_out[i])); });
+    divergence_into(div.data());
+    return parallel_max(div.size(), [&](std::size_t i) { return std::fabs(double(div[i])); });
   }
 };
 

@@ -18,25 +18,35 @@
 #include <new>
 #include <vector>
 
+#include "common/memory.h"
 #include "common/parallel.h"
 #include "common/types.h"
 
 namespace flagsim {
 
-/// 64-byte aligned allocator: FFTW's new-array execute needs every buffer equally aligned.
+/// 64-byte aligned allocator: FFTW's new-array execute needs every buffer equally aligned. Counts
+/// the bytes it holds (aligned_bytes_live, common/memory.h): allocations are rare (construction,
+/// set-up; never in a step), so the atomic costs nothing measurable.
 template <class T>
 struct AlignedAllocator {
   using value_type = T;
   AlignedAllocator() = default;
   template <class U>
   AlignedAllocator(const AlignedAllocator<U>&) {}
+  static std::size_t rounded(std::size_t n) {
+    const std::size_t bytes = ((n * sizeof(T) + 63) / 64) * 64;
+    return bytes == 0 ? 64 : bytes;
+  }
   T* allocate(std::size_t n) {
-    std::size_t bytes = ((n * sizeof(T) + 63) / 64) * 64;
-    void* p = std::aligned_alloc(64, bytes == 0 ? 64 : bytes);
+    void* p = std::aligned_alloc(64, rounded(n));
     if (!p) throw std::bad_alloc();
+    count_aligned_bytes(std::int64_t(rounded(n)));
     return static_cast<T*>(p);
   }
-  void deallocate(T* p, std::size_t) { std::free(p); }
+  void deallocate(T* p, std::size_t n) {
+    count_aligned_bytes(-std::int64_t(rounded(n)));  // before free: GCC 12 warns (falsely) of a
+    std::free(p);                                    // use after free the other way round
+  }
   template <class U>
   bool operator==(const AlignedAllocator<U>&) const {
     return true;

@@ -99,14 +99,31 @@ double FluidParams::memory_bytes() const {
   const bool masks = !obstacles.empty() || wall_y_min == Slip::kNoSlip ||
                      wall_y_max == Slip::kNoSlip || wall_z_min == Slip::kNoSlip ||
                      wall_z_max == Slip::kNoSlip;
-  // The solid map (csrc/fluid/solids.h): 3 face kinds, an owner (2 bytes) and a mask per cell.
-  // Turbulence: psi on the edges now and at the last step, 6 values per cell.
-  const double psi = turbulence.enabled() ? 6.0 : 0.0;
-  // The multigrid hierarchy (csrc/fluid/multigrid.h) and the pressure solve's own mask.
+  const double n0 = resolution[0], n1 = resolution[1], n2 = resolution[2], n = cells();
+  const bool periodic = boundary == Boundary::kPeriodic, fft = pressure == Pressure::kFft;
+  const bool maccormack = advection == Advection::kMacCormack;
+  // The grid-sized arrays of fluid.cpp's TypedSolver, in values of the grid's precision (the
+  // table in docs/design.md "Memory"; tests/cpp/fluid/test_fluid.cpp counts them):
+  // u, phi, div; periodic: the ghost-padded u^n (and the MacCormack predictor's); tunnel: u^n;
+  // hat (MacCormack, tunnel, pcg / multigrid); the CG vectors (pcg, multigrid); fft: 3 spectra.
+  constexpr double G = 2 * 3;  // PaddedComponent::kGhost on either side
+  const double padded = 3 * (n0 + G) * (n1 + G) * (n2 + G);
+  const double faces = 3 * n + (periodic ? 0.0 : n1 * n2 + n0 * n2 + n0 * n1);
+  double values = faces + 2 * n;
+  values += periodic ? padded * (maccormack ? 2 : 1) : faces;
+  if (maccormack || !periodic || !fft) values += faces;
+  if (!fft) values += 4 * (faces / 3 + n1 * n2 + n0 * n2);  // CgScratch: the largest component
+  if (!fft) values += n;                                    // phi_start (undo_step's warm start)
+  if (fft) values += 3 * n0 * n1 * (std::floor(n2 / 2) + 1) * 2;
+  // The solid map (csrc/fluid/solids.h): 3 face kinds, an owner (2 bytes) and a mask per cell;
+  // the pressure solve's mask (1 byte). Turbulence: psi on the edges now and at the last step, 6
+  // values per cell. The multigrid hierarchy (csrc/fluid/multigrid.h) and its own mask.
+  values += turbulence.enabled() ? 6.0 * n : 0.0;
   const double multigrid = pressure == Pressure::kMultigrid ? kMultigridBytesPerCell + 1.0 : 0.0;
-  return cells() * ((kValuesPerCell + psi) *
-                        double(precision == Precision::kFloat ? sizeof(float) : sizeof(double)) +
-                    (masks ? 6.0 : 0.0) + multigrid);
+  const double bytes =
+      values * double(precision == Precision::kFloat ? sizeof(float) : sizeof(double));
+  // kMemorySlack: FFTW's plans and what the measured peak adds beyond the arrays (docs/design.md).
+  return kMemorySlack * bytes + n * (1.0 + (masks ? 6.0 : 0.0) + multigrid);
 }
 
 void FluidParams::validate_combination(const std::string& prefix) const {

@@ -216,8 +216,7 @@ struct FftProjector<T>::Impl {
   GridGeometry geo;
   int nzc = 0;  // nz/2 + 1 complex entries along z
   std::size_t n_real = 0, n_cplx = 0;
-  AlignedVector<T> div;                 // nx*ny*nz
-  std::array<AlignedVector<C>, 3> hat;  // nx*ny*nzc each
+  std::array<AlignedVector<C>, 3> hat;  // nx*ny*nzc each (no real buffer: see project)
   // Per-axis Fourier symbols: a_d(m) = (e^{i theta} - 1) / h (forward difference, i.e. MAC div
   // from faces to cells), lam_d(m) = (2 cos theta - 2) / h^2, theta = 2 pi m / n_d.
   std::array<std::vector<double>, 3> ar, ai;  // real and imaginary parts of a_d
@@ -236,7 +235,6 @@ FftProjector<T>::FftProjector(const GridGeometry& geo) : impl_(new Impl) {
   m.nzc = geo.nz / 2 + 1;
   m.n_real = geo.cells().size();
   m.n_cplx = std::size_t(geo.nx) * geo.ny * m.nzc;
-  m.div.assign(m.n_real, T(0));
   for (int c = 0; c < 3; ++c) m.hat[c].assign(m.n_cplx, std::complex<T>(0));
   m.plane_squares.assign(std::size_t(geo.nx), 0.0);
   const double two_pi = 6.283185307179586476925286766559;
@@ -255,8 +253,13 @@ FftProjector<T>::FftProjector(const GridGeometry& geo) : impl_(new Impl) {
   }
   std::lock_guard<std::mutex> lock(fftw_planner_mutex());
   Impl::F::threads(fft_threads(m.n_real));
-  m.fwd = Impl::F::r2c(geo.nx, geo.ny, geo.nz, m.div.data(), m.fc(0));
-  m.inv = Impl::F::c2r(geo.nx, geo.ny, geo.nz, m.fc(0), m.div.data());
+  // The plans' real side is any other 64-byte aligned buffer of n_real values: the transforms
+  // run with new arrays (the components, phi) of that alignment, and FFTW_ESTIMATE does not
+  // touch the arrays while planning. hat[1] (n_cplx complex values >= n_real reals) serves, so
+  // no grid-sized real buffer is kept for it (docs/design.md, "Memory").
+  T* real = reinterpret_cast<T*>(m.hat[1].data());
+  m.fwd = Impl::F::r2c(geo.nx, geo.ny, geo.nz, real, m.fc(0));
+  m.inv = Impl::F::c2r(geo.nx, geo.ny, geo.nz, m.fc(0), real);
 }
 
 template <class T>
@@ -270,8 +273,8 @@ template <class T>
 void FftProjector<T>::project(MacGrid<T>& u, T* phi) {
   Impl& m = *impl_;
   const GridGeometry& g = m.geo;
-  divergence(u, m.div.data());
-  Impl::F::exec_r2c(m.fwd, m.div.data(), m.fc(0));
+  divergence(u, phi);  // phi holds div u until the inverse transform writes the potential
+  Impl::F::exec_r2c(m.fwd, phi, m.fc(0));
   const double scale = 1.0 / double(m.n_real);
   std::complex<T>* d = m.cplx(0);
   parallel_for_if(Index(m.n_cplx) > kGridParallelGrain, long(g.nx) * g.ny, [&](Index r) {

@@ -51,7 +51,8 @@ class FftProjector {
   FftProjector& operator=(const FftProjector&) = delete;
 
   /// u <- P u (no diffusion): one r2c of div u, divide, one c2r, subtract the gradient.
-  /// phi (nx*ny*nz) receives the potential. The k = 0 mode is untouched.
+  /// phi (nx*ny*nz, 64-byte aligned as AlignedVector) receives the potential (and holds div u
+  /// before it). The k = 0 mode is untouched.
   void project(MacGrid<T>& u, T* phi);
   /// u <- P (I - nu dt lap)^-1 u, all in Fourier space (3 r2c + 3 c2r). When mean != nullptr the
   /// k = 0 mode is set to *mean (m/s), otherwise left as it is. Returns true when the new u is

@@ -512,3 +512,28 @@ def test_cluster_smoke_run_reports_times_and_ratios(tmp_path, capsys):
         float(rows[2]["wall_s_min"]) / float(rows[3]["wall_s_min"]), rel=0.02
     )
     assert float(rows[3]["dask_over_pool"]) > 0 and rows[4]["workload"].endswith("start-up")
+
+
+def test_taichi_air_peer_keeps_a_uniform_wind_or_is_skipped_with_a_line(tmp_path):
+    """The second air peer (benchmarks/taichi_air.py), where Taichi is installed (the bench
+    extra; an optional peer like PyBullet): a uniform wind through its advection, Jacobi sweeps
+    and gradient comes out unchanged. In its own process, as the bench runs it (ti.init)."""
+    from benchmarks.taichi_air import taichi_available
+
+    ok, why = taichi_available()
+    if not ok:
+        pytest.skip(why)
+    code = (
+        "import numpy as np\n"
+        "from benchmarks.taichi_air import TaichiFluid\n"
+        "w = np.array([2.0, -0.5, 0.25])\n"
+        "f = TaichiFluid(8, 2.0, lambda p: np.tile(w, (len(p), 1)), 0.01)\n"
+        "f.step(3)\n"
+        "v = f.v.to_numpy()\n"
+        "assert f.ok() and np.abs(v - w).max() < 1e-12, np.abs(v - w).max()\n"
+    )
+    root = Path(__file__).resolve().parents[2]
+    done = subprocess.run(
+        [sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-2000:]

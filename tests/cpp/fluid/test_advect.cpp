@@ -81,6 +81,39 @@ TEST_P(PeriodicFastPath, MatchesTheGenericKernels) {
 INSTANTIATE_TEST_SUITE_P(Advect, PeriodicFastPath,
                          ::testing::Combine(::testing::Bool(), ::testing::Values(0.3, 3.0)));
 
+// A smooth flow moving 1.1 to 2.6 cells a step along x, and up to 0.9 across (the 128^3 benchmark
+// field's regime): every node's departure is a cell or more away, so every node takes far_sample
+// (within the 3 ghost layers; contiguous loads where the lanes' lower nodes share their offsets,
+// lane by lane where the flow crosses a cell face within a vector), which does the general
+// sampler's arithmetic: the generic kernel's bits on every node, at every vector width.
+TEST(Advect, PeriodicFarDeparturesGiveTheGenericKernelsBits) {
+  const GridGeometry g = periodic_geometry(10, 9, 23);  // 23: a scalar tail at every width
+  const double dt = 0.1, s = dt / g.h;                  // cells per step per m/s
+  MacGrid<double> u0(g);
+  const double two_pi = 6.283185307179586;
+  for (int c = 0; c < 3; ++c)
+    for (int i = 0; i < g.nx; ++i)
+      for (int j = 0; j < g.ny; ++j)
+        for (int k = 0; k < g.nz; ++k) {
+          const double x = two_pi * i / g.nx, y = two_pi * j / g.ny, z = two_pi * k / g.nz;
+          const double cells = c == 0   ? 1.85 + 0.75 * std::sin(z + 0.3) * std::cos(y)
+                               : c == 1 ? 0.9 * std::sin(x + z)
+                                        : -0.6 + 0.3 * std::cos(x - y);
+          u0.at(c, i, j, k) = cells / s;
+        }
+  MacGrid<double> generic(g), hat(g);
+  advect_semi_lagrangian(u0, dt, SampleBoundary{}, generic);
+  for (const int cap : {0, 16}) {
+    vector_bytes(cap);
+    MacGrid<double> fast = u0;
+    PeriodicAdvectScratch<double> scratch;
+    scratch.resize(g);
+    advect_periodic(fast, dt, false, scratch, hat);
+    vector_bytes(0);
+    EXPECT_TRUE(same_bits(generic, fast)) << "vector cap " << cap;
+  }
+}
+
 // The fast path reproduces a uniform field exactly, whatever the direction of the flow, on grids
 // whose rows are not a multiple of the vector width (the scalar tail).
 TEST(Advect, PeriodicFastPathKeepsAUniformFieldExactly) {

@@ -10,8 +10,10 @@
 
 #include "../support/alloc_counter.h"
 #include "common/errors.h"
+#include "common/memory.h"
 #include "common/parallel.h"
 #include "common/simd.h"
+#include "fluid/advect.h"
 #include "fluid/pressure.h"
 
 namespace flagsim {
@@ -276,6 +278,81 @@ TEST(FftProjector, DiffusionShowsItsResultFinite) {
 #endif
   expect_finite_certificate<double>();
   expect_finite_certificate<float>();
+}
+
+}  // namespace flagsim
+
+namespace flagsim {
+namespace {
+
+// The grid-sized arrays a Fluid holds after two steps, in grids of the cell count (values of the
+// grid's precision per cell), counted by the aligned allocator (common/memory.h). A buffer added
+// to the air without its row in docs/design.md "Memory" fails GridArrays.*.
+struct Counted {
+  double arrays;  ///< bytes / (cells * sizeof(value))
+  double bytes;
+  double estimate;  ///< FluidParams::memory_bytes
+};
+Counted count_arrays(const FluidParams& p) {
+  const std::int64_t before = aligned_bytes_live();
+  double bytes = 0;
+  {
+    Fluid f(p);
+    randomise(f, 5);
+    f.step(0.01);
+    f.step(0.01);
+    bytes = double(aligned_bytes_live() - before);
+  }
+  EXPECT_EQ(aligned_bytes_live(), before);  // all given back
+  const double value = p.precision == Precision::kFloat ? sizeof(float) : sizeof(double);
+  return {bytes / (p.cells() * value), bytes, p.memory_bytes()};
+}
+
+/// A padded copy of one 32^3 component (PaddedComponent: kGhost layers each side), in grids.
+const double padded = std::pow((32.0 + 2 * PaddedComponent<double>::kGhost) / 32.0, 3);
+
+FluidParams cube(int n, const std::string& pressure, const std::string& advection) {
+  FluidParams p = small(pressure, advection);
+  p.resolution = {n, n, n};
+  return p;
+}
+
+}  // namespace
+
+TEST(GridArrays, PeriodicSemiLagrangianFftHoldsTwelveGrids) {
+  // u (3) + phi + div (2) + u^n with 3 ghost layers (3 (38/32)^3 = 5.02) + 3 half spectra
+  // (3 * 2 * 17/32 = 3.19) + the solid mask (1 byte a cell): 12.3 grids at 32^3 (11.6 at
+  // 128^3, where the ghosts weigh less). Before issue 28: 23.6 (MacCormack's scratch, the CG
+  // vectors, a second divergence and an FFT real buffer were allocated whatever the scene used).
+  for (const Precision precision : {Precision::kDouble, Precision::kFloat}) {
+    FluidParams p = cube(32, "fft", "semi_lagrangian");
+    p.precision = precision;
+    const double value = precision == Precision::kFloat ? 4.0 : 8.0;
+    const double expected = 3 + 2 + 3 * padded + 3 * 2 * 17.0 / 32 + 1 / value;
+    const Counted c = count_arrays(p);
+    EXPECT_NEAR(c.arrays, expected, 1e-3);
+    EXPECT_GE(c.estimate, c.bytes);  // the up-front memory check covers what is allocated
+    EXPECT_LE(c.estimate, 1.5 * c.bytes);
+  }
+}
+
+TEST(GridArrays, MacCormackAddsItsPredictorAndItsPaddedCopy) {
+  const Counted sl = count_arrays(cube(32, "fft", "semi_lagrangian"));
+  const Counted mc = count_arrays(cube(32, "fft", "maccormack"));
+  EXPECT_NEAR(mc.arrays - sl.arrays, 3 + 3 * padded, 1e-3);
+  EXPECT_GE(mc.estimate, mc.bytes);
+  EXPECT_LE(mc.estimate, 1.5 * mc.bytes);
+}
+
+TEST(GridArrays, IterativeBackendsAreCoveredByTheEstimate) {
+  for (const char* pressure : {"pcg", "multigrid"})
+    for (const char* boundary : {"periodic", "tunnel"}) {
+      FluidParams p = cube(16, pressure, "semi_lagrangian");
+      p.boundary = parse_enum<Boundary>("boundary", boundary);
+      const Counted c = count_arrays(p);
+      EXPECT_GE(c.estimate, c.bytes) << pressure << " " << boundary;
+      EXPECT_LE(c.estimate, 2.0 * c.bytes) << pressure << " " << boundary;
+    }
 }
 
 }  // namespace flagsim
