@@ -124,8 +124,7 @@ surface, Coulomb `friction`), at rest or keyframed (motion, cloth only).)doc");
   solid.def("validate", &SolidParams::validate, py::arg("prefix") = "solid");
 }
 
-void bind_scene(py::module_& m) {
-  bind_solids(m);
+void bind_air_params(py::module_& m) {
   py::class_<AirParams> air(
       m, "AirParams", "The air: 'none', 'uniform' (analytic wind) or 'grid' (Stable Fluids).");
   air.def(py::init<>());
@@ -154,7 +153,9 @@ void bind_scene(py::module_& m) {
   def_field(air, "coupling", &AirParams::coupling, "air",
             "'one_way' (the paper: the air never feels the flag) | 'two_way' (the flag's drag goes "
             "back into the grid; 'grid'; docs/coupling.md)");
+}
 
+void bind_flag_spec(py::module_& m) {
   py::class_<FlagSpec> spec(m, "FlagSpec", R"doc(One flag of a scene with several (TOML [[flags]]).
 
 Its keys are the flag's (rows, cols, width, origin, pin, ...), and its own drag, integrator,
@@ -179,7 +180,9 @@ flapping and pole sections; Scene.flags lists them, flag 0 first.)doc");
   spec.def("__copy__", [](const FlagSpec& s) { return FlagSpec(s); });
   spec.def(
       "__deepcopy__", [](const FlagSpec& s, py::dict) { return FlagSpec(s); }, py::arg("memo"));
+}
 
+void bind_scene_class(py::module_& m) {
   py::class_<Scene> scene(m, "Scene", R"doc(Everything a Simulation needs, in SI units.
 
 Sections: flag, air, drag, integrator (and the areas' own sections); top-level dt and gravity.
@@ -268,7 +271,9 @@ the scene unchanged. Build one with Scene.paper(), Scene.named(name) or Scene.lo
   scene.def("validate", &Scene::validate, "Raise ValueError naming the first bad parameter.");
   scene.def("__copy__", [](const Scene& s) { return Scene(s); });
   scene.def("__deepcopy__", [](const Scene& s, py::dict) { return Scene(s); }, py::arg("memo"));
+}
 
+void bind_simulation(py::module_& m) {
   py::class_<Simulation> sim(m, "Simulation", R"doc(A scene built into the stages it needs.
 
 sim.step(n) advances n steps of scene.dt with the GIL released. positions, velocities and normals
@@ -567,6 +572,14 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
         return out;
       },
       py::arg("points"), "(M, 3) air velocity at world points (M, 3) at the current time, m/s");
+}
+
+void bind_scene(py::module_& m) {
+  bind_solids(m);
+  bind_air_params(m);
+  bind_flag_spec(m);
+  bind_scene_class(m);
+  bind_simulation(m);
 }
 
 }  // namespace flagsim::bindings
