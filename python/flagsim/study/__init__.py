@@ -24,6 +24,22 @@ from .runner import run_cases
 TASK_INDEX = "tasks.csv"
 
 
+def _run(module, cases, out: str, csv: str, *, jobs, executor, progress, **kw):
+    """The study's cases through the runner (resumable CSV out/csv, the task index beside it)."""
+    return run_cases(
+        cases,
+        module.run_case,
+        os.path.join(out, csv),
+        module.COLUMNS,
+        jobs=jobs,
+        executor=executor,
+        progress=progress,
+        desc=module.__name__.rsplit(".", 1)[-1],
+        index=os.path.join(out, TASK_INDEX),
+        **kw,
+    )
+
+
 def run_stability(
     out: str,
     *,
@@ -35,16 +51,14 @@ def run_stability(
 ) -> list[dict[str, str]]:
     from . import stability
 
-    rows = run_cases(
+    rows = _run(
+        stability,
         stability.cases(reduced),
-        stability.run_case,
-        os.path.join(out, "stability.csv"),
-        stability.COLUMNS,
+        out,
+        "stability.csv",
         jobs=jobs,
         executor=executor,
         progress=progress,
-        desc="stability",
-        index=os.path.join(out, TASK_INDEX),
     )
     stability.write_report(
         rows, report_path or os.path.join(out, "stability.md"), machine_description()
@@ -65,16 +79,14 @@ def run_accuracy(
     from . import accuracy
 
     state_dir = os.path.join(out, "states")
-    rows = run_cases(
+    rows = _run(
+        accuracy,
         accuracy.cases(quick),
-        accuracy.run_case,
-        os.path.join(out, "runs.csv"),
-        accuracy.COLUMNS,
+        out,
+        "runs.csv",
         jobs=jobs,
         executor=executor,
         progress=progress,
-        desc="accuracy",
-        index=os.path.join(out, TASK_INDEX),
         files_dir=state_dir,  # the final states the cases return
     )
     rows = [dict(r) for r in rows]
@@ -104,16 +116,14 @@ def run_flutter(
 ) -> list[dict[str, str]]:
     from . import flutter
 
-    rows = run_cases(
+    rows = _run(
+        flutter,
         flutter.cases(quick),
-        flutter.run_case,
-        os.path.join(out, "flutter.csv"),
-        flutter.COLUMNS,
+        out,
+        "flutter.csv",
         jobs=jobs,
         executor=executor,
         progress=progress,
-        desc="flutter",
-        index=os.path.join(out, TASK_INDEX),
     )
     plot = flutter.write_plots(rows, plot_dir or out)
     report = report_path or os.path.join(out, "flutter.md")
