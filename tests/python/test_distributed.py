@@ -333,11 +333,15 @@ def test_ctrl_c_leaves_whole_files_and_the_same_command_resumes(
     out = tmp_path / "sweep"
     more = ["--vary", "air.wind=[2,0,0],[8,0,1]", "--vary", "flag.rows=5,6,7,8"]
     argv = ["sweep", "paper", *more, *SWEEP[4:], "--out", str(out)]
+    # As from a terminal, where Ctrl-C's default action holds: a shell's background job (make
+    # test run with &, nohup) starts with SIGINT ignored, and Python keeps an inherited SIG_IGN,
+    # so the head would finish its sweep instead of stopping (exit 0, this test failing).
     head = subprocess.Popen(
         [sys.executable, "-m", "flagsim", *argv, "--workers", "2"],
         start_new_session=True,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     try:
         _wait_for(lambda: len(runner.read_rows(str(out / sweep.INDEX))) >= 1)
