@@ -30,9 +30,8 @@ Measured (docs/flutter.md says why each is defined this way):
               wave_speed = 2 pi f / k is positive for waves running from the pole to the fly
   c_f         mean force of the flag on its pole along the wind / (1/2 rho U^2 A): one-way, from
               the whole step's momentum balance (the air's force + weight - dP/dt over the
-              window); two-way, sim.pole_impulse (which balances the integrate stage only and
-              misses the strain limiter's pull on the pins: force_core, recorded for every run,
-              shows the gap)
+              window); two-way, sim.pole_impulse (the balance of the drag the implicit solve
+              applied, linearised: force_core, recorded for every run, shows the difference)
   droop       degrees below horizontal of the line from the pole edge to the free edge
               (mean of each column), time-averaged
   cost        wall seconds of sim.step per simulated second
@@ -295,8 +294,8 @@ def aero_force(sim: flagsim.Simulation, scene: flagsim.Scene) -> np.ndarray:
     """(3,) N: the air's total force on the flag now, as the one-way drag stage computes it
     (eq. 3 per mass, or per triangle: csrc/cloth/forces.cpp add_drag; two-way scales it by
     1 / (1 + kappa), which this does not know). For the whole step's momentum balance of the pole
-    force: sim.pole_impulse balances the integrate stage alone and misses the strain limiter's
-    pull on the pins (docs/flutter.md)."""
+    force: sim.pole_impulse balances the drag the integrator applied, which the implicit solve
+    linearises (docs/flutter.md)."""
     x, v = sim.positions, sim.velocities
     u = sim.air_velocity(x)
     c = 0.5 * scene.drag.coefficient * scene.air.density
@@ -699,8 +698,7 @@ def write_report(rows, path: str, plot: str | None, relative_to: str) -> None:
         "",
         "F: the mean force of the flag on its pole along the wind (one-way: the whole step's "
         "momentum balance; two-way: sim.pole_impulse). F core: sim.pole_impulse for every run, "
-        "which balances the integrate stage only and leaves out the strain limiter's pull on "
-        "the pins.",
+        "the balance of the drag the implicit solve applied (linearised; docs/flutter.md).",
         "",
         "| model | drag | U (m/s) | f (Hz) | A / L | f A / U | lambda (m) | c (m/s) | F (N) "
         "| F core (N) | c_f | droop | wall s / sim s | state |",
