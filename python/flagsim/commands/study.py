@@ -71,15 +71,10 @@ def run(args):
 
 
 def _run(args, study, report, jobs, executor):
+    common = dict(jobs=jobs, executor=executor, progress=not args.quiet, report_path=report)
+    plot_dir = os.path.join(args.docs, "images") if args.docs else None
     if args.study == "stability":
-        rows = study.run_stability(
-            args.out,
-            reduced=args.quick,
-            jobs=jobs,
-            executor=executor,
-            progress=not args.quiet,
-            report_path=report,
-        )
+        rows = study.run_stability(args.out, reduced=args.quick, **common)
         from ..study.stability import headline, summarize
 
         for (integ,), c in summarize(rows).items():
@@ -88,31 +83,13 @@ def _run(args, study, report, jobs, executor):
         total = summarize(rows, by=())[()]
         silent = total["implausible"] + total["nonfinite"]
     elif args.study == "flutter":
-        plot_dir = os.path.join(args.docs, "images") if args.docs else None
-        rows = study.run_flutter(
-            args.out,
-            quick=args.quick,
-            jobs=jobs,
-            executor=executor,
-            progress=not args.quiet,
-            report_path=report,
-            plot_dir=plot_dir,
-        )
+        rows = study.run_flutter(args.out, quick=args.quick, plot_dir=plot_dir, **common)
         from ..study.flutter import headline
 
         print(headline(rows))
         silent = 0
     else:
-        plot_dir = os.path.join(args.docs, "images") if args.docs else None
-        study.run_accuracy(
-            args.out,
-            quick=args.quick,
-            jobs=jobs,
-            executor=executor,
-            progress=not args.quiet,
-            report_path=report,
-            plot_dir=plot_dir,
-        )
+        study.run_accuracy(args.out, quick=args.quick, plot_dir=plot_dir, **common)
         silent = 0
     print(f"report: {report or os.path.join(args.out, args.study + '.md')}")
     return 1 if silent else 0
