@@ -279,117 +279,87 @@ AxisTransfer axis_transfer(const MultigridLevel<T>& F, int d, int nc, int scale_
 // ---- set-up
 // --------------------------------------------------------------------------------------
 
-template <class T>
-void PoissonMultigrid<T>::build(const Laplace7& op) {
+namespace {
+
+/// Throws unless op is a pressure operator the hierarchy handles (see build).
+void check_sides(const Laplace7& op) {
   for (int d = 0; d < 3; ++d) {
     if (op.lo[d] == Side::kFixed || op.hi[d] == Side::kFixed)
       throw InvalidArgument("multigrid: the operator should have no Fixed side (pressure only)");
     if ((op.lo[d] == Side::kPeriodic) != (op.hi[d] == Side::kPeriodic))
       throw InvalidArgument("multigrid: a periodic axis should be periodic on both sides");
   }
-  using F32 = MgScalar;
-  levels_.clear();
-  levels_.emplace_back();
-  std::vector<LevelGeometry> geo;
-  geo.push_back(fine_level(op, levels_[0]));
+}
+
+/// Level 0 from op, then coarser levels until one is small enough or cannot halve.
+template <class T>
+std::vector<MultigridLevel<T>> coarsen(const Laplace7& op) {
+  std::vector<MultigridLevel<T>> levels(1);
+  LevelGeometry geo = fine_level(op, levels[0]);
   while (true) {
-    MultigridLevel<F32>& F = levels_.back();
+    MultigridLevel<T>& F = levels.back();
     if (F.shape.size() <= kCoarsestCells) break;
     choose_halving(F.shape, F.periodic, F.scale, F.halved);
     if (!(F.halved[0] || F.halved[1] || F.halved[2])) break;
-    MultigridLevel<F32> C;
-    geo.push_back(coarse_level(F, geo.back(), C));
-    levels_.push_back(std::move(C));
+    MultigridLevel<T> C;
+    geo = coarse_level(F, geo, C);
+    levels.push_back(std::move(C));
   }
-  std::size_t widest = 1;
-  for (std::size_t l = 0; l < levels_.size(); ++l) {
-    MultigridLevel<F32>& L = levels_[l];
-    const std::size_t n = L.shape.size();
-    widest = std::max(widest, std::size_t(L.shape.n[2]));
-    L.passes = 1;
-    for (int d = 0; d < 3; ++d)
-      if (L.periodic[d] && L.shape.n[d] > 1 && L.shape.n[d] % 2 == 1) ++L.passes;
-    L.x.assign(n, F32(0));
-    L.b.assign(n, F32(0));
-    if (l + 1 < levels_.size()) {
-      L.r.assign(n, F32(0));
-      const MultigridLevel<F32>& C = levels_[l + 1];
-      std::array<std::vector<double>, 3> p_norm;
-      for (int d = 0; d < 3; ++d) {
-        AxisTransfer t = axis_transfer(L, d, C.shape.n[d], C.scale[d]);
-        L.r_count[d] = t.r_count;
-        L.p_count[d] = t.p_count;
-        L.r_idx[d] = std::move(t.r_idx);
-        L.p_idx[d] = std::move(t.p_idx);
-        L.r_w[d].assign(t.r_w.begin(), t.r_w.end());
-        L.p_w[d].assign(t.p_w.begin(), t.p_w.end());
-        p_norm[d] = std::move(t.p_norm);
-      }
-      // inv_norm: 1 / sum of the prolongation weights from active coarse cells (and from the
-      // zero beyond a Dirichlet end).
-      L.inv_norm.assign(n, F32(0));
-      for (int i = 0; i < L.shape.n[0]; ++i)
-        for (int j = 0; j < L.shape.n[1]; ++j)
-          for (int k = 0; k < L.shape.n[2]; ++k) {
-            const std::size_t q = L.shape.index(i, j, k);
-            if (L.inv_diag[q] == F32(0)) continue;
-            double norm = 0;
-            for (int e0 = 0; e0 < L.p_count[0]; ++e0)
-              for (int e1 = 0; e1 < L.p_count[1]; ++e1)
-                for (int e2 = 0; e2 < L.p_count[2]; ++e2) {
-                  const std::size_t e[3] = {std::size_t(i * L.p_count[0] + e0),
-                                            std::size_t(j * L.p_count[1] + e1),
-                                            std::size_t(k * L.p_count[2] + e2)};
-                  const double w = p_norm[0][e[0]] * p_norm[1][e[1]] * p_norm[2][e[2]];
-                  if (w == 0) continue;
-                  bool beyond = false;
-                  for (int d = 0; d < 3; ++d) beyond = beyond || L.p_w[d][e[d]] == F32(0);
-                  const std::size_t Q =
-                      C.shape.index(L.p_idx[0][e[0]], L.p_idx[1][e[1]], L.p_idx[2][e[2]]);
-                  if (beyond || C.inv_diag[Q] != F32(0)) norm += w;
-                }
-            L.inv_norm[q] = norm > 0 ? F32(1.0 / norm) : F32(0);
-          }
-    }
-  }
-  zero_row_.assign(widest, F32(0));
-  parity_.resize(widest + 1);
-  for (std::size_t k = 0; k <= widest; ++k) parity_[k] = F32((k & 1) == 0 ? 1 : 0);
-  zero_row_t_.assign(widest, T(0));
-  product_ = MultigridLevel<T>();
-  product_.shape = levels_[0].shape;
-  for (int d = 0; d < 3; ++d) product_.periodic[d] = levels_[0].periodic[d];
-  product_.unit = true;
-  product_.diag.assign(levels_[0].diag.begin(), levels_[0].diag.end());
-  singular_ = op.singular();
-  n_active_ = 0;
-  for (MgScalar d : levels_[0].diag) n_active_ += d != MgScalar(0) ? 1 : 0;
-  any_inactive_ = n_active_ < product_.shape.size();
-  for (auto& p : part_) p.assign(std::size_t(product_.shape.n[0]), 0.0);
+  return levels;
+}
 
-  // Coarsest level: dense Cholesky of its active cells, one rank-one term per pocket without a
-  // Dirichlet side (its null vector is the pocket's constant: the term pins the pocket's mean).
-  MultigridLevel<F32>& L = levels_.back();
-  const Shape3& sh = L.shape;
-  cell_of_.clear();
-  chol_.clear();
-  rhs_.clear();
-  std::vector<int32_t> dense(sh.size(), -1);
-  for (std::size_t q = 0; q < sh.size(); ++q)
-    if (L.inv_diag[q] != F32(0)) {
-      dense[q] = int32_t(cell_of_.size());
-      cell_of_.push_back(int32_t(q));
-    }
-  const std::size_t m = cell_of_.size();
-  if (m == 0 || m > kMaxDirectCells) {
-    cell_of_.clear();
-    return finish_build();
+/// L's transfer tables to C (the next coarser level) and inv_norm: 1 / the sum of the
+/// prolongation weights from active coarse cells (and from the zero beyond a Dirichlet end).
+template <class T>
+void build_transfers(MultigridLevel<T>& L, const MultigridLevel<T>& C) {
+  std::array<std::vector<double>, 3> p_norm;
+  for (int d = 0; d < 3; ++d) {
+    AxisTransfer t = axis_transfer(L, d, C.shape.n[d], C.scale[d]);
+    L.r_count[d] = t.r_count;
+    L.p_count[d] = t.p_count;
+    L.r_idx[d] = std::move(t.r_idx);
+    L.p_idx[d] = std::move(t.p_idx);
+    L.r_w[d].assign(t.r_w.begin(), t.r_w.end());
+    L.p_w[d].assign(t.p_w.begin(), t.p_w.end());
+    p_norm[d] = std::move(t.p_norm);
   }
+  L.inv_norm.assign(L.shape.size(), T(0));
+  for (int i = 0; i < L.shape.n[0]; ++i)
+    for (int j = 0; j < L.shape.n[1]; ++j)
+      for (int k = 0; k < L.shape.n[2]; ++k) {
+        const std::size_t q = L.shape.index(i, j, k);
+        if (L.inv_diag[q] == T(0)) continue;
+        double norm = 0;
+        for (int e0 = 0; e0 < L.p_count[0]; ++e0)
+          for (int e1 = 0; e1 < L.p_count[1]; ++e1)
+            for (int e2 = 0; e2 < L.p_count[2]; ++e2) {
+              const std::size_t e[3] = {std::size_t(i * L.p_count[0] + e0),
+                                        std::size_t(j * L.p_count[1] + e1),
+                                        std::size_t(k * L.p_count[2] + e2)};
+              const double w = p_norm[0][e[0]] * p_norm[1][e[1]] * p_norm[2][e[2]];
+              if (w == 0) continue;
+              bool beyond = false;
+              for (int d = 0; d < 3; ++d) beyond = beyond || L.p_w[d][e[d]] == T(0);
+              const std::size_t Q =
+                  C.shape.index(L.p_idx[0][e[0]], L.p_idx[1][e[1]], L.p_idx[2][e[2]]);
+              if (beyond || C.inv_diag[Q] != T(0)) norm += w;
+            }
+        L.inv_norm[q] = norm > 0 ? T(1.0 / norm) : T(0);
+      }
+}
+
+/// The coarsest level's matrix on its active cells (dense index: the order of cell_of), one
+/// rank-one term added per pocket without a Dirichlet side (its null vector is the pocket's
+/// constant: the term pins the pocket's mean).
+template <class T>
+std::vector<double> coarsest_matrix(const MultigridLevel<T>& L, const std::vector<int32_t>& cell_of,
+                                    const std::vector<int32_t>& dense) {
+  const Shape3& sh = L.shape;
+  const std::size_t m = cell_of.size();
   std::vector<double> A(m * m, 0.0);
-  std::vector<int32_t> pocket(m, -1);
-  std::vector<double> ghost(m, 0.0);
+  std::vector<double> ghost(m, 0.0);  // each row's Dirichlet conductance
   for (std::size_t r = 0; r < m; ++r) {
-    const std::size_t q = std::size_t(cell_of_[r]);
+    const std::size_t q = std::size_t(cell_of[r]);
     const int ijk[3] = {int(q / (std::size_t(sh.n[1]) * sh.n[2])), int((q / sh.n[2]) % sh.n[1]),
                         int(q % sh.n[2])};
     A[r * m + r] = double(L.diag[q]);
@@ -409,14 +379,13 @@ void PoissonMultigrid<T>::build(const Laplace7& op) {
     ghost[r] = A[r * m + r] - off;
   }
   // Pockets: connected components of the coupling graph (breadth first, in index order).
-  std::vector<int32_t> queue;
+  std::vector<int32_t> pocket(m, -1), queue, members;
   for (std::size_t s0 = 0; s0 < m; ++s0) {
     if (pocket[s0] >= 0) continue;
-    const int32_t id = int32_t(s0);
     queue.assign(1, int32_t(s0));
-    pocket[s0] = id;
+    members.clear();
+    pocket[s0] = int32_t(s0);
     double dirichlet = 0, top = 0;
-    std::vector<int32_t> members;
     while (!queue.empty()) {
       const std::size_t r = std::size_t(queue.back());
       queue.pop_back();
@@ -425,7 +394,7 @@ void PoissonMultigrid<T>::build(const Laplace7& op) {
       top = std::max(top, A[r * m + r]);
       for (std::size_t c = 0; c < m; ++c)
         if (c != r && A[r * m + c] != 0 && pocket[c] < 0) {
-          pocket[c] = id;
+          pocket[c] = int32_t(s0);
           queue.push_back(int32_t(c));
         }
     }
@@ -434,14 +403,16 @@ void PoissonMultigrid<T>::build(const Laplace7& op) {
     for (int32_t r : members)
       for (int32_t c : members) A[std::size_t(r) * m + std::size_t(c)] += w;
   }
-  // A = L L^T, row-major lower factor in place.
+  return A;
+}
+
+/// A (m x m, row-major) = L L^T: the lower factor in place, the upper triangle zeroed. False
+/// (A spoiled) when A is not positive definite.
+bool cholesky_in_place(std::vector<double>& A, std::size_t m) {
   for (std::size_t j = 0; j < m; ++j) {
     double d = A[j * m + j];
     for (std::size_t k = 0; k < j; ++k) d -= A[j * m + k] * A[j * m + k];
-    if (!(d > 0)) {  // not positive definite after all: sweep instead
-      cell_of_.clear();
-      return finish_build();
-    }
+    if (!(d > 0)) return false;
     const double ljj = std::sqrt(d);
     A[j * m + j] = ljj;
     for (std::size_t i = j + 1; i < m; ++i) {
@@ -452,13 +423,85 @@ void PoissonMultigrid<T>::build(const Laplace7& op) {
   }
   for (std::size_t i = 0; i < m; ++i)
     for (std::size_t j = i + 1; j < m; ++j) A[i * m + j] = 0;
-  chol_ = std::move(A);
-  rhs_.assign(m, 0.0);
-  finish_build();
+  return true;
+}
+
+}  // namespace
+
+template <class T>
+void PoissonMultigrid<T>::build(const Laplace7& op) {
+  check_sides(op);
+  levels_ = coarsen<MgScalar>(op);
+  for (std::size_t l = 0; l + 1 < levels_.size(); ++l) build_transfers(levels_[l], levels_[l + 1]);
+  allocate_scratch();
+  build_product(op);
+  factor_coarsest();
+  split_layout();
 }
 
 template <class T>
-void PoissonMultigrid<T>::finish_build() {
+void PoissonMultigrid<T>::allocate_scratch() {
+  using F32 = MgScalar;
+  std::size_t widest = 1;
+  for (std::size_t l = 0; l < levels_.size(); ++l) {
+    MultigridLevel<F32>& L = levels_[l];
+    const std::size_t n = L.shape.size();
+    widest = std::max(widest, std::size_t(L.shape.n[2]));
+    L.passes = 1;
+    for (int d = 0; d < 3; ++d)
+      if (L.periodic[d] && L.shape.n[d] > 1 && L.shape.n[d] % 2 == 1) ++L.passes;
+    L.x.assign(n, F32(0));
+    L.b.assign(n, F32(0));
+    if (l + 1 < levels_.size()) L.r.assign(n, F32(0));
+  }
+  zero_row_.assign(widest, F32(0));
+  parity_.resize(widest + 1);
+  for (std::size_t k = 0; k <= widest; ++k) parity_[k] = F32((k & 1) == 0 ? 1 : 0);
+  zero_row_t_.assign(widest, T(0));
+}
+
+template <class T>
+void PoissonMultigrid<T>::build_product(const Laplace7& op) {
+  product_ = MultigridLevel<T>();
+  product_.shape = levels_[0].shape;
+  for (int d = 0; d < 3; ++d) product_.periodic[d] = levels_[0].periodic[d];
+  product_.unit = true;
+  product_.diag.assign(levels_[0].diag.begin(), levels_[0].diag.end());
+  singular_ = op.singular();
+  n_active_ = 0;
+  for (MgScalar d : levels_[0].diag) n_active_ += d != MgScalar(0) ? 1 : 0;
+  any_inactive_ = n_active_ < product_.shape.size();
+  for (auto& p : part_) p.assign(std::size_t(product_.shape.n[0]), 0.0);
+}
+
+template <class T>
+void PoissonMultigrid<T>::factor_coarsest() {
+  const MultigridLevel<MgScalar>& L = levels_.back();
+  cell_of_.clear();
+  chol_.clear();
+  rhs_.clear();
+  std::vector<int32_t> dense(L.shape.size(), -1);
+  for (std::size_t q = 0; q < L.shape.size(); ++q)
+    if (L.inv_diag[q] != MgScalar(0)) {
+      dense[q] = int32_t(cell_of_.size());
+      cell_of_.push_back(int32_t(q));
+    }
+  const std::size_t m = cell_of_.size();
+  if (m == 0 || m > kMaxDirectCells) {  // sweep instead
+    cell_of_.clear();
+    return;
+  }
+  std::vector<double> A = coarsest_matrix(L, cell_of_, dense);
+  if (!cholesky_in_place(A, m)) {  // not positive definite after all: sweep instead
+    cell_of_.clear();
+    return;
+  }
+  chol_ = std::move(A);
+  rhs_.assign(m, 0.0);
+}
+
+template <class T>
+void PoissonMultigrid<T>::split_layout() {
   // Level 0 runs on unit conductances (x = 0 on its solid cells): its c arrays go.
   MultigridLevel<MgScalar>& L0 = levels_[0];
   L0.unit = true;

@@ -119,7 +119,13 @@ class PoissonMultigrid {
   std::size_t bytes() const;
 
  private:
-  void finish_build();
+  // build's parts, in order.
+  void allocate_scratch();
+  void build_product(const Laplace7& op);
+  /// The coarsest level's dense factor (none: it is swept).
+  void factor_coarsest();
+  /// Every level's per-cell arrays to rows split by the parity of k.
+  void split_layout();
   /// One V-cycle: z = M r on natural rows; z == nullptr (the solve's): r split as the levels,
   /// M r left in level 0's x, r . z and sum z per plane in part_.
   void vcycle(const T* r, T* z);
