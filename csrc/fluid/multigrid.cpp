@@ -558,7 +558,12 @@ struct LevelArgs {
   bool io_double = false;
   bool io_split = false;          // in (entry) already split by the parity of k; exit: no z out
   bool first_half_sweep = false;  // entry: also the first half-sweep from x = 0
-  const T* parity = nullptr;      // 1, 0, 1, 0, ... (a row and one more)
+  // Residual and prolongation: colour 0's cells only (one wrap pass only). Right after a
+  // half-sweep of colour 1 its residual is 0 (to round-off): the residual writes that 0; the
+  // prolongation leaves colour 1 alone, as the half-sweep of colour 1 that follows it
+  // overwrites those cells without reading them.
+  bool colour0_only = false;
+  const T* parity = nullptr;  // 1, 0, 1, 0, ... (a row and one more)
   // CG on level 0 (in the grid's precision), per-plane partial sums (fixed order in a plane):
   double* sums = nullptr;          // product: s . q; exit: r . z; update: sum r
   double* sums2 = nullptr;         // exit: sum z; update: max |r|
@@ -751,8 +756,9 @@ struct SmoothPlane {
 /// vectors of L::W lanes inside each half, one by one at its ends. f takes a lane type or T and
 /// must give the same result when called twice for a position (see split_interior).
 template <bool Unit, class L, class T, class F>
-FLAGSIM_INLINE void each_cell_sum(const SplitRow<T>& w, const T* xr, const F& f) {
+FLAGSIM_INLINE void each_cell_sum(const SplitRow<T>& w, const T* xr, const F& f, int only = -1) {
   for (int h = 0; h < 2; ++h) {
+    if (only >= 0 && h != only) continue;
     int lo, hi;
     split_interior<Unit, L>(w, xr, h, lo, hi, f);
     for_each_end(half_len(w.n2, h), lo, hi, [&](int e) FLAGSIM_INLINE_LAMBDA {
@@ -774,11 +780,20 @@ struct ResidualPlane {
       const T* dg = Lv.diag.data() + w.base;
       const T* nr = Lv.inv_norm.data() + w.base;
       T* rr = a.r + w.base;
-      each_cell_sum<Unit, L>(w, xr, [&](int q, const auto& sum) FLAGSIM_INLINE_LAMBDA {
-        using S = std::decay_t<decltype(sum)>;
-        const S ax = load_lanes<S>(dg + q) * load_lanes<S>(xr + q) - sum;
-        store_lanes(rr + q, load_lanes<S>(nr + q) * (load_lanes<S>(br + q) - ax));
-      });
+      int only = -1;  // both halves
+      if (a.colour0_only) {
+        only = (i + j) & 1;  // colour 0's half; colour 1's residual is 0
+        const int lo = only == 0 ? w.ne : 0, hi = only == 0 ? w.n2 : w.ne;
+        std::fill(rr + lo, rr + hi, T(0));
+      }
+      each_cell_sum<Unit, L>(
+          w, xr,
+          [&](int q, const auto& sum) FLAGSIM_INLINE_LAMBDA {
+            using S = std::decay_t<decltype(sum)>;
+            const S ax = load_lanes<S>(dg + q) * load_lanes<S>(xr + q) - sum;
+            store_lanes(rr + q, load_lanes<S>(nr + q) * (load_lanes<S>(br + q) - ax));
+          },
+          only);
     }
   }
 };
@@ -1131,8 +1146,11 @@ struct ProlongPlane {
       const std::size_t base = fs.index(i, j, 0);
       T* xr = a.x + base;
       const T* nr = F.inv_norm.data() + base;
+      // colour 0's half only, or both
+      const int h0 = (i + j) & 1;
+      const bool even = !a.colour0_only || h0 == 0, odd = !a.colour0_only || h0 == 1;
       if (F.p_count[2] == 1) {  // k not halved: the same split positions
-        for (int q = 0; q < nf2; ++q) xr[q] += nr[q] * tmp[q];
+        for (int q = even ? 0 : nef; q < (odd ? nf2 : nef); ++q) xr[q] += nr[q] * tmp[q];
         continue;
       }
       const int nec = (nc2 + 1) / 2;
@@ -1144,12 +1162,16 @@ struct ProlongPlane {
         xr[q] += nr[q] * (w[2 * k] * nat[c[2 * k]] + w[2 * k + 1] * nat[c[2 * k + 1]]);
       };
       // even half e (k = 2e): parent e, other e - 1; odd half o (k = 2o + 1): parent o, other o + 1
-      for (int e = 1; e < nef; ++e) xr[e] += nr[e] * (T(0.75) * nat[e] + T(0.25) * nat[e - 1]);
-      edge(0);
-      const int ohi = std::min(nof, nc2 - 1);
-      for (int o = 0; o < ohi; ++o)
-        xr[nef + o] += nr[nef + o] * (T(0.75) * nat[o] + T(0.25) * nat[o + 1]);
-      for (int o = ohi; o < nof; ++o) edge(2 * o + 1);
+      if (even) {
+        for (int e = 1; e < nef; ++e) xr[e] += nr[e] * (T(0.75) * nat[e] + T(0.25) * nat[e - 1]);
+        edge(0);
+      }
+      if (odd) {
+        const int ohi = std::min(nof, nc2 - 1);
+        for (int o = 0; o < ohi; ++o)
+          xr[nef + o] += nr[nef + o] * (T(0.75) * nat[o] + T(0.25) * nat[o + 1]);
+        for (int o = ohi; o < nof; ++o) edge(2 * o + 1);
+      }
     }
   }
 };
@@ -1371,8 +1393,10 @@ void PoissonMultigrid<T>::vcycle(const T* r_in, T* z) {
   // Down: smooth from x = 0 and take the residual (one fused pass), restrict it.
   for (int l = 0; l + 1 < nl; ++l) {
     const LevelArgs<F32> a = args(l);
-    presmooth(a, l, kSmoothSweeps);
-    list.add<ResidualPlane>(a);
+    presmooth(a, l, smooth_sweeps(l));
+    LevelArgs<F32> res = a;
+    res.colour0_only = a.L->passes == 1;  // the last half-sweep was colour 1's
+    list.add<ResidualPlane>(res);
     list.flush();
     for_each_plane<RestrictPlane>(a, a.coarse->shape.n[0]);
   }
@@ -1410,8 +1434,10 @@ void PoissonMultigrid<T>::vcycle(const T* r_in, T* z) {
   // the exit too).
   for (int l = nl - 2; l >= 0; --l) {
     const LevelArgs<F32> a = args(l);
-    list.add<ProlongPlane>(a);
-    sweep(a, false, kSmoothSweeps, 0);
+    LevelArgs<F32> pro = a;
+    pro.colour0_only = a.L->passes == 1;  // colour 1's half-sweep comes next
+    list.add<ProlongPlane>(pro);
+    sweep(a, false, smooth_sweeps(l), 0);
     if (l > 0) list.flush();
   }
   LevelArgs<F32> a = args(0);

@@ -38,8 +38,13 @@
 
 namespace flagsim {
 
-/// Gauss-Seidel sweeps (red then black) before the coarse correction; as many after.
+/// Gauss-Seidel sweeps (red then black) before the coarse correction on level 0; as many after.
 constexpr int kSmoothSweeps = 2;
+/// The same on the coarser levels (an eighth of the cells or fewer each: more sweeps there are
+/// cheap and take an iteration off).
+constexpr int kCoarseSmoothSweeps = 3;
+/// Sweeps before (and after) the coarse correction on level l.
+constexpr int smooth_sweeps(int l) { return l == 0 ? kSmoothSweeps : kCoarseSmoothSweeps; }
 /// Coarsening stops once a level has at most this many cells.
 constexpr std::size_t kCoarsestCells = 64;
 /// Largest coarsest level factored densely (its factor takes 8 n^2 bytes: 32 MiB at 2048).
