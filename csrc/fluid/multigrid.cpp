@@ -957,6 +957,61 @@ struct ProductPlane {
   }
 };
 
+/// MGPCG's start on plane i, before the product: x (natural: cg_x) and b (natural: in) to rows
+/// split by the parity of k, x into cg_s (0 on the cells that are no unknowns, where diag is 0)
+/// and b into cg_rw; sums: max |b| over the unknowns.
+struct StartPlane {
+  template <class L, bool Unit, class T>
+  FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
+    const Shape3& sh = a.L->shape;
+    const int n1 = sh.n[1], n2 = sh.n[2], ne = (n2 + 1) / 2, no = n2 / 2;
+    double top = 0;
+    for (int j = 0; j < n1; ++j) {
+      const std::size_t base = sh.index(i, j, 0);
+      const T* xn = a.cg_x + base;
+      const T* bn = static_cast<const T*>(a.in) + base;
+      const T* dg = a.L->diag.data() + base;
+      T* xs = a.cg_s + base;
+      T* rs = a.cg_rw + base;
+      for (int e = 0; e < ne; ++e) {
+        xs[e] = xn[2 * e];
+        rs[e] = bn[2 * e];
+      }
+      for (int o = 0; o < no; ++o) {
+        xs[ne + o] = xn[2 * o + 1];
+        rs[ne + o] = bn[2 * o + 1];
+      }
+      for (int q = 0; q < n2; ++q) {
+        if (dg[q] == T(0))
+          xs[q] = T(0);
+        else
+          top = std::max(top, std::fabs(double(rs[q])));
+      }
+    }
+    a.sums[i] = top;
+  }
+};
+
+/// MGPCG's start on plane i, after the product (cg_q = K x): r (cg_rw, holding b) = b - K x on
+/// the unknowns, 0 elsewhere; sums2: max |r|.
+struct StartResidualPlane {
+  template <class L, bool Unit, class T>
+  FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
+    const Shape3& sh = a.L->shape;
+    const std::size_t base = sh.index(i, 0, 0);
+    const int n = sh.n[1] * sh.n[2];
+    const T* dg = a.L->diag.data() + base;
+    const T* q = a.cg_q + base;
+    T* r = a.cg_rw + base;
+    double top = 0;
+    for (int c = 0; c < n; ++c) {
+      r[c] = dg[c] == T(0) ? T(0) : T(double(r[c]) - double(q[c]));
+      top = std::max(top, std::fabs(double(r[c])));
+    }
+    a.sums2[i] = top;
+  }
+};
+
 /// v's plane i between the natural order (natural[k]) and rows split by the parity of k
 /// (split[split_pos(k)]): to_split copies natural into split, else split into natural.
 struct SplitCopyPlane {
@@ -1478,9 +1533,9 @@ CgResult PoissonMultigrid<T>::solve(const T* b, T* x, double tol, int max_iter, 
     for (int i = 0; i < planes; ++i) t += part_[std::size_t(k)][std::size_t(i)];
     return t;
   };
-  auto largest = [&]() {
+  auto largest = [&](int k) {  // the planes' maxima
     double t = 0;
-    for (int i = 0; i < planes; ++i) t = std::max(t, part_[1][std::size_t(i)]);
+    for (int i = 0; i < planes; ++i) t = std::max(t, part_[std::size_t(k)][std::size_t(i)]);
     return t;
   };
   auto mean = [&](const T* v) {  // over the unknowns
@@ -1491,32 +1546,54 @@ CgResult PoissonMultigrid<T>::solve(const T* b, T* x, double tol, int max_iter, 
   CgResult res;
   LevelArgs<T> a = cg_args();
   a.sums = nullptr;
-  split_copy(a, x, xs, true);
-  split_copy(a, const_cast<T*>(b), r, true);  // b is only read
-  if (any_inactive_)
+  double b_max = 0, r_max = 0, sum_r = 0;
+  if (!singular_) {
+    // One blocked pass: x and b split (x = 0 off the unknowns) with max |b| over the unknowns;
+    // q = K x; r = b - q on the unknowns (0 elsewhere) with max |r|.
+    StageList<T> list;
+    LevelArgs<T> start = cg_args();
+    start.cg_x = x;
+    start.cg_s = xs;
+    start.cg_rw = r;
+    start.in = b;
+    list.template add<StartPlane>(start);
+    LevelArgs<T> product = a;
+    product.x = xs;
+    product.r = q;
+    list.template add<ProductPlane>(product);
+    LevelArgs<T> rest = cg_args();
+    rest.cg_rw = r;
+    rest.cg_q = q;
+    list.template add<StartResidualPlane>(rest);
+    list.flush();
+    b_max = largest(0);
+    r_max = largest(1);
+  } else {
+    split_copy(a, x, xs, true);
+    split_copy(a, const_cast<T*>(b), r, true);  // b is only read
+    if (any_inactive_)
+      parallel_for_cells(long(n), [&](Index i) {
+        if (active[i] == T(0)) xs[i] = T(0);
+      });
+    // max|b| over the unknowns of b - mean(b): constants over the unknowns are K's null space,
+    // the solve is for the zero-mean part.
+    const double mb = mean(r);
+    b_max = parallel_max(
+        n, [&](std::size_t i) { return active[i] == T(0) ? 0.0 : std::fabs(double(r[i]) - mb); });
+    // r = b - K x on the unknowns, 0 elsewhere, its mean over the unknowns taken out.
+    a.x = xs;
+    a.r = q;
+    for_each_plane<ProductPlane>(a);
     parallel_for_cells(long(n), [&](Index i) {
-      if (active[i] == T(0)) xs[i] = T(0);
+      r[i] = active[i] == T(0) ? T(0) : T(double(r[i]) - double(q[i]));
     });
-  // max|b| over the unknowns; for a singular K (constants over the unknowns are its null space:
-  // the solve is for the zero-mean part) of b - mean(b).
-  const double mb = singular_ ? mean(r) : 0.0;
-  const double b_max = parallel_max(
-      n, [&](std::size_t i) { return active[i] == T(0) ? 0.0 : std::fabs(double(r[i]) - mb); });
-  // r = b - K x on the unknowns, 0 elsewhere.
-  a.x = xs;
-  a.r = q;
-  for_each_plane<ProductPlane>(a);
-  parallel_for_cells(
-      long(n), [&](Index i) { r[i] = active[i] == T(0) ? T(0) : T(double(r[i]) - double(q[i])); });
-  double sum_r = 0;
-  if (singular_) {
     const double mr = mean(r);
     parallel_for_cells(long(n), [&](Index i) {
       if (active[i] != T(0)) r[i] = T(r[i] - mr);
     });
     sum_r = deterministic_sum(n, [&](std::size_t i) { return double(r[i]); });
+    r_max = parallel_max(n, [&](std::size_t i) { return std::fabs(double(r[i])); });
   }
-  double r_max = parallel_max(n, [&](std::size_t i) { return std::fabs(double(r[i])); });
   if (b_max == 0 || r_max <= tol * b_max) {
     res.residual = b_max == 0 ? 0.0 : r_max / b_max;
     split_copy(a, x, xs, false);
@@ -1562,7 +1639,7 @@ CgResult PoissonMultigrid<T>::solve(const T* b, T* x, double tol, int max_iter, 
     u.alpha = rz / sq;
     for_each_plane<UpdatePlane>(u);
     sum_r = in_order(0);
-    r_max = largest();
+    r_max = largest(1);
     if (r_max <= tol * b_max) break;
     const double rz_new = precondition();
     beta = rz_new / rz;
