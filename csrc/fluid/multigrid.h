@@ -8,10 +8,13 @@
 //   of the fine conductances across it times (fine distance / coarse distance), so a solid wall
 //   of fine cells stays a wall on every level and open cells keep the 7-point stencil (2x the
 //   fine conductance per level in 3-D);
-//   red-black Gauss-Seidel smoothing (kSmoothSweeps before, the reverse order after: the cycle
-//   is a symmetric operator, as CG needs), trilinear prolongation renormalised over the fluid
-//   coarse cells (so a constant is interpolated exactly beside solids and domain ends), the
-//   restriction its transpose;
+//   red-black Gauss-Seidel smoothing (smooth_sweeps(l) before, the reverse order after: the
+//   cycle is a symmetric operator, as CG needs; more sweeps on the cheap coarse levels),
+//   trilinear prolongation renormalised over the fluid coarse cells (so a constant is
+//   interpolated exactly beside solids and domain ends), the restriction its transpose; with
+//   one colouring pass the residual is taken on colour 0 only (colour 1's is 0 right after its
+//   half-sweep) and the prolongation adds to colour 0 only (colour 1's half-sweep overwrites the
+//   rest unread);
 //   the coarsest level solved exactly by a dense Cholesky factor (with one rank-one term per
 //   pocket that touches no Dirichlet side, so singular systems factor too), or, when it is too
 //   large to factor, by kCoarsestSweeps symmetric Gauss-Seidel sweeps.
