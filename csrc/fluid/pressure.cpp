@@ -151,28 +151,24 @@ bool subtract_gradient_periodic(const T* phi, int row_stride, MacGrid<T>& u) {
   const int nx = g.nx, ny = g.ny, nz = g.nz;
   const T inv_h = T(1.0 / g.h);
   const std::size_t stride = row_stride > 0 ? std::size_t(row_stride) : std::size_t(nz);
+  T *U = u.comp[0].data(), *V = u.comp[1].data(), *W = u.comp[2].data();
   std::atomic<bool> finite{true};  // an AND of per-row answers: the same for any order
-  for (int c = 0; c < 3; ++c) {
-    T* q = u.comp[c].data();
-    parallel_for_if(Index(g.cells().size()) > kGridParallelGrain, long(nx) * ny, [&](Index r) {
-      const int i = int(r / ny), j = int(r % ny);
-      T* dst = q + std::size_t(r) * nz;
-      const T* hi = phi + std::size_t(r) * stride;  // cell (i, j): the face's upper cell
-      bool ok;
-      if (c == 2) {
-        // Face k lies between cells k - 1 and k of the row; face 0 wraps to cell nz - 1.
-        dst[0] -= (hi[0] - hi[nz - 1]) * inv_h;
-        ok = dst[0] - dst[0] == 0;  // false for NaN and infinity
-        ok = gradient_row(dst + 1, hi + 1, hi, nz - 1, inv_h) && ok;
-      } else {
-        const int il = c == 0 ? (i == 0 ? nx - 1 : i - 1) : i;
-        const int jl = c == 1 ? (j == 0 ? ny - 1 : j - 1) : j;
-        const T* lo = phi + (std::size_t(il) * ny + jl) * stride;
-        ok = gradient_row(dst, hi, lo, nz, inv_h);
-      }
-      if (!ok) finite.store(false, std::memory_order_relaxed);
-    });
-  }
+  // One task per (i, j) row, all three components: the potential's rows are read once.
+  parallel_for_if(Index(g.cells().size()) > kGridParallelGrain, long(nx) * ny, [&](Index r) {
+    const int i = int(r / ny), j = int(r % ny);
+    const std::size_t row = std::size_t(r) * nz;
+    const T* hi = phi + std::size_t(r) * stride;  // cell (i, j): the faces' upper cell
+    const T* lo_x = phi + (std::size_t(i == 0 ? nx - 1 : i - 1) * ny + j) * stride;
+    const T* lo_y = phi + (std::size_t(i) * ny + (j == 0 ? ny - 1 : j - 1)) * stride;
+    bool ok = gradient_row(U + row, hi, lo_x, nz, inv_h);
+    ok = gradient_row(V + row, hi, lo_y, nz, inv_h) && ok;
+    // Face k of w lies between cells k - 1 and k of the row; face 0 wraps to cell nz - 1.
+    T* w = W + row;
+    w[0] -= (hi[0] - hi[nz - 1]) * inv_h;
+    ok = w[0] - w[0] == 0 && ok;  // false for NaN and infinity
+    ok = gradient_row(w + 1, hi + 1, hi, nz - 1, inv_h) && ok;
+    if (!ok) finite.store(false, std::memory_order_relaxed);
+  });
   return finite.load();
 }
 
