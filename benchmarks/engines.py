@@ -125,9 +125,10 @@ def _spacing(flag) -> float:
     return min(flag.width / (flag.cols - 1), flag.height / (flag.rows - 1))
 
 
-def paper_scene(full: bool, pipeline: bool = True):
+def paper_scene(full: bool, pipeline: bool = True, coupling: str = "one_way"):
     """Scene.paper() as built in (whatever it switches on); full: with grid air, self-collision
-    and flapping switched on. pipeline: air.pipeline (the air beside the cloth on two threads)."""
+    and flapping switched on. pipeline: air.pipeline (the air beside the cloth on two threads);
+    coupling: air.coupling."""
     import flagsim
 
     s = flagsim.Scene.paper()
@@ -136,6 +137,7 @@ def paper_scene(full: bool, pipeline: bool = True):
         s.self_collision.enabled = True
         s.flapping.mode = "displace"
     s.air.pipeline = pipeline
+    s.air.coupling = coupling
     return s
 
 

@@ -502,7 +502,10 @@ PAPER_NOTE = (
     "default; same bits as one after the other: docs/design.md 'Air and cloth side by side'); the "
     "/serial rows are the same scenes with air.pipeline = false, one after the other with both "
     "threads in each stage's loops. The stage split then counts the air's seconds beside the "
-    "cloth's, so its shares are of the two threads' busy time."
+    "cloth's, so its shares are of the two threads' busy time. full/two_way_lagged: the full "
+    "scene with air.coupling = 'two_way_lagged' (the air takes the flag's drag reaction a step "
+    "late, beside the cloth); full/two_way: the serial two-way scheme (never pipelined), the "
+    "same physics one step less behind (docs/coupling.md)."
 )
 
 

@@ -69,7 +69,9 @@ def build(spec: dict[str, Any]):
             engines.cloth_scene(p["rows"], p["cols"], p["integrator"], p["self_collision"])
         )
     if kind == "paper":
-        return engines.SimulationStepper(engines.paper_scene(p["full"], p.get("pipeline", True)))
+        return engines.SimulationStepper(
+            engines.paper_scene(p["full"], p.get("pipeline", True), p.get("coupling", "one_way"))
+        )
     if kind == "large":
         return engines.SimulationStepper(engines.large_scene(p["pipeline"]))
     if kind == "multiflag":

@@ -108,9 +108,10 @@ def _thread_counts(sel: Selection, threads, is_largest: bool, main_variant: bool
 def _pipeline_workloads(sel: Selection, threads) -> list[Workload]:
     """Issue 28: the air beside the cloth (air.pipeline, the default: "full", "large") against
     the serial order ("/serial": air.pipeline = false, every thread in each stage's loops) at
-    each thread count above one, so the ratio comes from one run; and the large scene (Scene.large:
-    64 x 64 flag, 64^3 air, self-collision, eq. 5, dt = 0.01) at every thread count. Smoke runs
-    take the paper scene's serial row alone."""
+    each thread count above one, so the ratio comes from one run; the full paper scene two-way,
+    lagged ("full/two_way_lagged", pipelined) and serial ("full/two_way"), at every thread count;
+    and the large scene (Scene.large: 64 x 64 flag, 64^3 air, self-collision, eq. 5, dt = 0.01)
+    at every thread count. Smoke runs take the paper scene's serial row alone."""
     multi = [t for t in threads if t > 1]
     serial = {"kind": "paper", "full": True, "pipeline": False}
     work = [
@@ -119,6 +120,13 @@ def _pipeline_workloads(sel: Selection, threads) -> list[Workload]:
     ]
     if sel.mode == "smoke":
         return work
+    # two-way: the lagged scheme with its air beside the cloth at every thread count, and the
+    # serial two-way scheme (its air takes this step's reaction, after the cloth) to compare with
+    for coupling in ("two_way_lagged", "two_way"):
+        params = {"kind": "paper", "full": True, "coupling": coupling}
+        work += [
+            Workload("paper", "flagsim", f"full/{coupling}", "8x11", 88, t, params) for t in threads
+        ]
     # quick runs: the large scene at the largest thread count only (a step is ~10 ms)
     counts = threads if sel.mode == "full" or sel.threads is not None else threads[-1:]
     for variant, pipeline, ts in (("large", True, counts), ("large/serial", False, multi)):

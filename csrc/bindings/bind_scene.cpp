@@ -148,11 +148,13 @@ void bind_air_params(py::module_& m) {
       air, "pole_obstacle", &AirParams::pole_obstacle, "air",
       "the pole is a no-slip solid of the air grid too, so it sheds a wake ('grid', pole.enabled)");
   def_field<AirParams, bool>(air, "pipeline", &AirParams::pipeline, "air",
-                             "'grid' on >= 2 threads: the air steps on its own thread beside the "
-                             "cloth (same results); false: one after the other");
+                             "'grid' on >= 2 threads, coupling 'one_way' or 'two_way_lagged': the "
+                             "air steps on its own thread beside the cloth (same results); false: "
+                             "one after the other");
   def_field(air, "coupling", &AirParams::coupling, "air",
             "'one_way' (the paper: the air never feels the flag) | 'two_way' (the flag's drag goes "
-            "back into the grid; 'grid'; docs/coupling.md)");
+            "back into the grid in the same step; 'grid'; docs/coupling.md) | 'two_way_lagged' "
+            "(the same a step later, so the air can step beside the cloth: another scheme)");
 }
 
 void bind_flag_spec(py::module_& m) {
@@ -319,8 +321,9 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
   sim.def_property_readonly("time", &Simulation::time, "simulated time, s");
   sim.def_property_readonly("step_count", &Simulation::step_count);
   sim.def_property_readonly("pipelined", &Simulation::pipelined,
-                            "True when the air steps beside the cloth (air.pipeline and a grid; "
-                            "on two threads when flagsim.num_threads() >= 2); same results");
+                            "True when the air steps beside the cloth (air.pipeline, a grid, "
+                            "coupling 'one_way' or 'two_way_lagged'; on two threads when "
+                            "flagsim.num_threads() >= 2); same results as the serial order");
   sim.def_property_readonly(
       "scene", [](const Simulation& s) { return Scene(s.scene()); },
       "a copy of the scene this simulation was built from");

@@ -83,10 +83,10 @@ class Candidates {
   double next_skin(const Vec3& centre);
   void miss();
   size_t list_budget() const;
-  void collect_vertex(Index i, double wide, const VecX* inv_mass,
-                      std::vector<CandidatePair>& buffer) const;
-  void collect_edge(Index e, double wide, const VecX* inv_mass,
-                    std::vector<CandidatePair>& buffer) const;
+  void collect_vertices(Index i0, Index i1, double wide, const VecX* inv_mass,
+                        std::vector<CandidatePair>& buffer, std::vector<int32_t>& hits) const;
+  void collect_edges(Index e0, Index e1, double wide, const VecX* inv_mass,
+                     std::vector<CandidatePair>& buffer, std::vector<int32_t>& hits) const;
   bool query_trees(double wide, const VecX* inv_mass, CandidatePairs& out,
                    size_t budget = SIZE_MAX);
   void filter_list(const VecX& inv_mass);
@@ -104,7 +104,9 @@ class Candidates {
   // Per thread (query_trees, filter_list), each on cache lines of its own: the threads push pairs
   // at the same time, and two threads' vector ends on one line could bounce it between the cores
   // at every push (false sharing). On this 2-vCPU machine no difference was measurable either way.
-  struct alignas(64) ThreadPairs : CandidatePairs {};
+  struct alignas(64) ThreadPairs : CandidatePairs {
+    std::vector<int32_t> hits;  // a query group's tree hits (collect_vertices, collect_edges)
+  };
   std::vector<ThreadPairs> thread_pairs_;
   CandidatePairs pairs_;
   // The pair list (a Verlet list): every pair whose boxes come within 2 skin_ of the query, from

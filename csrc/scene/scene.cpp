@@ -120,10 +120,10 @@ void Scene::validate() const {
                "false unless air.model is \"grid\" and pole.enabled is true (the pole is a solid "
                "of the air grid)",
                "true");
-  if (air.coupling == Coupling::kTwoWay && air.model != AirModel::kGrid)
+  if (air.two_way() && air.model != AirModel::kGrid)
     fail_param("air.coupling",
                "\"one_way\" unless air.model is \"grid\" (two-way coupling pushes the air grid)",
-               "\"two_way\"");
+               "\"" + std::string(name_of(air.coupling)) + "\"");
   for (size_t i = 0; i < solids.size(); ++i) {
     solids[i].validate("solids[" + std::to_string(i) + "]");
     solids[i].validate_mesh("solids[" + std::to_string(i) + "]");

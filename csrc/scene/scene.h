@@ -18,11 +18,14 @@ struct EnumNames<AirModel> {
 };
 
 /// one_way: the air pushes the flag and never feels it (the paper); two_way: the drag each mass
-/// receives goes back into the air grid with the opposite sign (docs/coupling.md).
-enum class Coupling { kOneWay, kTwoWay };
+/// receives in a step goes back into the air grid with the opposite sign in that step's air step;
+/// two_way_lagged: the same reaction, taken by the next step's air step instead, so that the air
+/// can step beside the cloth (air.pipeline): a partitioned scheme one step further behind, not the
+/// bits of two_way (docs/coupling.md "Two-way beside the cloth").
+enum class Coupling { kOneWay, kTwoWay, kTwoWayLagged };
 template <>
 struct EnumNames<Coupling> {
-  static constexpr std::array<const char*, 2> names{"one_way", "two_way"};
+  static constexpr std::array<const char*, 3> names{"one_way", "two_way", "two_way_lagged"};
 };
 
 /// The air the flag feels. model "none": no air at all (no drag stage); "uniform": the wind
@@ -35,13 +38,17 @@ struct AirParams : FluidParams {
   bool pole_obstacle = false;
   /// With model "grid" and flagsim on two threads or more (set_num_threads), the air's step for
   /// the next step runs on a thread of its own beside the cloth's step (one-way coupling: the air
-  /// never reads the flag), each with its loops on one thread; the same bits as the serial order
-  /// (docs/design.md "Air and cloth side by side"). false: one after the other, each with every
-  /// thread in its loops (better when one side dominates, e.g. a large grid and a small flag).
+  /// never reads the flag; "two_way_lagged": it takes the reaction of the step before), each with
+  /// its loops on one thread; the same bits as the serial order (docs/design.md "Air and cloth
+  /// side by side"). false: one after the other, each with every thread in its loops (better when
+  /// one side dominates, e.g. a large grid and a small flag). "two_way" is never pipelined.
   bool pipeline = true;
   /// "two_way": the flag's drag reaction is spread back into the grid at every step, with the
-  /// weights the sampling uses, so air plus flag conserve momentum. Needs model "grid".
+  /// weights the sampling uses, so air plus flag conserve momentum; "two_way_lagged": the same,
+  /// a step later (the air beside the cloth). Needs model "grid".
   Coupling coupling = Coupling::kOneWay;
+  /// Any two-way scheme: the flag's drag goes back into the grid.
+  bool two_way() const { return coupling != Coupling::kOneWay; }
   /// The pole as an obstacle of the air (pole.radius, height, base; axis +y; no-slip).
   static ObstacleParams pole_solid(const PoleParams& pole);
   AirParams() { wind = WindSchedule(Vec3(2.0, 0.0, 0.0)); }

@@ -78,6 +78,7 @@ Simulation::Simulation(const Scene& scene, Simulation* host)
   if (forces_.drag) forces_.drag_impulse = &drag_impulse_;
   if (built(Stage::kCoupling)) {
     reaction_.setZero(N, 3);
+    reaction_at_ = x_;
     drag_scale_.setOnes(N);
     weight_sq_.setZero(N);
     forces_.drag_scale = &drag_scale_;
@@ -109,7 +110,7 @@ Simulation::Simulation(const Scene& scene, Simulation* host)
   if (built(Stage::kSelfCollision) && !others_.empty()) build_between_flags();
   for (int i = 0; i < num_flags(); ++i)  // two-way: every flag's reaction goes into the grid
     if (flag(i).built(Stage::kCoupling))
-      reactions_.push_back({&flag(i).x_start_, &flag(i).reaction_});
+      reactions_.push_back({&flag(i).reaction_at_, &flag(i).reaction_});
   name_stages();
 }
 
@@ -136,8 +137,8 @@ void Simulation::choose_stages() {
   if (!host_ && scene_.air.model == AirModel::kGrid)  // flag 0 steps the scene's grid for all
     for (const FlagSpec& f : scene_.more_flags)
       built(Stage::kFluid) = built(Stage::kFluid) || (air && f.drag.coefficient > 0);
-  built(Stage::kCoupling) = forces_.drag && scene_.air.model == AirModel::kGrid &&
-                            scene_.air.coupling == Coupling::kTwoWay;
+  built(Stage::kCoupling) =
+      forces_.drag && scene_.air.model == AirModel::kGrid && scene_.air.two_way();
   built(Stage::kGravity) = forces_.gravity;
   built(Stage::kDrag) = forces_.drag;
   built(Stage::kSprings) = forces_.springs;
@@ -257,10 +258,10 @@ void Simulation::setup_flapping() {
   }
 }
 
-// The air grid (paper §2): it only needs the flags to start inside it. Pipelined (one-way
-// coupling and air.pipeline), the air steps on a thread of its own with its loops on that
-// thread, so its FFTs are planned for one thread, and it keeps its warm start so that a step the
-// pipeline takes back is taken again to the same bits.
+// The air grid (paper §2): it only needs the flags to start inside it. Pipelined (air.pipeline,
+// coupling one-way or lagged two-way), the air steps on a thread of its own with its loops on
+// that thread, so its FFTs are planned for one thread, and it keeps its warm start so that a
+// step the pipeline takes back is taken again to the same bits.
 void Simulation::build_fluid() {
   check_inside_grid();
   FluidParams fp = scene_.air;
@@ -272,9 +273,9 @@ void Simulation::build_fluid() {
     int before = num_threads();
     ~Threads() { set_num_threads(before); }
   } restore;
-  // Two-way: the air's step takes this step's drag reaction, so it cannot start before the
-  // cloth's step; the lagged, pipelined scheme (issue 28) is not built, so two-way runs serially.
-  const bool pipeline = scene_.air.pipeline && scene_.air.coupling == Coupling::kOneWay;
+  // "two_way": the air's step takes this step's drag reaction, so it cannot start before the
+  // cloth's step, and runs after it. "two_way_lagged" takes the step before's, which is ready.
+  const bool pipeline = scene_.air.pipeline && scene_.air.coupling != Coupling::kTwoWay;
   if (pipeline) set_num_threads(1);
   fluid_ = std::make_unique<Fluid>(fp, "air");
   air_grid_ = fluid_.get();
@@ -304,8 +305,9 @@ void Simulation::check_inside_grid() const {
   }
 }
 
-// One-way coupling only: an air step that takes this step's drag reaction (two-way, issue 24)
-// cannot start before the cloth's step; a pipelined two-way scheme lags the reaction a step.
+// One-way or lagged two-way coupling: an air step that takes this step's drag reaction
+// ("two_way", issue 24) cannot start before the cloth's step; "two_way_lagged" takes the step
+// before's.
 bool Simulation::pipelined() const { return beside_ != nullptr; }
 
 void Simulation::update_normals() { compute_vertex_normals(topo_, x_, n_); }
@@ -527,9 +529,15 @@ void Simulation::step_once() {
                           e.cause);
   }
   stage_between_flags();  // vertex-triangle and edge-edge contacts between flags
-  for (int k = 0; k < num_flags(); ++k) flag(k).stage_coupling();  // two-way: drag's reaction
+  const bool lag = lagged();
+  if (!lag) hand_reactions();          // two-way: the drag's reaction, to this step's air
   if (!air_advanced) advance_fluid();  // after the check: a rolled-back step leaves the air
+  if (lag) hand_reactions();           // lagged two-way: to the next step's air
   for (int k = 0; k < num_flags(); ++k) flag(k).finish_step();
+}
+
+void Simulation::hand_reactions() {
+  for (int k = 0; k < num_flags(); ++k) flag(k).stage_coupling();
 }
 
 void Simulation::step_pieces() {
@@ -588,6 +596,7 @@ Simulation::Implausible Simulation::pieces(int level) {
   for (long k = 0; k < pieces && bad.cause.empty(); ++k) {
     t_piece_ = time_ + double(k) * h_;
     bad = step_piece();
+    air_sampled_ = pole_air_sampled_ = false;  // sample_air_ahead's reads serve one piece
   }
   return bad;
 }
@@ -604,10 +613,12 @@ void Simulation::sample_air_ahead() {
   air_sampled_ = pole_air_sampled_ = true;
 }
 
-// The pipeline (one-way coupling): the air's step u^n -> u^n+1 reads nothing of the cloth, and
-// the cloth's step reads the air only at u^n. So every flag's first-piece reads of the air are
-// sampled first (sample_air_ahead); then the air advances on the helper thread while this thread
-// steps each flag's first piece. Each side runs the serial order's operations on the same data,
+// The pipeline (one-way coupling, or two-way lagged): the air's step u^n -> u^n+1 reads nothing
+// of this step's cloth (lagged: the reaction of the step before, in reaction_ and reaction_at_,
+// which this step's cloth does not write), and the cloth's step reads the air only at u^n. So
+// every flag's first-piece reads of the air are sampled first (sample_air_ahead, the two-way
+// drag factors too); then the air advances on the helper thread while this thread steps each
+// flag's first piece. Each side runs the serial order's operations on the same data,
 // so the bits are the serial order's. When a flag's piece throws or must be redone in pieces,
 // whose later pieces read u^n at positions known only then, the air's step is taken back
 // (Fluid::undo_step) and the step finishes in the serial order from that flag on (the flags
@@ -634,7 +645,7 @@ bool Simulation::steps_beside_air(int& done) {
       [&]() noexcept {
         try {
           StageClock::Scope t(&air_clock_, Stage::kFluid);
-          fluid_->step(scene_.dt);
+          fluid_->step(scene_.dt, reactions_.empty() ? nullptr : &reactions_);
         } catch (...) {
           air_error = std::current_exception();
         }
@@ -839,7 +850,8 @@ void Simulation::stage_air() {
         u_.row(i) += noise_.velocity(x_.row(i).transpose(), t_piece_).transpose();
       });
   }
-  if (built(Stage::kFluid) && !air_sampled_) {  // else sample_air_ahead did
+  if (air_sampled_) return;  // sample_air_ahead did, and scaled the drag
+  if (built(Stage::kFluid)) {
     StageClock::Scope t(&clock_, Stage::kFluid);
     air_outside_last_ = air_grid_->sample(x_, u_);
     air_outside_total_ += air_outside_last_;
@@ -870,11 +882,13 @@ void Simulation::scale_drag_for_air_response() {
 
 // Two-way coupling (docs/coupling.md): the air takes back the drag impulse each mass received in
 // this step, with the opposite sign, at the positions the step sampled it (x_start_); the
-// fluid's step spreads it with the sampling's weights after advection, before the projection.
+// fluid's step spreads it with the sampling's weights after advection, before the projection:
+// this step's ("two_way") or the next one's ("two_way_lagged"; in flight until then).
 void Simulation::stage_coupling() {
   if (!built(Stage::kCoupling)) return;
   StageClock::Scope t(&clock_, Stage::kCoupling);
   reaction_ = -drag_impulse_;
+  reaction_at_ = x_start_;
 }
 
 // The air restores itself when its step fails; the cloth's step is then undone too, so the

@@ -174,10 +174,10 @@ class Simulation {
   /// Recompute normals after positions were edited from outside.
   void update_normals();
 
-  /// True when a step takes the air's step together with the cloth's first piece (air.pipeline
-  /// and a grid): side by side on two threads when flagsim has two or more (num_threads()), one
-  /// after the other on one. Same bits as the serial order either way (docs/design.md "Air and
-  /// cloth side by side").
+  /// True when a step takes the air's step together with the cloth's first piece (air.pipeline,
+  /// a grid, and air.coupling "one_way" or "two_way_lagged"): side by side on two threads when
+  /// flagsim has two or more (num_threads()), one after the other on one. Same bits as the serial
+  /// order of the same scheme either way (docs/design.md "Air and cloth side by side").
   bool pipelined() const;
   /// The pinned vertices, in the order set_pin_targets takes them.
   const std::vector<Index>& pinned_vertices() const { return pin_index_; }
@@ -200,6 +200,7 @@ class Simulation {
   void step_once();
   // A flag's part of a step: its pieces (halvings, checks), then, after the air, its end.
   void step_pieces();
+  void hand_reactions();  // every flag's stage_coupling: its drag's reaction for the air
   void finish_step();
   void undo_step();     // back to the start of the step, normals too
   struct Implausible {  // a piece that failed a plausibility test; empty cause: it passed
@@ -230,6 +231,7 @@ class Simulation {
   // The stages of a piece (step_piece), each timed by its own StageClock scope.
   void stage_air();
   void stage_coupling();
+  bool lagged() const { return scene_.air.coupling == Coupling::kTwoWayLagged; }
   void scale_drag_for_air_response();
   void stage_flap();
   void stage_integrate();
@@ -322,8 +324,10 @@ class Simulation {
 
   // Drag impulse of the step per mass (N x 3, N s; the integrator adds to it), the reaction the
   // air takes in two-way coupling (its negative) and the points it is spread at (the step's
-  // start positions, where the first piece sampled the air).
-  MatX3 drag_impulse_, reaction_;
+  // start positions, where the first piece sampled the air). "two_way_lagged": the reaction and
+  // its points wait there for the next step's air (in flight), which may read them on the
+  // helper thread while this step's cloth writes drag_impulse_ and x_start_.
+  MatX3 drag_impulse_, reaction_, reaction_at_;
   // Two-way: each mass's drag factor 1 / (1 + kappa) (ForceSet::drag_scale) and the sum of the
   // squared sampling weights at it (N).
   VecX drag_scale_, weight_sq_;

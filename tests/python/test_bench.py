@@ -305,11 +305,14 @@ def test_workloads_needing_missing_parts_are_skipped_with_the_reason():
     assert {f"air/flagsim/sl/fft/float/{n}^3/t1" for n in workloads.AIR_SIZES} <= names
     assert {f"air/fftw/3r2c+3c2r/{n}^3/t1" for n in workloads.AIR_SIZES} <= names
     assert {"paper/flagsim/full/8x11/t1", "paper/flagsim/full/8x11/t2"} <= names
-    # issue 28: the air beside the cloth against the serial order in the same run, and the
-    # large scene (Scene.large) at every thread count
+    # issue 28: the air beside the cloth against the serial order in the same run, two-way lagged
+    # (pipelined) and serial, and the large scene (Scene.large) at every thread count
     large = workloads.LARGE_SIZE
     assert {
         "paper/flagsim/full/serial/8x11/t2",
+        "paper/flagsim/full/two_way_lagged/8x11/t1",
+        "paper/flagsim/full/two_way_lagged/8x11/t2",
+        "paper/flagsim/full/two_way/8x11/t2",
         f"paper/flagsim/large/{large}/t1",
         f"paper/flagsim/large/{large}/t2",
         f"paper/flagsim/large/serial/{large}/t2",

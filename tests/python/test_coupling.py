@@ -40,9 +40,33 @@ def test_two_way_from_toml(tmp_path):
         flagsim.Scene.load(path)
 
 
-def _held_plate(coupling):
+def test_lagged_two_way_is_the_one_two_way_scheme_the_pipeline_takes():
+    s = flagsim.Scene.paper()
+    s.air.coupling = "two_way_lagged"
+    sim = flagsim.Simulation(s)
+    assert "coupling" in sim.stages
+    assert sim.pipelined  # air.pipeline is on by default
+    s.air.pipeline = False  # the same scheme, one side after the other
+    assert not flagsim.Simulation(s).pipelined
+    s.air.coupling = "two_way"  # its step takes this step's reaction: never beside the cloth
+    s.air.pipeline = True
+    assert not flagsim.Simulation(s).pipelined
+    s.air.coupling = "two_way_lagged"
+    s.air.model = "uniform"
+    with pytest.raises(ValueError, match=r'air\.coupling.*"grid".*got "two_way_lagged"'):
+        s.validate()
+
+
+def test_lagged_two_way_from_toml(tmp_path):
+    path = tmp_path / "s.toml"
+    path.write_text('base = "emergent"\n[air]\ncoupling = "two_way_lagged"\n')
+    assert flagsim.Scene.load(path).air.coupling == "two_way_lagged"
+
+
+def _held_plate(coupling, pipeline=True):
     """The paper's flag held still (every vertex pinned) across a uniform 2 m/s stream along +z
-    in the paper's periodic box; the wind has no keys, so nothing holds the mean flow."""
+    in the paper's periodic box; the wind has no keys, so nothing holds the mean flow.
+    pipeline: air.pipeline (the lagged scheme's air beside the cloth)."""
     s = flagsim.Scene.paper()
     s.air.fans = []
     s.air.wind = []
@@ -51,6 +75,7 @@ def _held_plate(coupling):
     s.flapping.mode = "off"
     s.flag.imperfection = 0.0
     s.flag.pinned_vertices = list(range(s.flag.rows * s.flag.cols))
+    s.air.pipeline = pipeline
     sim = flagsim.Simulation(s)
     for c in "uvw":
         getattr(sim.fluid, c)[...] = 0.0
@@ -103,6 +128,28 @@ def test_held_flag_slows_the_air_behind_it_by_its_drag_impulse():
     one_way = _held_plate("one_way")
     one_way.step(30)
     np.testing.assert_allclose(_air_momentum(one_way.fluid), p0, rtol=1e-12)
+
+
+@pytest.mark.parametrize("pipeline", [True, False])
+def test_lagged_held_flag_gives_the_air_its_drag_impulse_a_step_later(pipeline):
+    """The lagged scheme: after n steps the air has taken the drag of the first n - 1; the last
+    step's (the pins' impulse in that step) is in flight."""
+    sim = _held_plate("two_way_lagged", pipeline)
+    assert sim.pipelined == pipeline
+    twin = _twin(sim.fluid)
+    given = np.zeros(3)
+    for k in range(30):
+        for c in "uvw":
+            getattr(twin, c)[...] = getattr(sim.fluid, c)
+        sim.step(1)
+        twin.step(sim.scene.dt)
+        given += _air_momentum(twin) - _air_momentum(sim.fluid)
+        if k == 0:
+            np.testing.assert_allclose(given, 0.0, rtol=0, atol=1e-15)  # nothing in flight yet
+    impulse = np.array(sim.pole_impulse)
+    in_flight = np.array(sim.pole_force) * sim.scene.dt
+    assert impulse[2] > 0 and in_flight[2] > 0
+    np.testing.assert_allclose(given, impulse - in_flight, rtol=0, atol=1e-12 * impulse[2])
 
 
 def test_pole_force_of_a_hanging_flag_is_its_weight():

@@ -114,6 +114,64 @@ TEST(Candidates, WithinBoxesAllowsOneThicknessOutsideTheSweptBox) {
 // collect while no vertex box has left its box at the build by more than the skin (3 mm extra on
 // one vertex), and gives way to the trees when one has (7 mm), to be rebuilt after. Each collect
 // gives exactly the pairs of a fresh object, which always queries the trees.
+// The trees' candidates (queried in groups of neighbouring items) are exactly the pairs a test of
+// every pair's boxes gives, in the documented order: a 12 x 16 sheet folded over itself (its two
+// halves 3 mm apart, so far more pairs than mesh neighbours) and jittered, world frame.
+TEST(Candidates, TreeQueriesGiveEveryPairWhoseBoxesMeetInOrder) {
+  const JitteredSheet s;
+  const double h = JitteredSheet::kThickness;
+  auto folded = [&](int k) {
+    MatX3 x = s.at(k);
+    for (Index i = 0; i < x.rows(); ++i)
+      if (x(i, 0) > 0.3) {  // fold at x = 0.3 m: the far part comes back 3 mm above
+        x(i, 0) = 0.6 - x(i, 0);
+        x(i, 2) += 0.003;
+      }
+    return x;
+  };
+  const MatX3 x0 = folded(0), x = folded(1);
+  Candidates got(s.tris, s.rest.rows(), h);
+  got.collect(x0, x, s.w, /*shifted=*/false);
+  ASSERT_FALSE(got.from_list());
+  const Index N = x.rows(), T = s.tris.rows();
+  auto box = [&](std::initializer_list<int32_t> vs, double grow, Vec3& lo, Vec3& hi) {
+    lo = Vec3::Constant(1e300);
+    hi = Vec3::Constant(-1e300);
+    for (const int32_t v : vs) {
+      lo = lo.cwiseMin(Vec3(x0.row(v))).cwiseMin(Vec3(x.row(v)));
+      hi = hi.cwiseMax(Vec3(x0.row(v))).cwiseMax(Vec3(x.row(v)));
+    }
+    lo.array() -= grow;
+    hi.array() += grow;
+  };
+  auto meet = [](const Vec3& a0, const Vec3& a1, const Vec3& b0, const Vec3& b1, double r) {
+    return (b0.array() <= a1.array() + r).all() && (b1.array() >= a0.array() - r).all();
+  };
+  PairList vt, ee;
+  for (Index i = 0; i < N; ++i)
+    for (Index t = 0; t < T; ++t) {
+      const int32_t a = s.tris(t, 0), b = s.tris(t, 1), c = s.tris(t, 2);
+      if (a == i || b == i || c == i) continue;
+      Vec3 v0, v1, t0, t1;
+      box({int32_t(i)}, 0, v0, v1);
+      box({a, b, c}, h, t0, t1);
+      if (meet(v0, v1, t0, t1, 2 * h)) vt.emplace_back(int32_t(i), int32_t(t));
+    }
+  const MatX2i& E = got.edges();
+  for (Index e = 0; e < E.rows(); ++e)
+    for (Index f = e + 1; f < E.rows(); ++f) {
+      const int32_t a = E(e, 0), b = E(e, 1), c = E(f, 0), d = E(f, 1);
+      if (a == c || a == d || b == c || b == d) continue;
+      Vec3 e0, e1, f0, f1;
+      box({a, b}, h, e0, e1);
+      box({c, d}, h, f0, f1);
+      if (meet(e0, e1, f0, f1, h)) ee.emplace_back(int32_t(e), int32_t(f));
+    }
+  EXPECT_GT(vt.size(), size_t(4 * N)) << "the fold should pair far more than mesh neighbours";
+  EXPECT_EQ(as_list(got.pairs().vertex_triangle), vt);
+  EXPECT_EQ(as_list(got.pairs().edge_edge), ee);
+}
+
 TEST(Candidates, VerletListServesWhileNothingMovedMoreThanItsSkinAndIsRebuiltAfter) {
   const JitteredSheet s;
   const double h = JitteredSheet::kThickness;

@@ -76,19 +76,22 @@ TEST(NoAlloc, PaperSceneStepsWithoutHeapAllocation) {
 
 // The air's step beside the cloth's (air.pipeline, issue 28) and one after the other, on one
 // thread and on two (the side-by-side sections: a cached two-thread team, each side's loops on
-// its own thread, no nested team).
+// its own thread, no nested team); one-way, and two-way with the reaction a step late.
 TEST(NoAlloc, PipelinedAndSerialStepsWithoutHeapAllocation) {
   SKIP_WITHOUT_COUNTING();
   const int before = num_threads();
-  for (int threads : {1, 2})
-    for (bool pipeline : {true, false}) {
-      set_num_threads(threads);
-      Scene s = paper_full();
-      s.air.pipeline = pipeline;
-      Simulation sim(s);
-      EXPECT_EQ(sim.pipelined(), pipeline);
-      EXPECT_EQ(allocations_in_steps(sim, 100), 0) << threads << " threads, pipeline " << pipeline;
-    }
+  for (Coupling coupling : {Coupling::kOneWay, Coupling::kTwoWayLagged})
+    for (int threads : {1, 2})
+      for (bool pipeline : {true, false}) {
+        set_num_threads(threads);
+        Scene s = paper_full();
+        s.air.pipeline = pipeline;
+        s.air.coupling = coupling;
+        Simulation sim(s);
+        EXPECT_EQ(sim.pipelined(), pipeline);
+        EXPECT_EQ(allocations_in_steps(sim, 100), 0)
+            << name_of(coupling) << ", " << threads << " threads, pipeline " << pipeline;
+      }
   set_num_threads(before);
 }
 

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "../support/alloc_counter.h"
+#include "../support/same_bits.h"
 #include "common/errors.h"
 #include "common/parallel.h"
 #include "scene/simulation.h"
@@ -49,24 +50,9 @@ Scene paper_full(bool pipeline) {
   return s;
 }
 
-bool same_bytes(const MatX3& a, const MatX3& b) {
-  return a.size() == b.size() && std::memcmp(a.data(), b.data(), sizeof(double) * a.size()) == 0;
-}
-
-// Every component of the two grids, byte for byte.
-bool same_air(const Fluid& a, const Fluid& b) {
-  for (int c = 0; c < 3; ++c) {
-    const std::size_t bytes = a.component_shape(c).size() * (a.is_double() ? 8 : 4);
-    if (std::memcmp(a.component_data(c), b.component_data(c), bytes) != 0) return false;
-  }
-  return a.time() == b.time();
-}
-
-struct Threads {  // flagsim's thread count for a scope
-  int before = num_threads();
-  explicit Threads(int n) { set_num_threads(n); }
-  ~Threads() { set_num_threads(before); }
-};
+using testing::same_air;
+using testing::same_bytes;
+using testing::Threads;
 }  // namespace
 
 // Issue 28: the air's step beside the cloth's gives the serial order's bits. 400 steps of the
