@@ -400,7 +400,8 @@ def fftw_available() -> tuple[bool, str]:
 
 class FftwFloorStepper:
     """One 'step' = 3 forward r2c + 3 inverse c2r double transforms of an n^3 grid, one thread,
-    FFTW_ESTIMATE plans (as flagsim's fft projection plans them): the floor of an FFT projection."""
+    FFTW_ESTIMATE plans (as flagsim's fft projection plans them): the floor of a spectral diffusion
+    and projection (flagsim's explicit viscosity needs 1 r2c + 1 c2r of them, docs/design.md)."""
 
     def __init__(self, n: int):
         lib = _load_fftw()

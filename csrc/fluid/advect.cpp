@@ -628,10 +628,25 @@ struct SlRow {
   const T *own, *e1, *e2;  // the row's start in the padded component and in the other two
   const T* rows9[9];       // see upwind_sample
   std::ptrdiff_t dc, d1s, d2s, sx, sy;
-  T st;  // dt / h
+  T st;    // dt / h
+  T beta;  // nu dt / h^2 (explicit diffusion of u^n; read only when the kernel diffuses)
   T* dst;
   int i, j;  // the row's node indices along x and y
 };
+
+/// beta times the 7-point Laplacian (h^2 units) of a padded component at node k of the row that
+/// starts at own, sx and sy its x and y strides: the explicit viscous term nu dt lap u^n
+/// (add_viscous_term). Summed as differences from the node, z, y, x pairs, so a uniform field
+/// gives exactly 0. S is T or a vector of T: the same operations per lane, the same bits.
+template <class S, class T>
+FLAGSIM_INLINE S viscous_term(const T* own, std::ptrdiff_t sx, std::ptrdiff_t sy, int k, T beta) {
+  const T* p = own + k;
+  const S c = load_lanes<S>(p);
+  const S z = (load_lanes<S>(p - 1) - c) + (load_lanes<S>(p + 1) - c);
+  const S y = (load_lanes<S>(p - sy) - c) + (load_lanes<S>(p + sy) - c);
+  const S x = (load_lanes<S>(p - sx) - c) + (load_lanes<S>(p + sx) - c);
+  return beta * ((z + y) + x);
+}
 
 /// The departure displacement (cells) of node k: velocity (own value, 4-node means of the other
 /// components, as padded_velocity) times dt / h, for component C.
@@ -733,8 +748,13 @@ FLAGSIM_INLINE bool far_sample(const SlRow<double>& w, int k, V d0, V d1, V d2, 
 /// The fast path over a row: vectors of L (Lanes16 or Lanes32; void: scalars only), the tail in
 /// scalars. Departures of a cell or more: far_sample where it applies (double grids). Returns
 /// false if some node's departure is a cell or more away (or not finite) and was not sampled so.
-template <int C, class L, class T>
+template <int C, bool D, class L, class T>
 FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
+  // D: add the explicit viscous term of u^n to every node's value (add_viscous_term).
+  auto viscous = [&](auto value, int k) FLAGSIM_INLINE_LAMBDA {
+    if constexpr (D) value += viscous_term<decltype(value)>(w.own, w.sx, w.sy, k, w.beta);
+    return value;
+  };
   bool near = true;
   int k = 0;
 #ifdef FLAGSIM_HAVE_VECTORS
@@ -757,13 +777,14 @@ FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
         V far;
         if (!all_in && far_sample<C>(w, k, d0, d1, d2, far)) {
           // the lanes within a cell keep the upwind form's value (its rounding, as before)
-          store_lanes(w.dst + k,
-                      any_in ? (in ? upwind_sample<V, T>(w.rows9, k, d0, d1, d2) : far) : far);
+          store_lanes(
+              w.dst + k,
+              viscous(any_in ? (in ? upwind_sample<V, T>(w.rows9, k, d0, d1, d2) : far) : far, k));
           continue;
         }
       }
       inside &= in;
-      store_lanes(w.dst + k, upwind_sample<V, T>(w.rows9, k, d0, d1, d2));
+      store_lanes(w.dst + k, viscous(upwind_sample<V, T>(w.rows9, k, d0, d1, d2), k));
     }
     for (int lane = 0; lane < L::W; ++lane) near = near && inside[lane];
   }
@@ -772,20 +793,20 @@ FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
     T d0, d1, d2;
     departure<C>(w, k, d0, d1, d2);
     near = near && std::fabs(d0) < 1 && std::fabs(d1) < 1 && std::fabs(d2) < 1;  // false for NaN
-    w.dst[k] = upwind_sample<T, T>(w.rows9, k, d0, d1, d2);
+    w.dst[k] = viscous(upwind_sample<T, T>(w.rows9, k, d0, d1, d2), k);
   }
   return near;
 }
 
 /// The fast path over the n1 rows of a plane, w set for its row j = 0. Returns false if some
 /// node's departure is a cell or more away (or not finite).
-template <int C, class L, class T>
+template <int C, bool D, class L, class T>
 FLAGSIM_INLINE bool sl_plane_body(SlRow<T> w, int n1, int n2, std::ptrdiff_t sy,
                                   unsigned char* row_done) {
   bool near = true;
   for (int j = 0; j < n1; ++j) {
     w.j = j;
-    row_done[j] = sl_row_body<C, L>(w, n2);
+    row_done[j] = sl_row_body<C, D, L>(w, n2);
     near = row_done[j] && near;
     w.own += sy;
     w.e1 += sy;
@@ -796,16 +817,16 @@ FLAGSIM_INLINE bool sl_plane_body(SlRow<T> w, int n1, int n2, std::ptrdiff_t sy,
   return near;
 }
 
-template <int C, class T>
+template <int C, bool D, class T>
 bool sl_plane_16(const SlRow<T>& w, int n1, int n2, std::ptrdiff_t sy, unsigned char* row_done) {
-  return sl_plane_body<C, NarrowLanes<T>>(w, n1, n2, sy, row_done);
+  return sl_plane_body<C, D, NarrowLanes<T>>(w, n1, n2, sy, row_done);
 }
 
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
-template <int C, class T>
+template <int C, bool D, class T>
 FLAGSIM_TARGET_AVX bool sl_plane_32(const SlRow<T>& w, int n1, int n2, std::ptrdiff_t sy,
                                     unsigned char* row_done) {
-  return sl_plane_body<C, Lanes32<T>>(w, n1, n2, sy, row_done);
+  return sl_plane_body<C, D, Lanes32<T>>(w, n1, n2, sy, row_done);
 }
 #endif
 
@@ -859,18 +880,20 @@ constexpr int kMaxRows = 4096;
 /// (float grids, offsets that differ across the lanes, departures past the ghosts, not finite)
 /// are then redone in their rows by the general sampler (any_corner: floor, wrap). The upwind form
 /// agrees with the general sampler to round-off (tests/cpp/fluid/test_advect.cpp); far_sample is
-/// it bit for bit.
-template <int C, class T>
-void padded_sl(const PeriodicAdvectScratch<T>& sc, double s, T* out) {
+/// it bit for bit. D: every node also gains the explicit viscous term beta lap u^n
+/// (viscous_term), beta = nu dt / h^2.
+template <int C, bool D, class T>
+void padded_sl(const PeriodicAdvectScratch<T>& sc, double s, T beta, T* out) {
   const PaddedComponent<T>& p = sc.u[C];
   constexpr int E1 = C == 0 ? 1 : 0, E2 = C == 2 ? 1 : 2;  // the other two components
   const std::ptrdiff_t sx = std::ptrdiff_t(p.p1) * p.p2, sy = p.p2;
   const std::ptrdiff_t stride[3] = {sx, sy, 1};
   const T st = T(s);
   const int n1 = p.n[1], n2 = p.n[2];
-  bool (*plane_fn)(const SlRow<T>&, int, int, std::ptrdiff_t, unsigned char*) = &sl_plane_16<C, T>;
+  bool (*plane_fn)(const SlRow<T>&, int, int, std::ptrdiff_t, unsigned char*) =
+      &sl_plane_16<C, D, T>;
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
-  if (vector_bytes() == 32) plane_fn = &sl_plane_32<C, T>;
+  if (vector_bytes() == 32) plane_fn = &sl_plane_32<C, D, T>;
 #endif
   for_each_plane(Shape3{{p.n[0], n1, n2}}, [&](int i) {
     const std::size_t idx0 = p.index(i, 0, 0);
@@ -886,6 +909,7 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, double s, T* out) {
     w.sx = sx;
     w.sy = sy;
     w.st = st;
+    w.beta = beta;
     w.dst = out + std::size_t(i) * n1 * n2;
     w.i = i;
     w.j = 0;
@@ -905,9 +929,30 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, double s, T* out) {
             std::fabs(st * T(vel[2])) < 1)
           continue;  // the fast path's departure (same T arithmetic): its value stands
         dst[k] = semi_lagrangian(row, trace(x, s, vel), k);
+        if constexpr (D) dst[k] += viscous_term<T>(w.own + j * sy, sx, sy, k, beta);
       }
     }
   });
+}
+
+/// out += beta lap u^n for component C (viscous_term, the same bits as padded_sl's fused term).
+template <int C, class T>
+void padded_viscous(const PeriodicAdvectScratch<T>& sc, T beta, T* out) {
+  const PaddedComponent<T>& p = sc.u[C];
+  const std::ptrdiff_t sx = std::ptrdiff_t(p.p1) * p.p2, sy = p.p2;
+  for_each_row(Shape3{{p.n[0], p.n[1], p.n[2]}}, [&](int i, int j, std::size_t base) {
+    const T* own = p.data.data() + p.index(i, j, 0);
+    T* dst = out + base;
+    for (int k = 0; k < p.n[2]; ++k) dst[k] += viscous_term<T>(own, sx, sy, k, beta);
+  });
+}
+
+template <int C, class T>
+void padded_sl_any(const PeriodicAdvectScratch<T>& sc, double s, double beta, T* out) {
+  if (beta > 0)
+    padded_sl<C, true>(sc, s, T(beta), out);
+  else
+    padded_sl<C, false>(sc, s, T(0), out);
 }
 
 /// MacCormack correction and limiter of component C into out, h the unpadded predictor.
@@ -923,19 +968,29 @@ void padded_mc(const PeriodicAdvectScratch<T>& sc, double s, const T* h, T* out)
 
 template <class T>
 void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, PeriodicAdvectScratch<T>& scratch,
-                     MacGrid<T>& hat) {
+                     MacGrid<T>& hat, double viscous_beta) {
   const double s = dt / u.geo.h;
   for (int c = 0; c < 3; ++c) scratch.u[c].fill(u.comp[c].data());
-  // Semi-Lagrangian (into hat for MacCormack, else straight into u: only padded copies are read).
-  MacGrid<T>& sl = maccormack ? hat : u;
-  padded_sl<0>(scratch, s, sl.comp[0].data());
-  padded_sl<1>(scratch, s, sl.comp[1].data());
-  padded_sl<2>(scratch, s, sl.comp[2].data());
-  if (!maccormack) return;
+  // Semi-Lagrangian (into hat for MacCormack, else straight into u: only padded copies are read;
+  // the viscous term fused in).
+  if (!maccormack) {
+    padded_sl_any<0>(scratch, s, viscous_beta, u.comp[0].data());
+    padded_sl_any<1>(scratch, s, viscous_beta, u.comp[1].data());
+    padded_sl_any<2>(scratch, s, viscous_beta, u.comp[2].data());
+    return;
+  }
+  padded_sl_any<0>(scratch, s, 0.0, hat.comp[0].data());
+  padded_sl_any<1>(scratch, s, 0.0, hat.comp[1].data());
+  padded_sl_any<2>(scratch, s, 0.0, hat.comp[2].data());
   for (int c = 0; c < 3; ++c) scratch.hat[c].fill(hat.comp[c].data());
   padded_mc<0>(scratch, s, hat.comp[0].data(), u.comp[0].data());
   padded_mc<1>(scratch, s, hat.comp[1].data(), u.comp[1].data());
   padded_mc<2>(scratch, s, hat.comp[2].data(), u.comp[2].data());
+  if (viscous_beta > 0) {  // MacCormack: the viscous term in a pass of its own
+    padded_viscous<0>(scratch, T(viscous_beta), u.comp[0].data());
+    padded_viscous<1>(scratch, T(viscous_beta), u.comp[1].data());
+    padded_viscous<2>(scratch, T(viscous_beta), u.comp[2].data());
+  }
 }
 
 template <class T>
@@ -969,7 +1024,7 @@ void sample_weight_squares(const MacGrid<T>& g, const double* points, long m, do
   template struct PaddedComponent<T>;                                                        \
   template struct PeriodicAdvectScratch<T>;                                                  \
   template void advect_periodic<T>(MacGrid<T>&, double, bool, PeriodicAdvectScratch<T>&,     \
-                                   MacGrid<T>&);
+                                   MacGrid<T>&, double);
 FLAGSIM_INSTANTIATE_ADVECT(float)
 FLAGSIM_INSTANTIATE_ADVECT(double)
 

@@ -91,8 +91,12 @@ struct PeriodicAdvectScratch {
 /// same arithmetic as advect_semi_lagrangian / advect_maccormack (identical results) but reading
 /// ghost-padded copies: departure points within a cell of their node take a wrap-free path.
 /// hat: scratch of u's geometry (MacCormack; unused, and may be empty, otherwise). No allocation.
+/// viscous_beta = nu dt / h^2 > 0 adds the explicit viscous step of u^n, u <- A(u^n) +
+/// beta h^2 lap u^n (7-point MAC Laplacian per component; fused into the semi-Lagrangian pass,
+/// a pass of its own after MacCormack): stable for beta <= 1/6; the Fluid takes it only where
+/// beta is small (docs/design.md, "Explicit viscosity on periodic fft grids").
 template <class T>
 void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, PeriodicAdvectScratch<T>& scratch,
-                     MacGrid<T>& hat);
+                     MacGrid<T>& hat, double viscous_beta = 0);
 
 }  // namespace flagsim

@@ -1,9 +1,11 @@
 // The air solver: Stable Fluids (Stam 1999) on a staggered MAC grid. Owns the arrays and scratch
 // (allocated at construction, never resized) and sequences the kernels of advect.h, forces.h,
 // solids.h and pressure.h. One step:
-//   advect (semi-Lagrangian | MacCormack) -> fans -> boundary values (tunnel faces, solids) /
-//   mean flow -> diffuse (implicit; explicit substeps beside no-slip walls and solids; skipped
-//   when viscosity = 0) -> project (fft | pcg | multigrid) -> solids' faces held again
+//   advect (semi-Lagrangian | MacCormack; on periodic grids without solids with nu dt / h^2 <=
+//   0.01 plus the explicit viscous term of u^n) -> fans -> boundary values (tunnel faces,
+//   solids) / mean flow -> diffuse (implicit; explicit substeps beside no-slip walls and solids;
+//   skipped when viscosity = 0 or done in the advection) -> project (fft | pcg | multigrid) ->
+//   solids' faces held again
 // Layout of the component arrays: csrc/fluid/grid.h. Scalar type: params.precision.
 #pragma once
 #include <array>

@@ -2,6 +2,7 @@
 #include "common/parallel.h"
 #include "common/simd.h"
 
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <mutex>
@@ -16,9 +17,10 @@
 namespace flagsim {
 
 template <class T>
-void divergence(const MacGrid<T>& u, T* div) {
+void divergence(const MacGrid<T>& u, T* div, int row_stride) {
   const GridGeometry& g = u.geo;
   const int nx = g.nx, ny = g.ny, nz = g.nz;
+  const std::size_t stride = row_stride > 0 ? std::size_t(row_stride) : std::size_t(nz);
   const bool per = g.periodic;
   const double inv_h = 1.0 / g.h;
   const Shape3 su = u.shape[0], sv = u.shape[1], sw = u.shape[2], sc = g.cells();
@@ -30,7 +32,7 @@ void divergence(const MacGrid<T>& u, T* div) {
     const T *u0 = U + su.index(i, j, 0), *u1 = U + su.index(ip, j, 0);
     const T *v0 = V + sv.index(i, j, 0), *v1 = V + sv.index(i, jp, 0);
     const T* w0 = W + sw.index(i, j, 0);
-    T* d = div + sc.index(i, j, 0);
+    T* d = div + std::size_t(r) * stride;
     const int kend = per ? nz - 1 : nz;  // periodic: the last cell's top face is face 0
     for (int k = 0; k < kend; ++k)
       d[k] = T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[k + 1]) - w0[k])) *
@@ -67,9 +69,11 @@ Laplace7 diffusion_operator(const GridGeometry& geo, int c) {
 }
 
 template <class T>
-void subtract_gradient(const T* phi, MacGrid<T>& u) {
+void subtract_gradient(const T* phi, MacGrid<T>& u, int row_stride) {
   const GridGeometry& g = u.geo;
   const Shape3 sc = g.cells();
+  const std::size_t stride = row_stride > 0 ? std::size_t(row_stride) : std::size_t(sc.n[2]);
+  auto phi_row = [&](int i, int j) { return phi + (std::size_t(i) * sc.n[1] + j) * stride; };
   const T inv_h = T(1.0 / g.h);
   const bool per = g.periodic;
   const Laplace7 p = pressure_operator(g);
@@ -90,14 +94,14 @@ void subtract_gradient(const T* phi, MacGrid<T>& u) {
         if (held) return;
         int lo[2] = {i, j}, hi[2] = {i, j};
         lo[c] = per ? (f == 0 ? nc - 1 : f - 1) : f - 1;
-        const T* ph = (per || f < nc) ? phi + sc.index(hi[0], hi[1], 0) : nullptr;  // null: ghost 0
-        const T* pl = lo[c] >= 0 ? phi + sc.index(lo[0], lo[1], 0) : nullptr;
+        const T* ph = (per || f < nc) ? phi_row(hi[0], hi[1]) : nullptr;  // null: ghost 0
+        const T* pl = lo[c] >= 0 ? phi_row(lo[0], lo[1]) : nullptr;
         for (int k = 0; k < sh.n[2]; ++k) {
           const T a = ph ? ph[k] : T(0), b = pl ? pl[k] : T(0);
           dst[k] -= (a - b) * inv_h;
         }
       } else {
-        const T* pr = phi + sc.index(i, j, 0);
+        const T* pr = phi_row(i, j);
         const int n2 = sc.n[2];
         if (per) {
           dst[0] -= (pr[0] - pr[n2 - 1]) * inv_h;
@@ -109,6 +113,63 @@ void subtract_gradient(const T* phi, MacGrid<T>& u) {
       }
     });
   }
+}
+
+namespace {
+
+/// dst[k] -= (hi[k] - lo[k]) * inv_h for k in [0, n) (subtract_gradient's arithmetic, the same
+/// bits); returns false when a new value is not finite. The test sums v - v per lane: 0 for a
+/// finite v, NaN for NaN or infinity, and NaN stays NaN (no integer masks: SSE2 has no 64-bit
+/// lane compares, and a mask reduction went scalar).
+template <class T>
+FLAGSIM_INLINE bool gradient_row(T* dst, const T* hi, const T* lo, int n, T inv_h) {
+  int k = 0;
+  T zero = 0;
+#ifdef FLAGSIM_HAVE_VECTORS
+  using V = typename NarrowLanes<T>::V;
+  constexpr int W = NarrowLanes<T>::W;
+  V zeros = V{};
+  for (; k + W <= n; k += W) {
+    const V v = load_lanes<V>(dst + k) - (load_lanes<V>(hi + k) - load_lanes<V>(lo + k)) * inv_h;
+    store_lanes(dst + k, v);
+    zeros += v - v;
+  }
+  for (int l = 0; l < W; ++l) zero += zeros[l];
+#endif
+  for (; k < n; ++k) {
+    dst[k] -= (hi[k] - lo[k]) * inv_h;
+    zero += dst[k] - dst[k];
+  }
+  return zero == 0;
+}
+
+}  // namespace
+
+template <class T>
+bool subtract_gradient_periodic(const T* phi, int row_stride, MacGrid<T>& u) {
+  const GridGeometry& g = u.geo;
+  const int nx = g.nx, ny = g.ny, nz = g.nz;
+  const T inv_h = T(1.0 / g.h);
+  const std::size_t stride = row_stride > 0 ? std::size_t(row_stride) : std::size_t(nz);
+  T *U = u.comp[0].data(), *V = u.comp[1].data(), *W = u.comp[2].data();
+  std::atomic<bool> finite{true};  // an AND of per-row answers: the same for any order
+  // One task per (i, j) row, all three components: the potential's rows are read once.
+  parallel_for_if(Index(g.cells().size()) > kGridParallelGrain, long(nx) * ny, [&](Index r) {
+    const int i = int(r / ny), j = int(r % ny);
+    const std::size_t row = std::size_t(r) * nz;
+    const T* hi = phi + std::size_t(r) * stride;  // cell (i, j): the faces' upper cell
+    const T* lo_x = phi + (std::size_t(i == 0 ? nx - 1 : i - 1) * ny + j) * stride;
+    const T* lo_y = phi + (std::size_t(i) * ny + (j == 0 ? ny - 1 : j - 1)) * stride;
+    bool ok = gradient_row(U + row, hi, lo_x, nz, inv_h);
+    ok = gradient_row(V + row, hi, lo_y, nz, inv_h) && ok;
+    // Face k of w lies between cells k - 1 and k of the row; face 0 wraps to cell nz - 1.
+    T* w = W + row;
+    w[0] -= (hi[0] - hi[nz - 1]) * inv_h;
+    ok = w[0] - w[0] == 0 && ok;  // false for NaN and infinity
+    ok = gradient_row(w + 1, hi + 1, hi, nz - 1, inv_h) && ok;
+    if (!ok) finite.store(false, std::memory_order_relaxed);
+  });
+  return finite.load();
 }
 
 template <class T>
@@ -222,7 +283,8 @@ struct FftProjector<T>::Impl {
   std::array<std::vector<double>, 3> ar, ai;  // real and imaginary parts of a_d
   std::array<std::vector<double>, 3> lam;
   std::vector<double> plane_squares;  // nx: per plane, the squares of its new modes (finiteness)
-  typename F::Plan fwd = nullptr, inv = nullptr;
+  typename F::Plan fwd = nullptr, inv = nullptr;        // out of place: u's components <-> hat[c]
+  typename F::Plan fwd_in = nullptr, inv_in = nullptr;  // in place in hat[0] (project)
 
   C* cplx(int c) { return hat[c].data(); }
   typename F::Complex* fc(int c) { return reinterpret_cast<typename F::Complex*>(hat[c].data()); }
@@ -260,6 +322,9 @@ FftProjector<T>::FftProjector(const GridGeometry& geo) : impl_(new Impl) {
   T* real = reinterpret_cast<T*>(m.hat[1].data());
   m.fwd = Impl::F::r2c(geo.nx, geo.ny, geo.nz, real, m.fc(0));
   m.inv = Impl::F::c2r(geo.nx, geo.ny, geo.nz, m.fc(0), real);
+  T* padded = reinterpret_cast<T*>(m.hat[0].data());  // rows of 2 nzc reals (FFTW manual §4.3.4)
+  m.fwd_in = Impl::F::r2c(geo.nx, geo.ny, geo.nz, padded, m.fc(0));
+  m.inv_in = Impl::F::c2r(geo.nx, geo.ny, geo.nz, m.fc(0), padded);
 }
 
 template <class T>
@@ -267,14 +332,19 @@ FftProjector<T>::~FftProjector() {
   std::lock_guard<std::mutex> lock(fftw_planner_mutex());
   if (impl_->fwd) Impl::F::destroy(impl_->fwd);
   if (impl_->inv) Impl::F::destroy(impl_->inv);
+  if (impl_->fwd_in) Impl::F::destroy(impl_->fwd_in);
+  if (impl_->inv_in) Impl::F::destroy(impl_->inv_in);
 }
 
 template <class T>
-void FftProjector<T>::project(MacGrid<T>& u, T* phi) {
+bool FftProjector<T>::project(MacGrid<T>& u) {
   Impl& m = *impl_;
   const GridGeometry& g = m.geo;
-  divergence(u, phi);  // phi holds div u until the inverse transform writes the potential
-  Impl::F::exec_r2c(m.fwd, phi, m.fc(0));
+  // phi: hat[0] as padded rows of reals, div u until the inverse transform writes the potential
+  T* phi = reinterpret_cast<T*>(m.hat[0].data());
+  const int stride = 2 * m.nzc;
+  divergence(u, phi, stride);
+  Impl::F::exec_r2c(m.fwd_in, phi, m.fc(0));
   const double scale = 1.0 / double(m.n_real);
   std::complex<T>* d = m.cplx(0);
   parallel_for_if(Index(m.n_cplx) > kGridParallelGrain, long(g.nx) * g.ny, [&](Index r) {
@@ -287,8 +357,8 @@ void FftProjector<T>::project(MacGrid<T>& u, T* phi) {
       row[k] = l == 0 ? std::complex<T>(0) : std::complex<T>(row[k] * T(scale / l));
     }
   });
-  Impl::F::exec_c2r(m.inv, m.fc(0), phi);
-  subtract_gradient(phi, u);
+  Impl::F::exec_c2r(m.inv_in, m.fc(0), phi);
+  return subtract_gradient_periodic(phi, stride, u);
 }
 
 namespace {
@@ -482,7 +552,9 @@ FftProjector<T>::FftProjector(const GridGeometry&) {
 template <class T>
 FftProjector<T>::~FftProjector() = default;
 template <class T>
-void FftProjector<T>::project(MacGrid<T>&, T*) {}
+bool FftProjector<T>::project(MacGrid<T>&) {
+  return false;
+}
 template <class T>
 bool FftProjector<T>::diffuse_and_project(MacGrid<T>&, double, const Vec3*) {
   return false;
@@ -491,8 +563,9 @@ bool FftProjector<T>::diffuse_and_project(MacGrid<T>&, double, const Vec3*) {
 #endif
 
 #define FLAGSIM_INSTANTIATE_PRESSURE(T)                                            \
-  template void divergence<T>(const MacGrid<T>&, T*);                              \
-  template void subtract_gradient<T>(const T*, MacGrid<T>&);                       \
+  template void divergence<T>(const MacGrid<T>&, T*, int);                         \
+  template void subtract_gradient<T>(const T*, MacGrid<T>&, int);                  \
+  template bool subtract_gradient_periodic<T>(const T*, int, MacGrid<T>&);         \
   template void apply_tunnel_boundary<T>(const Vec3&, const double*, MacGrid<T>&); \
   template void set_mean_flow<T>(const Vec3&, MacGrid<T>&);                        \
   template class FftProjector<T>;

@@ -14,9 +14,10 @@
 
 namespace flagsim {
 
-/// Cell divergence of the face field (1/s). div: nx*ny*nz, C order.
+/// Cell divergence of the face field (1/s). div: nx*ny*nz, C order, each (i, j) row of nz values
+/// starting row_stride values after the previous one (0: nz, contiguous).
 template <class T>
-void divergence(const MacGrid<T>& u, T* div);
+void divergence(const MacGrid<T>& u, T* div, int row_stride = 0);
 
 /// K-operator of the pressure solve for this grid (periodic, or the tunnel conditions above).
 Laplace7 pressure_operator(const GridGeometry& geo);
@@ -25,9 +26,15 @@ Laplace7 pressure_operator(const GridGeometry& geo);
 /// faces (inflow, wall normals) fixed and zero-gradient elsewhere.
 Laplace7 diffusion_operator(const GridGeometry& geo, int c);
 
-/// u <- u - grad phi on every face that is not held (phi: nx*ny*nz, m^2/s).
+/// u <- u - grad phi on every face that is not held (phi: nx*ny*nz, m^2/s, rows row_stride
+/// values apart as in divergence).
 template <class T>
-void subtract_gradient(const T* phi, MacGrid<T>& u);
+void subtract_gradient(const T* phi, MacGrid<T>& u, int row_stride = 0);
+
+/// subtract_gradient on a periodic grid (every face), fused with the step's finiteness check:
+/// returns true when every new value is finite.
+template <class T>
+bool subtract_gradient_periodic(const T* phi, int row_stride, MacGrid<T>& u);
 
 /// Tunnel boundary values: u = inflow.x (times weights[j * nz + k], the inflow profile, when
 /// weights is not null) on the x-min face, 0 normal velocity on the y and z walls.
@@ -50,10 +57,12 @@ class FftProjector {
   FftProjector(const FftProjector&) = delete;
   FftProjector& operator=(const FftProjector&) = delete;
 
-  /// u <- P u (no diffusion): one r2c of div u, divide, one c2r, subtract the gradient.
-  /// phi (nx*ny*nz, 64-byte aligned as AlignedVector) receives the potential (and holds div u
-  /// before it). The k = 0 mode is untouched.
-  void project(MacGrid<T>& u, T* phi);
+  /// u <- P u (no diffusion): one r2c of div u, divide, one c2r, subtract the gradient. The
+  /// transforms run in place in the first spectrum's buffer (div u, then the potential, in rows
+  /// padded to 2 (nz/2 + 1) values: 14 % faster than out of place at 128^3). The k = 0 mode is
+  /// untouched. Returns true when every new value is finite (checked as the gradient is
+  /// subtracted), false when one is not.
+  bool project(MacGrid<T>& u);
   /// u <- P (I - nu dt lap)^-1 u, all in Fourier space (3 r2c + 3 c2r). When mean != nullptr the
   /// k = 0 mode is set to *mean (m/s), otherwise left as it is. Returns true when the new u is
   /// certainly finite (its modes, checked in the spectral pass, are bounded far below overflow);

@@ -106,14 +106,16 @@ def test_solid_cells_are_checked():
             fft.set_solid_cells(plate((8, 6, 4)))
 
 
-def test_fft_agrees_with_the_numpy_oracle_after_one_step():
+@pytest.mark.parametrize("nu", [2e-3, 0.1])  # nu dt / h^2 = 0.004 (explicit), 0.2 (spectral)
+def test_fft_agrees_with_the_numpy_oracle_after_one_step(nu):
     if not flagsim.has_fftw():
         pytest.skip("built without FFTW")
-    res, h, nu, dt = (8, 12, 10), 0.1, 2e-3, 0.02  # odd and even sizes; CFL about 0.6
+    res, h, dt = (8, 12, 10), 0.1, 0.02  # odd and even sizes; CFL about 0.6
     rng = np.random.default_rng(3)
     fields = [rng.standard_normal(res) for _ in range(3)]
     fluid = flagsim.Fluid(resolution=res, cell_size=h, origin=(0.3, -0.2, 0.1), viscosity=nu)
     oracle = StableFluidsNumpy(res, h, (0.3, -0.2, 0.1), nu)
+    assert oracle.explicit_viscosity(dt) == (nu == 2e-3)
     fluid.u, fluid.v, fluid.w = fields
     oracle.u, oracle.v, oracle.w = (f.copy() for f in fields)
     fluid.step(dt)
@@ -235,6 +237,53 @@ def taylor_green_error(n, scheme, steps, nu=0.01, t_end=0.5):
         ref = exact(fluid.face_positions(c), t_end)[:, c].reshape(getattr(fluid, name).shape)
         err = max(err, float(np.abs(getattr(fluid, name) - ref).max()))
     return err
+
+
+@pytest.mark.parametrize("precision", ["double", "float"])
+@pytest.mark.parametrize("scheme", SCHEMES)
+def test_taylor_green_viscous_decay_explicit_and_spectral(scheme, precision):
+    # A slow Taylor-Green vortex (U = 1 mm/s: advection moves it 1e-4 cells a step) decays by
+    # viscosity alone, exp(nu lambda_h t) with the 7-point Laplacian's eigenvalue lambda_h of its
+    # mode. nu dt / h^2 = 0.005 diffuses explicitly (fused into the advection), 0.02 spectrally
+    # (implicit): both follow the discrete decay to about 1e-3 (first order in dt, errors of
+    # opposite sign: forward Euler decays faster, backward Euler slower; measured -3e-4 and +1.2e-3
+    # with MacCormack, -7e-4 and +7e-4 with semi-Lagrangian) and the continuous one to the
+    # Laplacian's O(h^2) (0.5 %).
+    if not flagsim.has_fftw():
+        pytest.skip("built without FFTW")
+    n, nu, t_end, amp = 16, 0.01, 0.5, 1e-3
+    k, h = 2 * np.pi, 1.0 / n
+
+    def field(p):
+        x, y = p[:, 0], p[:, 1]
+        return amp * np.stack(
+            [np.sin(k * x) * np.cos(k * y), -np.cos(k * x) * np.sin(k * y), 0 * x], axis=1
+        )
+
+    lam_h = 2 * (2 * math.cos(k * h) - 2) / h**2  # two axes
+    discrete = math.exp(nu * lam_h * t_end)
+    continuous = math.exp(-2 * nu * k * k * t_end)
+    ratios = {}
+    for beta in (0.005, 0.02):
+        dt = beta * h * h / nu
+        steps = round(t_end / dt)
+        fluid = flagsim.Fluid(
+            resolution=(n, n, 2),
+            cell_size=h,
+            origin=(0, 0, 0),
+            viscosity=nu,
+            advection=scheme,
+            pressure="fft",
+            precision=precision,
+        )
+        fluid.set_velocity(field)
+        u0 = fluid.u.astype(float)
+        fluid.step(t_end / steps, steps)
+        ratios[beta] = float(np.sum(fluid.u * u0) / np.sum(u0 * u0))
+    assert ratios[0.005] < discrete < ratios[0.02]
+    for r in ratios.values():
+        assert abs(r / discrete - 1) < 2e-3
+        assert abs(r / continuous - 1) < 1e-2
 
 
 def test_taylor_green_converges_first_order_for_semi_lagrangian_better_for_maccormack(capsys):

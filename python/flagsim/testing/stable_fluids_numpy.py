@@ -12,6 +12,11 @@ agrees to round-off:
   ``(phi[i] - phi[i-1]) / h``; in Fourier space their symbols are ``(e^{i t} - 1) / h`` and
   ``(1 - e^{-i t}) / h`` with ``t = 2 pi m / n``, and the Laplacian's is ``(2 cos t - 2) / h^2``.
 
+Viscosity follows flagsim's rule (docs/design.md, "Explicit viscosity on periodic fft grids"):
+where ``beta = nu dt / h^2 <= EXPLICIT_VISCOSITY_BETA`` the step adds ``nu dt lap u^n`` (the
+7-point Laplacian of the field before advection, in real space) to the advected field and projects
+it; above, implicit diffusion in Fourier space, ``(1 - nu dt lambda)^-1``, before the projection.
+
 No mean-flow driving and no fans: the k = 0 mode is left as it is.
 """
 
@@ -19,7 +24,10 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["StableFluidsNumpy"]
+__all__ = ["EXPLICIT_VISCOSITY_BETA", "StableFluidsNumpy"]
+
+#: Largest nu dt / h^2 diffused explicitly (flagsim's kExplicitViscosityBeta, csrc/fluid/fluid.cpp).
+EXPLICIT_VISCOSITY_BETA = 0.01
 
 
 def _offset(component: int) -> np.ndarray:
@@ -111,11 +119,23 @@ class StableFluidsNumpy:
             out.append(self._interpolate(fields[c], c, x - (dt / self.h) * vel))
         self.u, self.v, self.w = out
 
+    def explicit_viscosity(self, dt: float) -> bool:
+        """Whether a step of dt diffuses explicitly (see the module docstring)."""
+        beta = self.viscosity * dt / self.h**2
+        return 0 < beta <= EXPLICIT_VISCOSITY_BETA
+
+    def laplacian(self, q: np.ndarray) -> np.ndarray:
+        """Periodic 7-point Laplacian of a component array (1/m^2 times its unit)."""
+        out = -6.0 * q
+        for axis in range(3):
+            out += np.roll(q, 1, axis) + np.roll(q, -1, axis)
+        return out / self.h**2
+
     def diffuse_and_project(self, dt: float) -> None:
         """Implicit diffusion and projection in Fourier space (Stam 2001)."""
         hats = [np.fft.fftn(q) for q in (self.u, self.v, self.w)]
         lam = self._lap_symbol
-        if self.viscosity > 0:
+        if self.viscosity > 0 and not self.explicit_viscosity(dt):
             hats = [q / (1.0 - self.viscosity * dt * lam) for q in hats]
         div = sum(a * q for a, q in zip(self._div_symbol, hats))
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -136,6 +156,12 @@ class StableFluidsNumpy:
 
     def step(self, dt: float) -> None:
         """One Stable Fluids step: advect, diffuse, project."""
+        before = (self.u, self.v, self.w)
         self.advect(dt)
+        if self.explicit_viscosity(dt):
+            nu_dt = self.viscosity * dt
+            self.u, self.v, self.w = (
+                q + nu_dt * self.laplacian(q0) for q, q0 in zip((self.u, self.v, self.w), before)
+            )
         self.diffuse_and_project(dt)
         self.time += dt

@@ -235,10 +235,10 @@ TEST(Fluid, RejectsBadStep) {
   EXPECT_EQ(f.time(), 0.0);
 }
 
-// The FFT diffusion shows its result finite from its spectral pass, so that Fluid::step skips the
-// full-grid check: true for an ordinary field, and false (the caller then checks the grid) when a
-// value is NaN, when one is finite but large enough that the transforms could overflow, and when
-// the mean flow set is.
+// The FFT diffusion shows its result finite from its spectral pass (the projection alone from its
+// gradient pass), so that Fluid::step skips the full-grid check: true for an ordinary field, and
+// false (the caller then checks the grid) when a value is NaN, when one is finite but large enough
+// that the transforms could overflow, and when the mean flow set is.
 template <class T>
 void expect_finite_certificate() {
   GridGeometry g;
@@ -270,6 +270,20 @@ void expect_finite_certificate() {
   EXPECT_FALSE(fft.diffuse_and_project(u, 1e-3, nullptr));
   fill();
   EXPECT_FALSE(fft.diffuse_and_project(u, 1e-3, &big_mean));
+  // The projection alone checks its new values as it subtracts the gradient: true for an
+  // ordinary field, false when one is NaN or infinite.
+  fill();
+  EXPECT_TRUE(fft.project(u));
+  for (const auto& c : u.comp)
+    for (const T x : c) ASSERT_TRUE(std::isfinite(x));
+  for (int c = 0; c < 3; ++c) {
+    fill();
+    u.comp[c][11] = std::numeric_limits<T>::quiet_NaN();
+    EXPECT_FALSE(fft.project(u)) << "component " << c;
+    fill();
+    u.comp[c][4] = std::numeric_limits<T>::infinity();
+    EXPECT_FALSE(fft.project(u)) << "component " << c;
+  }
 }
 
 TEST(FftProjector, DiffusionShowsItsResultFinite) {
