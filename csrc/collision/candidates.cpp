@@ -204,6 +204,25 @@ size_t Candidates::list_budget() const {
 // by its own box with the tree's test on the same numbers. The same pairs as one descent per
 // item, in the same order, for a fraction of the descents (the large scene's edge queries were
 // 18 % of its step).
+namespace {
+
+// hits = the items of `tree` above `after` whose boxes (item_lo, item_hi) overlap the union of
+// the boxes [lo, hi] of rows [first, last), grown by reach: every member's hits, and more.
+void query_group(const BoxTree& tree, const MatX3& item_lo, const MatX3& item_hi, const MatX3& lo,
+                 const MatX3& hi, Index first, Index last, double reach, int32_t after,
+                 std::vector<int32_t>& hits) {
+  Vec3 glo = lo.row(first).transpose(), ghi = hi.row(first).transpose();
+  for (Index i = first + 1; i < last; ++i) {
+    glo = glo.cwiseMin(lo.row(i).transpose());
+    ghi = ghi.cwiseMax(hi.row(i).transpose());
+  }
+  hits.clear();
+  tree.query(
+      item_lo, item_hi, glo.array() - reach, ghi.array() + reach,
+      [&](int32_t t) { hits.push_back(t); }, after);
+}
+
+}  // namespace
 
 // Appends to buffer the pairs of each vertex i in [i0, i1) with the triangles whose boxes the
 // tree finds within the vertex query's reach, `wide` wider, by vertex, then by triangle. hits:
@@ -212,14 +231,7 @@ void Candidates::collect_vertices(Index i0, Index i1, double wide, const VecX* i
                                   std::vector<CandidatePair>& buffer,
                                   std::vector<int32_t>& hits) const {
   const double reach = kVertexQuery * thickness_ + wide;
-  Vec3 glo = vlo_.row(i0).transpose(), ghi = vhi_.row(i0).transpose();
-  for (Index i = i0 + 1; i < i1; ++i) {
-    glo = glo.cwiseMin(vlo_.row(i).transpose());
-    ghi = ghi.cwiseMax(vhi_.row(i).transpose());
-  }
-  hits.clear();
-  tri_tree_.query(tlo_, thi_, glo.array() - reach, ghi.array() + reach,
-                  [&](int32_t t) { hits.push_back(t); });
+  query_group(tri_tree_, tlo_, thi_, vlo_, vhi_, i0, i1, reach, -1, hits);
   for (Index i = i0; i < i1; ++i) {
     const Vec3 qlo = vlo_.row(i).transpose().array() - reach;
     const Vec3 qhi = vhi_.row(i).transpose().array() + reach;
@@ -244,15 +256,7 @@ void Candidates::collect_edges(Index e0, Index e1, double wide, const VecX* inv_
                                std::vector<CandidatePair>& buffer,
                                std::vector<int32_t>& hits) const {
   const double reach = kEdgeQuery * thickness_ + wide;
-  Vec3 glo = elo_.row(e0).transpose(), ghi = ehi_.row(e0).transpose();
-  for (Index e = e0 + 1; e < e1; ++e) {
-    glo = glo.cwiseMin(elo_.row(e).transpose());
-    ghi = ghi.cwiseMax(ehi_.row(e).transpose());
-  }
-  hits.clear();
-  edge_tree_.query(
-      elo_, ehi_, glo.array() - reach, ghi.array() + reach, [&](int32_t f) { hits.push_back(f); },
-      static_cast<int32_t>(e0));
+  query_group(edge_tree_, elo_, ehi_, elo_, ehi_, e0, e1, reach, static_cast<int32_t>(e0), hits);
   for (Index e = e0; e < e1; ++e) {
     const Vec3 qlo = elo_.row(e).transpose().array() - reach;
     const Vec3 qhi = ehi_.row(e).transpose().array() + reach;
