@@ -98,15 +98,8 @@ void bind_cloth(py::module_& m) {
                                            from_py<int64_t>("flag.imperfection_seed", seed));
       },
       "seed of the imperfection's offsets, an integer in [0, 2**32)");
-  flag.def_property(
-      "pin_motion", [](FlagParams& p) -> MotionSchedule& { return p.pin_motion; },
-      [](FlagParams& p, const py::object& o) {
-        FlagParams copy = p;
-        copy.pin_motion = from_py<MotionSchedule>("flag.pin_motion", o);
-        copy.validate("flag");
-        p = copy;
-      },
-      py::return_value_policy::reference_internal,
+  def_ref_field(
+      flag, "pin_motion", &FlagParams::pin_motion, "flag",
       "MotionSchedule: keyframed rigid motion of the pinned vertices and the pole together");
 
   py::class_<DragParams> drag(m, "DragParams",

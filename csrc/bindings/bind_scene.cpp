@@ -70,21 +70,6 @@ void assign_rows(MatX3& m, const std::string& name, const py::object& o) {
 
 }  // namespace
 
-// A SolidParams field as a validated property (def_field takes a class_ without bases).
-template <class T>
-void def_solid_field(py::class_<SolidParams, ObstacleParams>& cls, const char* name,
-                     T SolidParams::*member, const char* doc) {
-  cls.def_property(
-      name, [member](const SolidParams& s) { return to_py(s.*member); },
-      [member, name](SolidParams& s, const py::object& value) {
-        SolidParams copy = s;
-        copy.*member = from_py<T>(std::string("solid.") + name, value);
-        copy.validate("solid");
-        s = copy;
-      },
-      doc);
-}
-
 void bind_solids(py::module_& m) {
   py::class_<SolidParams, ObstacleParams> solid(m, "SolidParams", R"doc(A solid of the scene.
 
@@ -106,21 +91,13 @@ surface, Coulomb `friction`), at rest or keyframed (motion, cloth only).)doc");
         return o.cast<SolidParams>();
       }),
       "SolidParams(**fields), e.g. SolidParams(shape='sphere', center=(0, 0, 0), radius=0.1)");
-  def_solid_field(solid, "air", &SolidParams::air, "a solid of the air grid (static)");
-  def_solid_field(solid, "cloth", &SolidParams::cloth, "the flag collides with it");
-  def_solid_field(solid, "thickness", &SolidParams::thickness,
-                  "m, the distance the flag's vertices keep from its surface");
-  def_solid_field(solid, "friction", &SolidParams::friction, "Coulomb coefficient (>= 0)");
-  solid.def_property(
-      "motion", [](SolidParams& s) -> MotionSchedule& { return s.motion; },
-      [](SolidParams& s, const py::object& o) {
-        SolidParams copy = s;
-        copy.motion = from_py<MotionSchedule>("solid.motion", o);
-        copy.validate("solid");
-        s = copy;
-      },
-      py::return_value_policy::reference_internal,
-      "MotionSchedule: keyframed rigid motion (cloth only); empty = at rest");
+  def_field(solid, "air", &SolidParams::air, "solid", "a solid of the air grid (static)");
+  def_field(solid, "cloth", &SolidParams::cloth, "solid", "the flag collides with it");
+  def_field(solid, "thickness", &SolidParams::thickness, "solid",
+            "m, the distance the flag's vertices keep from its surface");
+  def_field(solid, "friction", &SolidParams::friction, "solid", "Coulomb coefficient (>= 0)");
+  def_ref_field(solid, "motion", &SolidParams::motion, "solid",
+                "MotionSchedule: keyframed rigid motion (cloth only); empty = at rest");
   solid.def("validate", &SolidParams::validate, py::arg("prefix") = "solid");
 }
 

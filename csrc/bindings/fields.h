@@ -209,18 +209,36 @@ inline py::list wind_to_list(const WindSchedule& w) {
   return out;
 }
 
+/// The setter of a validated property: the value converted (named section.name in errors), set
+/// on a copy, the copy validated, then kept; a bad value leaves the object as it was.
 template <class S, class T>
-void def_field(py::class_<S>& cls, const char* name, T S::*member, std::string section,
+auto validated_setter(T S::*member, std::string section, const char* name) {
+  return [member, section, name](S& s, const py::object& value) {
+    S copy = s;
+    copy.*member = from_py<T>(section + "." + name, value);
+    copy.validate(section);
+    s = copy;
+  };
+}
+
+/// A field of S as a validated property whose getter returns a Python value (to_py).
+template <class S, class T, class... Bases>
+void def_field(py::class_<S, Bases...>& cls, const char* name, T S::*member, std::string section,
                const char* doc) {
   cls.def_property(
       name, [member](const S& s) { return to_py(s.*member); },
-      [member, section, name](S& s, const py::object& value) {
-        S copy = s;
-        copy.*member = from_py<T>(section + "." + name, value);
-        copy.validate(section);
-        s = copy;
-      },
-      doc);
+      validated_setter(member, std::move(section), name), doc);
+}
+
+/// A field of S as a validated property whose getter returns the C++ object itself (kept alive by
+/// its owner), so that it can be changed in place: the keyframed schedules.
+template <class S, class T, class... Bases>
+void def_ref_field(py::class_<S, Bases...>& cls, const char* name, T S::*member,
+                   std::string section, const char* doc) {
+  cls.def_property(
+      name, [member](S& s) -> T& { return s.*member; },
+      validated_setter(member, std::move(section), name),
+      py::return_value_policy::reference_internal, doc);
 }
 
 }  // namespace flagsim::bindings
