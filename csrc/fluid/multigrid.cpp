@@ -569,6 +569,7 @@ struct LevelArgs {
   double* sums2 = nullptr;         // exit: sum z; update: max |r|
   const T* cg_r = nullptr;         // exit: r (its dot with z)
   const MgScalar* cg_z = nullptr;  // s update: z (level 0's x of the V-cycle)
+  const MgScalar* diag_f = nullptr;  // CG's product: level 0's diag (exact small integers)
   T *cg_x = nullptr, *cg_s = nullptr, *cg_q = nullptr, *cg_rw = nullptr;
   double alpha = 0, beta = 0, mean = 0;
 };
@@ -912,14 +913,23 @@ struct DirectionPlane {
       using S = typename L::V;
       using Z = typename FloatLanes<int(sizeof(MgScalar)) * L::W>::V;
       const S zero{};
-      for (; k + L::W <= n; k += L::W) {
-        const S zk = __builtin_convertvector(load_lanes<Z>(z + k), S);
-        const S mk = load_lanes<S>(dg + k) == zero ? zero : zero + m;
-        store_lanes(s + k, (zk - mk) + be * load_lanes<S>(s + k));
+      if (m == T(0)) {  // z - 0 = z: the diagonal is not read
+        for (; k + L::W <= n; k += L::W)
+          store_lanes(s + k, __builtin_convertvector(load_lanes<Z>(z + k), S) +
+                                 be * load_lanes<S>(s + k));
+      } else {
+        for (; k + L::W <= n; k += L::W) {
+          const S zk = __builtin_convertvector(load_lanes<Z>(z + k), S);
+          const S mk = load_lanes<S>(dg + k) == zero ? zero : zero + m;
+          store_lanes(s + k, (zk - mk) + be * load_lanes<S>(s + k));
+        }
       }
     }
 #endif
-    for (; k < n; ++k) s[k] = (T(z[k]) - (dg[k] == T(0) ? T(0) : m)) + be * s[k];
+    if (m == T(0))
+      for (; k < n; ++k) s[k] = T(z[k]) + be * s[k];
+    else
+      for (; k < n; ++k) s[k] = (T(z[k]) - (dg[k] == T(0) ? T(0) : m)) + be * s[k];
   }
 };
 
@@ -934,12 +944,20 @@ struct ProductPlane {
     for (int j = 0; j < n1; ++j) {
       const SplitRow<T> w = split_row(a, i, j);
       const T* xr = a.x + w.base;
-      const T* dg = Lv.diag.data() + w.base;
+      const MgScalar* dg = a.diag_f + w.base;
       T* yr = a.r + w.base;
       each_cell_sum<Unit, L>(w, xr, [&](int q, const auto& sum) FLAGSIM_INLINE_LAMBDA {
         using S = std::decay_t<decltype(sum)>;
         const S zero{};
-        const S d = load_lanes<S>(dg + q);
+        S d;
+        if constexpr (std::is_same<S, T>::value) {
+          d = T(dg[q]);
+        } else {
+#ifdef FLAGSIM_HAVE_VECTORS
+          using Z = typename FloatLanes<int(sizeof(MgScalar) * sizeof(S) / sizeof(T))>::V;
+          d = __builtin_convertvector(load_lanes<Z>(dg + q), S);
+#endif
+        }
         store_lanes(yr + q, d == zero ? zero : d * load_lanes<S>(xr + q) - sum);
       });
     }
@@ -1517,6 +1535,7 @@ LevelArgs<T> PoissonMultigrid<T>::cg_args() {
   LevelArgs<T> a;
   a.L = &product_;
   a.zero = zero_row_t_.data();
+  a.diag_f = levels_[0].diag.data();
   a.sums = part_[0].data();
   a.sums2 = part_[1].data();
   return a;
