@@ -565,10 +565,10 @@ struct LevelArgs {
   bool colour0_only = false;
   const T* parity = nullptr;  // 1, 0, 1, 0, ... (a row and one more)
   // CG on level 0 (in the grid's precision), per-plane partial sums (fixed order in a plane):
-  double* sums = nullptr;          // product: s . q; exit: r . z; update: sum r
-  double* sums2 = nullptr;         // exit: sum z; update: max |r|
-  const T* cg_r = nullptr;         // exit: r (its dot with z)
-  const MgScalar* cg_z = nullptr;  // s update: z (level 0's x of the V-cycle)
+  double* sums = nullptr;            // product: s . q; exit: r . z; update: sum r
+  double* sums2 = nullptr;           // exit: sum z; update: max |r|
+  const T* cg_r = nullptr;           // exit: r (its dot with z)
+  const MgScalar* cg_z = nullptr;    // s update: z (level 0's x of the V-cycle)
   const MgScalar* diag_f = nullptr;  // CG's product: level 0's diag (exact small integers)
   T *cg_x = nullptr, *cg_s = nullptr, *cg_q = nullptr, *cg_rw = nullptr;
   double alpha = 0, beta = 0, mean = 0;
@@ -915,8 +915,8 @@ struct DirectionPlane {
       const S zero{};
       if (m == T(0)) {  // z - 0 = z: the diagonal is not read
         for (; k + L::W <= n; k += L::W)
-          store_lanes(s + k, __builtin_convertvector(load_lanes<Z>(z + k), S) +
-                                 be * load_lanes<S>(s + k));
+          store_lanes(s + k,
+                      __builtin_convertvector(load_lanes<Z>(z + k), S) + be * load_lanes<S>(s + k));
       } else {
         for (; k + L::W <= n; k += L::W) {
           const S zk = __builtin_convertvector(load_lanes<Z>(z + k), S);
