@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 namespace flagsim {
 
@@ -677,89 +678,105 @@ FLAGSIM_INLINE void departure(const SlRow<T>& w, int k, S& d0, S& d1, S& d2) {
 }
 
 #ifdef FLAGSIM_HAVE_VECTORS
-/// 32-bit integer and double lanes, as many as a vector V of T has (the lower nodes' indices and
-/// the departure points in far_sample): double <-> int32 conversions are one instruction each
-/// (cvttpd2dq, cvtdq2pd), int64 ones are not before AVX-512.
-template <int Lanes>
-struct IntLanes {
-  typedef int V __attribute__((vector_size(4 * Lanes)));
-};
-template <int Lanes>
-struct DoubleLanes {
-  typedef double V __attribute__((vector_size(8 * Lanes)));
+/// Lanes of T, as many as given: the lower nodes' indices (int) and the departure points
+/// (double) in far_sample. double <-> int32 conversions are one instruction each (cvttpd2dq,
+/// cvtdq2pd), int64 ones are not before AVX-512.
+template <class T, int Lanes>
+struct LanesOf {
+  typedef T V __attribute__((vector_size(sizeof(T) * Lanes)));
 };
 
 /// The general sampler's value (PaddedRow::sample: departure x - (dt / h) u in double, lower node
 /// by floor, weights from it, trilinear along z, y, x in T) for the W nodes k.. of a row whose
 /// departures lie within the ghosts (|d| < G on every axis), u0..u2 the nodes' velocities
 /// (node_velocity): the same operations lane by lane, so the same bits, without wrapping or range
-/// checks and on vectors. Where the lanes' lower nodes share one offset from their node on each
-/// axis (a smooth flow moving a cell or more per step: ~88 % of such vectors at 128^3) the 8
-/// nodes are 8 contiguous vector loads, else they are loaded lane by lane. Returns false, out
-/// untouched, when a departure is a ghost layer's reach or more (or not finite).
+/// checks and on vectors. The departure points are computed in parts of as many doubles as V has
+/// bytes for (a float vector: two parts): GCC lowers a compare of doubles wider than the machine's
+/// vectors lane by lane (vcomisd, seta: a float grid's far path ran 1.5x the double's per node).
+/// Where the lanes' lower nodes share one offset from their node on each axis (~78 % of such
+/// vectors of 4 lanes at 128^3, ~55 % of 8) the 8 nodes are 8 contiguous vector loads, else they
+/// are loaded lane by lane (loading both candidates and selecting per lane measured no faster).
+/// Returns false, out untouched, when a departure is a ghost layer's reach or more (or not finite).
 template <int C, class V, class T>
 FLAGSIM_INLINE bool far_sample(const SlRow<T>& w, int k, V u0, V u1, V u2, V& out) {
   constexpr int G = PaddedComponent<T>::kGhost;
   constexpr int W = int(sizeof(V) / sizeof(T));
-  using D = typename DoubleLanes<W>::V;
-  using I = typename IntLanes<W>::V;
+  constexpr int DW = int(sizeof(V) / sizeof(double));  // lanes of a part
+  constexpr int H = W / DW;                            // parts: 1 (double) or 2 (float)
+  using D = typename LanesOf<double, DW>::V;
+  using I = typename LanesOf<int, DW>::V;
+  using P = typename LanesOf<T, DW>::V;  // a part of V
   constexpr double kO0 = C == 0 ? 0.0 : 0.5, kO1 = C == 1 ? 0.0 : 0.5, kO2 = C == 2 ? 0.0 : 0.5;
-  // Trace: d = s u in double (trace()); for a double grid the same bits as departure()'s st u.
-  const D d0 = w.s * __builtin_convertvector(u0, D), d1 = w.s * __builtin_convertvector(u1, D);
-  const D d2 = w.s * __builtin_convertvector(u2, D);
-  D reach = D{};
-  reach += double(G);
-  const auto ok = (d0 < reach) & (-d0 < reach) & (d1 < reach) & (-d1 < reach) & (d2 < reach) &
-                  (-d2 < reach);  // false for NaN
-  for (int l = 0; l < W; ++l)
-    if (!ok[l]) return false;
-  D lane = D{};
-  for (int l = 0; l < W; ++l) lane[l] = double(k + l);
-  // back = x - d, g = back - offset (node units), as trace() and PaddedRow::corner.
-  const D g0 = ((D{} + (double(w.i) + kO0)) - d0) - kO0;
-  const D g1 = ((D{} + (double(w.j) + kO1)) - d1) - kO1;
-  const D g2 = ((lane + kO2) - d2) - kO2;
+  auto part = [](const V& x, int h) FLAGSIM_INLINE_LAMBDA {
+    P y;
+    std::memcpy(&y, reinterpret_cast<const char*>(&x) + h * sizeof(P), sizeof(P));
+    return __builtin_convertvector(y, D);
+  };
   auto floor_of = [](D g, D& f) FLAGSIM_INLINE_LAMBDA {
     const I t = __builtin_convertvector(g, I);  // toward zero; |g| < 2^31 here
     const I fl = t + __builtin_convertvector(g < __builtin_convertvector(t, D), I);  // true: -1
     f = g - __builtin_convertvector(fl, D);
     return fl;
   };
-  D f0, f1, f2;
-  const I o0 = floor_of(g0, f0) - w.i, o1 = floor_of(g1, f1) - w.j;
-  const I o2 = floor_of(g2, f2) - __builtin_convertvector(lane, I);
+  D f[3][H];
+  I o[3][H];  // lower node's offset from the lane's node, per axis and part
+  D reach = D{};
+  reach += double(G);
+  for (int h = 0; h < H; ++h) {
+    // Trace: d = s u in double (trace()); for a double grid the same bits as departure()'s st u.
+    const D d0 = w.s * part(u0, h), d1 = w.s * part(u1, h), d2 = w.s * part(u2, h);
+    const auto ok = (d0 < reach) & (-d0 < reach) & (d1 < reach) & (-d1 < reach) & (d2 < reach) &
+                    (-d2 < reach);  // false for NaN
+    for (int l = 0; l < DW; ++l)
+      if (!ok[l]) return false;
+    D lane = D{};
+    for (int l = 0; l < DW; ++l) lane[l] = double(k + h * DW + l);
+    // back = x - d, g = back - offset (node units), as trace() and PaddedRow::corner.
+    const D g0 = ((D{} + (double(w.i) + kO0)) - d0) - kO0;
+    const D g1 = ((D{} + (double(w.j) + kO1)) - d1) - kO1;
+    const D g2 = ((lane + kO2) - d2) - kO2;
+    o[0][h] = floor_of(g0, f[0][h]) - w.i;
+    o[1][h] = floor_of(g1, f[1][h]) - w.j;
+    o[2][h] = floor_of(g2, f[2][h]) - __builtin_convertvector(lane, I);
+  }
   bool common = true;  // one offset per axis for all lanes: contiguous loads
-  for (int l = 1; l < W; ++l) common = common && o0[l] == o0[0] && o1[l] == o1[0] && o2[l] == o2[0];
+  for (int a = 0; a < 3; ++a)
+    for (int h = 0; h < H; ++h)
+      for (int l = 0; l < DW; ++l) common = common && o[a][h][l] == o[a][0][0];
+  const std::ptrdiff_t at[8] = {0, 1, w.sy, w.sy + 1, w.sx, w.sx + 1, w.sx + w.sy, w.sx + w.sy + 1};
   V v[8];  // the 8 nodes of each lane's cell, in trilinear's order
   if (common) {
-    const T* b = w.own + k + o0[0] * w.sx + o1[0] * w.sy + o2[0];
-    const std::ptrdiff_t at[8] = {0,    1,        w.sy,        w.sy + 1,
-                                  w.sx, w.sx + 1, w.sx + w.sy, w.sx + w.sy + 1};
+    const T* b = w.own + k + o[0][0][0] * w.sx + o[1][0][0] * w.sy + o[2][0][0];
     for (int a = 0; a < 8; ++a) v[a] = load_lanes<V>(b + at[a]);
-  } else {  // lane by lane (a crossing of a cell face within the vector: ~12 % at 128^3)
+  } else {  // lane by lane (a cell face crossed within the vector: ~22 % at 128^3, 4 lanes)
     // Gathered into arrays, then loaded: lanes set one by one in a vector read to GCC as the
     // unset rest used (-Wmaybe-uninitialized, even when zeroed first).
     T g[8][W];
     for (int l = 0; l < W; ++l) {
-      const T* b = w.own + (k + l) + o0[l] * w.sx + o1[l] * w.sy + o2[l];
-      g[0][l] = b[0];
-      g[1][l] = b[1];
-      g[2][l] = b[w.sy];
-      g[3][l] = b[w.sy + 1];
-      g[4][l] = b[w.sx];
-      g[5][l] = b[w.sx + 1];
-      g[6][l] = b[w.sx + w.sy];
-      g[7][l] = b[w.sx + w.sy + 1];
+      const int h = l / DW, r = l % DW;
+      const T* p = w.own + (k + l) + o[0][h][r] * w.sx + o[1][h][r] * w.sy + o[2][h][r];
+      g[0][l] = p[0];
+      g[1][l] = p[1];
+      g[2][l] = p[w.sy];
+      g[3][l] = p[w.sy + 1];
+      g[4][l] = p[w.sx];
+      g[5][l] = p[w.sx + 1];
+      g[6][l] = p[w.sx + w.sy];
+      g[7][l] = p[w.sx + w.sy + 1];
     }
     for (int a = 0; a < 8; ++a) v[a] = load_lanes<V>(g[a]);
   }
   // lerp in T (lerp(): a + T(f) (b - a)); for a double grid the conversions are no-ops.
-  const V h0 = __builtin_convertvector(f0, V), h1 = __builtin_convertvector(f1, V);
-  const V h2 = __builtin_convertvector(f2, V);
-  const V c00 = v[0] + h2 * (v[1] - v[0]), c01 = v[2] + h2 * (v[3] - v[2]);
-  const V c10 = v[4] + h2 * (v[5] - v[4]), c11 = v[6] + h2 * (v[7] - v[6]);
-  const V y0 = c00 + h1 * (c01 - c00), y1 = c10 + h1 * (c11 - c10);
-  out = y0 + h0 * (y1 - y0);
+  V wt[3];
+  for (int a = 0; a < 3; ++a)
+    for (int h = 0; h < H; ++h) {
+      const P x = __builtin_convertvector(f[a][h], P);
+      std::memcpy(reinterpret_cast<char*>(&wt[a]) + h * sizeof(P), &x, sizeof(P));
+    }
+  const V c00 = v[0] + wt[2] * (v[1] - v[0]), c01 = v[2] + wt[2] * (v[3] - v[2]);
+  const V c10 = v[4] + wt[2] * (v[5] - v[4]), c11 = v[6] + wt[2] * (v[7] - v[6]);
+  const V y0 = c00 + wt[1] * (c01 - c00), y1 = c10 + wt[1] * (c11 - c10);
+  out = y0 + wt[0] * (y1 - y0);
   return true;
 }
 #endif
