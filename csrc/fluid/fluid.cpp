@@ -73,7 +73,7 @@ struct TypedSolver final : Fluid::Solver {
   // Grid-sized arrays, each allocated only where a stage of this configuration uses it (counted
   // in docs/design.md "Memory"; tests/cpp/fluid/test_fluid.cpp GridArrays.* hold the counts).
   MacGrid<T> u, prev, hat;     // current field; tunnel advection source; MacCormack / rhs scratch
-  AlignedVector<T> phi;        // nx*ny*nz: potential dt p / rho (m^2/s)
+  AlignedVector<T> phi;        // nx*ny*nz or empty (fft): potential dt p / rho (m^2/s)
   AlignedVector<T> phi_start;  // nx*ny*nz or empty (fft): phi at the step's start (undo_step)
   // nx*ny*nz, 1/s: the pcg / multigrid right-hand side in a step, divergence() between steps
   mutable AlignedVector<T> div;
@@ -118,7 +118,9 @@ struct TypedSolver final : Fluid::Solver {
     else
       prev = MacGrid<T>(geo);
     const std::size_t cells = geo.cells().size();
-    phi.assign(cells, T(0));
+    // fft projects in its first half spectrum: phi is the pcg / multigrid potential (and the
+    // obstacles' pressure, which fft cannot have).
+    if (!use_fft) phi.assign(cells, T(0));
     div.assign(cells, T(0));
     solid.assign(cells, 0);
     // float cannot reach residuals near its epsilon: floor the relative tolerance there.
@@ -187,7 +189,7 @@ struct TypedSolver final : Fluid::Solver {
                  "\"fft\"");
     for (std::size_t i = 0; i < n; ++i) solid[i] = mask && mask[i] ? 1 : 0;
     pressure_op.solid = any ? solid.data() : nullptr;
-    for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t i = 0; i < phi.size(); ++i)
       if (solid[i]) phi[i] = T(0);  // not an unknown any more (the warm start reads phi)
     if (!use_fft) build_pressure_solver();
   }
