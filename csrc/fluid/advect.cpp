@@ -729,10 +729,12 @@ FLAGSIM_INLINE bool far_sample(const SlRow<T>& w, int k, V u0, V u1, V u2, V& ou
     return D(w.s * __builtin_convertvector(y, D));
   };
   auto floor_of = [](D g, D& f) FLAGSIM_INLINE_LAMBDA {
-    const I t = __builtin_convertvector(g, I);  // toward zero; |g| < 2^31 here
-    const I fl = t + __builtin_convertvector(g < __builtin_convertvector(t, D), I);  // true: -1
-    f = g - __builtin_convertvector(fl, D);
-    return fl;
+    const D t = __builtin_convertvector(__builtin_convertvector(g, I), D);  // toward zero
+    D one = D{};
+    one += 1.0;
+    const D fl = t - (g < t ? one : D{});  // floor, exactly (|g| < 2^31 here)
+    f = g - fl;
+    return __builtin_convertvector(fl, I);
   };
   D f[3][H];
   I o[3][H];  // lower node's offset from the lane's node, per axis and part
