@@ -5,7 +5,6 @@ from __future__ import annotations
 import datetime
 import os
 import platform
-import subprocess
 from importlib import metadata
 from typing import Any
 
@@ -62,30 +61,10 @@ def memory_total_gib() -> float | None:
 
 
 def git_revision() -> str:
-    """Short revision of the checkout flagsim was imported from (+ "-dirty"), or "unknown"."""
-    import flagsim
+    """Short revision of the flagsim in use (+ "-dirty"): flagsim._revision.revision()."""
+    from flagsim._revision import revision
 
-    here = os.path.dirname(os.path.abspath(flagsim.__file__))
-    try:
-        rev = subprocess.run(
-            ["git", "rev-parse", "--short=12", "HEAD"],
-            cwd=here,
-            capture_output=True,
-            text=True,
-            timeout=10,
-        )
-        if rev.returncode != 0:
-            return "unknown (not a git checkout)"
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
-            cwd=here,
-            capture_output=True,
-            text=True,
-            timeout=10,
-        )
-        return rev.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
-    except (OSError, subprocess.SubprocessError):
-        return "unknown (git not available)"
+    return revision()
 
 
 def package_versions() -> dict[str, str]:

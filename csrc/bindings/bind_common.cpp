@@ -33,6 +33,9 @@ namespace {
 #ifndef FLAGSIM_COMPILER_VERSION
 #define FLAGSIM_COMPILER_VERSION ""
 #endif
+#ifndef FLAGSIM_GIT_REVISION
+#define FLAGSIM_GIT_REVISION ""
+#endif
 #ifndef FLAGSIM_OPENMP_FLAGS
 #define FLAGSIM_OPENMP_FLAGS ""
 #endif
@@ -44,6 +47,7 @@ py::dict build_info() {
   d["compiler_version"] = FLAGSIM_COMPILER_VERSION;
   d["compiler"] = std::string(FLAGSIM_COMPILER_ID) + " " + FLAGSIM_COMPILER_VERSION;
   d["build_type"] = FLAGSIM_BUILD_TYPE;
+  d["git_revision"] = FLAGSIM_GIT_REVISION;  // configured from; "" outside a checkout
   d["cxx_flags"] = FLAGSIM_CXX_FLAGS;
   d["cxx_standard"] = long(__cplusplus);
   d["eigen"] = std::to_string(EIGEN_WORLD_VERSION) + "." + std::to_string(EIGEN_MAJOR_VERSION) +

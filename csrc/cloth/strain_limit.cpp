@@ -14,17 +14,22 @@ void limit_strain(const ClothTopology& topo, double limit, int iterations, MatX3
   // Long-range attachments first: one exact projection per vertex onto the ball of radius
   // (1 + limit) x rest distance around its nearest pin removes gross stretch in a single pass
   // (Gauss-Seidel over springs alone needs O(cols^2) sweeps for that).
-  const Index N = topo.num_vertices();
-  for (Index i = 0; i < N; ++i) {
-    const int32_t a = topo.tether_anchor[i];
-    if (a < 0) continue;
+  // Each vertex's tethers in turn: its nearest pin, then the two ends of the pins.
+  const auto tether = [&](Index i, int32_t a, double rest) {
+    if (a < 0) return;
     const Vec3 d = x.row(i) - x.row(a);
-    const double l = d.norm(), lmax = (1.0 + limit) * topo.tether_length[i];
-    if (l <= lmax) continue;
+    const double l = d.norm(), lmax = (1.0 + limit) * rest;
+    if (l <= lmax) return;
     x.row(i) += (d * (lmax / l - 1.0)).transpose();
     const Vec3 n = d / l;
     const double vr = (v.row(i) - v.row(a)).dot(n.transpose());  // the pin does not move for it
     if (vr > 0) v.row(i) -= (vr * n).transpose();
+  };
+  const Index N = topo.num_vertices();
+  for (Index i = 0; i < N; ++i) {
+    tether(i, topo.tether_anchor[i], topo.tether_length[i]);
+    for (Index k = 2 * i; k < 2 * i + 2; ++k)
+      tether(i, topo.tether_end_anchor[k], topo.tether_end_length[k]);
   }
   // Then Provot's local projection, Gauss-Seidel over springs in index order: deterministic.
   for (int it = 0; it < iterations; ++it) {
@@ -54,9 +59,13 @@ void limit_strain(const ClothTopology& topo, double limit, int iterations, MatX3
 }
 
 bool strain_limit_violated(const ClothTopology& topo, double limit, const MatX3& x) {
+  const auto stretched = [&](Index i, int32_t a, double rest) {
+    return a >= 0 && (x.row(i) - x.row(a)).norm() > (1.0 + limit) * rest;
+  };
   for (Index i = 0; i < topo.num_vertices(); ++i) {
-    const int32_t a = topo.tether_anchor[i];
-    if (a >= 0 && (x.row(i) - x.row(a)).norm() > (1.0 + limit) * topo.tether_length[i]) return true;
+    if (stretched(i, topo.tether_anchor[i], topo.tether_length[i])) return true;
+    for (Index k = 2 * i; k < 2 * i + 2; ++k)
+      if (stretched(i, topo.tether_end_anchor[k], topo.tether_end_length[k])) return true;
   }
   for (Index s = 0; s < topo.num_springs(); ++s) {
     if (topo.spring_kind[s] == SpringKind::kBend) continue;

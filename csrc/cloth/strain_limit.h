@@ -6,11 +6,12 @@
 
 namespace flagsim {
 
-/// Strain limiting: each vertex's distance to its nearest pin is capped at (1 + limit) x its rest
-/// distance (long-range attachments, Kim et al. 2012), then (Provot 1995) structural and shear
-/// springs longer than (1 + limit) x rest length are shortened by moving their ends
-/// (mass-weighted, pinned ends fixed). Velocities: each limited pair loses the relative velocity
-/// along it that still stretches it (inelastic, momentum-conserving; never adds kinetic energy).
+/// Strain limiting: each vertex's distance to its nearest pin, and to the two pins farthest apart,
+/// is capped at (1 + limit) x its rest distance (long-range attachments, Kim et al. 2012), then
+/// (Provot 1995) structural and shear springs longer than (1 + limit) x rest length are shortened
+/// by moving their ends (mass-weighted, pinned ends fixed). Velocities: each limited pair loses the
+/// relative velocity along it that still stretches it (inelastic, momentum-conserving; never adds
+/// kinetic energy).
 void limit_strain(const ClothTopology& topo, double limit, int iterations, MatX3& x, MatX3& v);
 
 /// True when limit_strain would move something: a tether or a structural or shear spring longer

@@ -178,7 +178,19 @@ void lump_mass_and_pin(const FlagParams& p, ClothTopology& t) {
   }
 }
 
-// Tethers to the nearest pin at rest.
+// The pin farthest from pin `from` at rest (the lowest index among equals).
+int farthest_pin(const MatX3& x, const std::vector<int>& pins, int from) {
+  int best = pins.front();
+  double best_d = -1;
+  for (int p : pins) {
+    const double d = (x.row(p) - x.row(from)).squaredNorm();
+    if (d > best_d) best = p, best_d = d;
+  }
+  return best;
+}
+
+// Tethers to the nearest pin at rest, and to the two pins farthest apart: e0, the farthest from
+// the first pin, and e1, the farthest from e0 (the ends of a line of pins).
 void attach_tethers(ClothTopology& t) {
   const int N = t.rows * t.cols;
   std::vector<int> pins;
@@ -186,12 +198,23 @@ void attach_tethers(ClothTopology& t) {
     if (t.inv_mass[i] == 0.0) pins.push_back(i);
   t.tether_anchor.assign(N, -1);
   t.tether_length.setZero(N);
+  t.tether_end_anchor.assign(2 * size_t(N), -1);
+  t.tether_end_length.setZero(2 * N);
+  if (pins.empty()) return;
+  const int e0 = farthest_pin(t.rest_positions, pins, pins.front());
+  const int ends[2] = {e0, farthest_pin(t.rest_positions, pins, e0)};
   const NearestPin nearest(t.rest_positions, std::move(pins));
   for (int i = 0; i < N; ++i) {
     if (t.inv_mass[i] == 0.0) continue;
     const auto [a, d] = nearest(i);
     t.tether_anchor[i] = a;
-    t.tether_length[i] = a >= 0 ? d : 0.0;
+    t.tether_length[i] = d;
+    for (int k = 0; k < 2; ++k) {
+      if (ends[k] == a || (k == 1 && ends[1] == ends[0])) continue;
+      t.tether_end_anchor[2 * size_t(i) + k] = ends[k];
+      t.tether_end_length[2 * i + k] =
+          (t.rest_positions.row(i) - t.rest_positions.row(ends[k])).norm();
+    }
   }
 }
 

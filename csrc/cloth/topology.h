@@ -38,6 +38,13 @@ struct ClothTopology {
   // rest distance tether_length[i], m. Used by strain limiting.
   std::vector<int32_t> tether_anchor;  ///< (N)
   VecX tether_length;                  ///< (N) m
+  // Two more tethers per vertex, to the two pins farthest apart (the ends of a pole, a top edge,
+  // both grommets): a tether to the nearest pin alone lets a vertex swing about it (sag 0.46 x
+  // its distance on a pole) while staying within its length; the ends hold that swing to a few
+  // degrees. tether_end_anchor[2 i + k], -1 where the end is the nearest pin or nothing is
+  // pinned; tether_end_length[2 i + k], m, the rest distance (0 where the anchor is -1).
+  std::vector<int32_t> tether_end_anchor;  ///< (2 N)
+  VecX tether_end_length;                  ///< (2 N) m
 
   Index num_vertices() const { return rest_positions.rows(); }
   Index num_springs() const { return springs.rows(); }

@@ -559,16 +559,17 @@ struct LevelArgs {
   bool io_split = false;          // in (entry) already split by the parity of k; exit: no z out
   bool first_half_sweep = false;  // entry: also the first half-sweep from x = 0
   // Residual and prolongation: colour 0's cells only (one wrap pass only). Right after a
-  // half-sweep of colour 1 its residual is 0 (to round-off): the residual writes that 0; the
+  // half-sweep of colour 1 its residual is 0 (to round-off): the restriction reads it as 0; the
   // prolongation leaves colour 1 alone, as the half-sweep of colour 1 that follows it
   // overwrites those cells without reading them.
   bool colour0_only = false;
   const T* parity = nullptr;  // 1, 0, 1, 0, ... (a row and one more)
   // CG on level 0 (in the grid's precision), per-plane partial sums (fixed order in a plane):
-  double* sums = nullptr;          // product: s . q; exit: r . z; update: sum r
-  double* sums2 = nullptr;         // exit: sum z; update: max |r|
-  const T* cg_r = nullptr;         // exit: r (its dot with z)
-  const MgScalar* cg_z = nullptr;  // s update: z (level 0's x of the V-cycle)
+  double* sums = nullptr;            // product: s . q; exit: r . z; update: sum r
+  double* sums2 = nullptr;           // exit: sum z; update: max |r|
+  const T* cg_r = nullptr;           // exit: r (its dot with z)
+  const MgScalar* cg_z = nullptr;    // s update: z (level 0's x of the V-cycle)
+  const MgScalar* diag_f = nullptr;  // CG's product: level 0's diag (exact small integers)
   T *cg_x = nullptr, *cg_s = nullptr, *cg_q = nullptr, *cg_rw = nullptr;
   double alpha = 0, beta = 0, mean = 0;
 };
@@ -780,12 +781,8 @@ struct ResidualPlane {
       const T* dg = Lv.diag.data() + w.base;
       const T* nr = Lv.inv_norm.data() + w.base;
       T* rr = a.r + w.base;
-      int only = -1;  // both halves
-      if (a.colour0_only) {
-        only = (i + j) & 1;  // colour 0's half; colour 1's residual is 0
-        const int lo = only == 0 ? w.ne : 0, hi = only == 0 ? w.n2 : w.ne;
-        std::fill(rr + lo, rr + hi, T(0));
-      }
+      // colour 0's half only: colour 1's residual is 0, which the restriction takes as read
+      const int only = a.colour0_only ? (i + j) & 1 : -1;
       each_cell_sum<Unit, L>(
           w, xr,
           [&](int q, const auto& sum) FLAGSIM_INLINE_LAMBDA {
@@ -916,14 +913,23 @@ struct DirectionPlane {
       using S = typename L::V;
       using Z = typename FloatLanes<int(sizeof(MgScalar)) * L::W>::V;
       const S zero{};
-      for (; k + L::W <= n; k += L::W) {
-        const S zk = __builtin_convertvector(load_lanes<Z>(z + k), S);
-        const S mk = load_lanes<S>(dg + k) == zero ? zero : zero + m;
-        store_lanes(s + k, (zk - mk) + be * load_lanes<S>(s + k));
+      if (m == T(0)) {  // z - 0 = z: the diagonal is not read
+        for (; k + L::W <= n; k += L::W)
+          store_lanes(s + k,
+                      __builtin_convertvector(load_lanes<Z>(z + k), S) + be * load_lanes<S>(s + k));
+      } else {
+        for (; k + L::W <= n; k += L::W) {
+          const S zk = __builtin_convertvector(load_lanes<Z>(z + k), S);
+          const S mk = load_lanes<S>(dg + k) == zero ? zero : zero + m;
+          store_lanes(s + k, (zk - mk) + be * load_lanes<S>(s + k));
+        }
       }
     }
 #endif
-    for (; k < n; ++k) s[k] = (T(z[k]) - (dg[k] == T(0) ? T(0) : m)) + be * s[k];
+    if (m == T(0))
+      for (; k < n; ++k) s[k] = T(z[k]) + be * s[k];
+    else
+      for (; k < n; ++k) s[k] = (T(z[k]) - (dg[k] == T(0) ? T(0) : m)) + be * s[k];
   }
 };
 
@@ -938,12 +944,20 @@ struct ProductPlane {
     for (int j = 0; j < n1; ++j) {
       const SplitRow<T> w = split_row(a, i, j);
       const T* xr = a.x + w.base;
-      const T* dg = Lv.diag.data() + w.base;
+      const MgScalar* dg = a.diag_f + w.base;
       T* yr = a.r + w.base;
       each_cell_sum<Unit, L>(w, xr, [&](int q, const auto& sum) FLAGSIM_INLINE_LAMBDA {
         using S = std::decay_t<decltype(sum)>;
         const S zero{};
-        const S d = load_lanes<S>(dg + q);
+        S d;
+        if constexpr (std::is_same<S, T>::value) {
+          d = T(dg[q]);
+        } else {
+#ifdef FLAGSIM_HAVE_VECTORS
+          using Z = typename FloatLanes<int(sizeof(MgScalar) * sizeof(S) / sizeof(T))>::V;
+          d = __builtin_convertvector(load_lanes<Z>(dg + q), S);
+#endif
+        }
         store_lanes(yr + q, d == zero ? zero : d * load_lanes<S>(xr + q) - sum);
       });
     }
@@ -1120,11 +1134,14 @@ struct ExitPlane {
 /// tmp = sum over the transfer entries (e0, e1) of row (I, J) (count[0] x count[1] of them) of
 /// w[0][e0] w[1][e1] times row (idx[0][e0], idx[1][e1]) of src (shape sh, rows of sh.n[2]): the
 /// rows a restriction or prolongation combines, summed in a fixed order.
+/// With colour0_only, each source row (i, j) is read on its colour-0 half only (the half of
+/// parity (i + j) & 1 of k), the other half taken as 0.
 template <class T>
 FLAGSIM_INLINE void weighted_rows(const T* src, const Shape3& sh, int I, int J, const int count[3],
                                   const std::array<AlignedVector<T>, 3>& w,
-                                  const std::array<std::vector<int32_t>, 3>& idx, T* tmp) {
-  const int n = sh.n[2];
+                                  const std::array<std::vector<int32_t>, 3>& idx, T* tmp,
+                                  bool colour0_only = false) {
+  const int n = sh.n[2], ne = (n + 1) / 2;
   std::fill(tmp, tmp + n, T(0));
   for (int e0 = 0; e0 < count[0]; ++e0) {
     const std::size_t ea = std::size_t(I * count[0] + e0);
@@ -1134,7 +1151,13 @@ FLAGSIM_INLINE void weighted_rows(const T* src, const Shape3& sh, int I, int J, 
       if (w[1][eb] == T(0)) continue;
       const T wab = w[0][ea] * w[1][eb];
       const T* row = src + sh.index(idx[0][ea], idx[1][eb], 0);
-      for (int k = 0; k < n; ++k) tmp[k] += wab * row[k];
+      int lo = 0, hi = n;
+      if (colour0_only) {
+        const bool odd = ((idx[0][ea] + idx[1][eb]) & 1) != 0;
+        lo = odd ? ne : 0;
+        hi = odd ? n : ne;
+      }
+      for (int k = lo; k < hi; ++k) tmp[k] += wab * row[k];
     }
   }
 }
@@ -1151,7 +1174,7 @@ struct RestrictPlane {
     const int nf2 = fs.n[2], nc2 = cs.n[2], nef = (nf2 + 1) / 2;
     T tmp[4096], nat[2048 + 1];
     for (int J = 0; J < cs.n[1]; ++J) {
-      weighted_rows(F.r.data(), fs, I, J, F.r_count, F.r_w, F.r_idx, tmp);
+      weighted_rows(F.r.data(), fs, I, J, F.r_count, F.r_w, F.r_idx, tmp, a.colour0_only);
       const std::size_t cbase = cs.index(I, J, 0);
       T* out = a.b_coarse + cbase;
       const T* active = C.inv_diag.data() + cbase;
@@ -1453,7 +1476,7 @@ void PoissonMultigrid<T>::vcycle(const T* r_in, T* z) {
     res.colour0_only = a.L->passes == 1;  // the last half-sweep was colour 1's
     list.add<ResidualPlane>(res);
     list.flush();
-    for_each_plane<RestrictPlane>(a, a.coarse->shape.n[0]);
+    for_each_plane<RestrictPlane>(res, a.coarse->shape.n[0]);
   }
   // Coarsest: the dense factor, or symmetric sweeps.
   {
@@ -1512,6 +1535,7 @@ LevelArgs<T> PoissonMultigrid<T>::cg_args() {
   LevelArgs<T> a;
   a.L = &product_;
   a.zero = zero_row_t_.data();
+  a.diag_f = levels_[0].diag.data();
   a.sums = part_[0].data();
   a.sums2 = part_[1].data();
   return a;

@@ -199,6 +199,33 @@ def test_flapping_and_integrator_controls_rebuild_with_the_chosen_stage():
         c.set_integrator("verlet")
 
 
+def test_a_scene_of_several_flags_is_drawn_and_controlled_whole():
+    # The gallery's row of four flags on their own poles (docs/multiflag.md): the mesh holds
+    # every flag, the flapping and integrator controls reach every flag, and a rebuild carries
+    # every flag's state over.
+    from flagsim.povray.mesh import mesh_arrays
+
+    scene = flagsim.scene.resolve("flag_row")
+    c = Controller(flagsim.Simulation(scene), clock=FakeClock(0.0))
+    c.advance(0.2)
+    flags = c.sim.flags
+    assert len(flags) == 4
+    x, n = c.mesh()
+    triangles, uv = c.topology()
+    np.testing.assert_array_equal(x, np.concatenate([f.render_positions for f in flags]))
+    assert n.shape == x.shape and uv.shape == (len(x), 2) and triangles.max() == len(x) - 1
+    np.testing.assert_array_equal(triangles, mesh_arrays(c.sim)[3])
+    before = [(np.array(f.positions), np.array(f.velocities)) for f in flags]
+    c.set_flapping("off")
+    c.set_integrator("explicit")
+    assert [s.flapping.mode for s in c.sim.scene.flags] == ["off"] * 4
+    assert [s.integrator.method for s in c.sim.scene.flags] == ["explicit"] * 4
+    for f, (p, v) in zip(c.sim.flags, before):
+        np.testing.assert_array_equal(f.positions, p)
+        np.testing.assert_array_equal(f.velocities, v)
+    np.testing.assert_array_equal(c.mesh()[0], np.concatenate([p for p, _ in before]))
+
+
 def test_reset_starts_again_with_the_current_controls():
     c = paper_controller()
     c.advance(0.3)

@@ -89,6 +89,22 @@ def test_the_flag_is_drawn_where_the_camera_projects_it(gl):
             assert image[r, c].min() > 120, (r, c, image[r, c])
 
 
+def test_every_flag_of_a_scene_of_several_is_drawn(gl):
+    # The gallery's row of four flags: each flag's projection is filled with its red, and the
+    # camera frames them all.
+    sim = flagsim.Simulation(flagsim.scene.resolve("flag_row"))
+    ctrl = viewer.Controller(sim)
+    off = viewer.Offscreen(ctrl, width=WIDTH, height=HEIGHT, panel=False)
+    image = run(ctrl, off, 5)
+    drawn = red(image)
+    for i, f in enumerate(ctrl.sim.flags):
+        pixels = off.project(f.render_positions)
+        inside = flag_mask(pixels, np.asarray(f.triangles), image.shape[:2])
+        core = ~grow(~inside, 2)
+        assert core.sum() > 50, f"flag {i} is (nearly) out of the picture"
+        assert drawn[core].mean() > 0.5, f"flag {i}"
+
+
 def test_turning_the_wind_changes_the_picture(gl):
     # Three runs from the same start: two identical ones give the same picture (the drawing is
     # deterministic), the one with the wind turned a quarter turn after 1 s (+x -> +z, towards

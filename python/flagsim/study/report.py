@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import platform
-import subprocess
 
 
 def write_text(path: str, text: str) -> None:
@@ -26,23 +25,10 @@ def machine_description() -> str:
                     break
     except OSError:
         pass
-    rev = "unknown"
-    try:
-        rev = (
-            subprocess.run(
-                ["git", "rev-parse", "--short", "HEAD"],
-                capture_output=True,
-                text=True,
-                cwd=os.path.dirname(__file__),
-                timeout=5,
-            ).stdout.strip()
-            or rev
-        )
-    except (OSError, subprocess.SubprocessError):
-        pass
     import flagsim
+    from flagsim._revision import revision
 
     return (
         f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, "
-        f"flagsim {flagsim.__version__} (git {rev})"
+        f"flagsim {flagsim.__version__} (git {revision()})"
     )

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..povray.mesh import flags_of, mesh_arrays
+
 #: keyboard shortcuts of the live window: (key, what it does, Controller method, ImGui key
 #: names). `flagsim view --help` lists them; Controller.press(key) does what they do.
 KEYS = (
@@ -180,8 +182,11 @@ class Controller:
                 if len(fan.strength) > 0:
                     fan.strength = shift_keys(fan.strength, start)
             s.air.fans = fans
-        s.flapping.mode = self.flapping
-        s.integrator.method = self.integrator
+        specs = list(s.flags)  # every flag follows the controls (s.flapping is flag 0's)
+        for spec in specs:
+            spec.flapping.mode = self.flapping
+            spec.integrator.method = self.integrator
+        s.flags = specs
         return s
 
     @property
@@ -297,8 +302,9 @@ class Controller:
         old = self.sim
         start = self.time
         new = self._flagsim.Simulation(self.scene(start))
-        new.positions = old.positions
-        new.velocities = old.velocities
+        for a, b in zip(flags_of(old), flags_of(new)):  # every flag's state
+            b.positions = a.positions
+            b.velocities = a.velocities
         if old.fluid is not None and new.fluid is not None:
             for c in ("u", "v", "w"):
                 setattr(new.fluid, c, getattr(old.fluid, c))
@@ -367,7 +373,18 @@ class Controller:
     def mesh(self):
         """(positions, normals) to draw: the render geometry (flapping 'visual' displaces it),
         or, right after a rebuild and before the new Simulation's first step has computed its
-        render geometry, the carried-over positions."""
+        render geometry, the carried-over positions. A scene of several flags: every flag's,
+        flag 0's vertices first, in the order of `topology()`."""
         if self._carried:
-            return np.asarray(self.sim.positions), np.asarray(self.sim.normals)
-        return np.asarray(self.sim.render_positions), np.asarray(self.sim.render_normals)
+            parts = [(f.positions, f.normals) for f in flags_of(self.sim)]
+        else:
+            parts = [(f.render_positions, f.render_normals) for f in flags_of(self.sim)]
+        if len(parts) == 1:
+            return np.asarray(parts[0][0]), np.asarray(parts[0][1])
+        return (np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts]))
+
+    def topology(self):
+        """(triangles, uv) of the drawn mesh: every flag's, as `mesh()` orders the vertices
+        (each flag's uv in [0, 1])."""
+        _, _, uv, triangles = mesh_arrays(self.sim)
+        return np.asarray(triangles), np.asarray(uv)

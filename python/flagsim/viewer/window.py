@@ -41,16 +41,16 @@ class Window:
         self._ui = {}  # slider values while they are dragged
         ps.remove_all_structures()
         x, _ = controller.mesh()
-        sim = controller.sim
+        triangles, uv = controller.topology()  # every flag of the scene, as one mesh
         self.flag = ps.register_surface_mesh(
             "flag",
             x,
-            np.asarray(sim.triangles),
+            triangles,
             smooth_shade=True,
             back_face_policy="identical",
             material="clay",
         )
-        self.flag.add_parameterization_quantity("uv", np.asarray(sim.uv), enabled=False)
+        self.flag.add_parameterization_quantity("uv", uv, enabled=False)
         self.flag.add_color_quantity(
             "flag",
             flag_image(texture),
@@ -59,17 +59,18 @@ class Window:
             image_origin="upper_left",
             enabled=True,
         )
-        self.pole = scenefiles.scene_pole(controller.base_scene)
-        if self.pole is not None and scenefiles.pole_enabled(self.pole):
-            base = np.asarray(self.pole.base, dtype=float)
-            r = float(self.pole.radius)
-            top = base + [0.0, float(self.pole.height), 0.0]
+        self.poles = scenefiles.scene_poles(controller.base_scene)  # one per flag that has one
+        for i, pole in enumerate(p for p in self.poles if scenefiles.pole_enabled(p)):
+            suffix = "" if i == 0 else f"_{i}"
+            base = np.asarray(pole.base, dtype=float)
+            r = float(pole.radius)
+            top = base + [0.0, float(pole.height), 0.0]
             c = ps.register_curve_network(
-                "pole", np.array([base, top]), "line", color=POLE_COLOUR, material="clay"
+                "pole" + suffix, np.array([base, top]), "line", color=POLE_COLOUR, material="clay"
             )
             c.set_radius(r, relative=False)
             ball = ps.register_point_cloud(
-                "finial", (top + [0.0, 1.9 * r, 0.0])[None], color=FINIAL_COLOUR
+                "finial" + suffix, (top + [0.0, 1.9 * r, 0.0])[None], color=FINIAL_COLOUR
             )
             ball.set_radius(1.6 * r, relative=False)
         self.air = None
@@ -131,10 +132,10 @@ class Window:
         the flag, the flag and the pole's top filling the picture left of `right_margin`
         pixels (the panel's)."""
         x, _ = self.ctrl.mesh()
-        facing = _area_normal(x, np.asarray(self.ctrl.sim.triangles))
+        facing = _area_normal(x, self.ctrl.topology()[0])
         free = width - right_margin
         view = scenefiles.frame_view(
-            x.min(axis=0), x.max(axis=0), self.pole, facing=facing, aspect=free / height
+            x.min(axis=0), x.max(axis=0), self.poles, facing=facing, aspect=free / height
         )
         tan_free = math.tan(math.radians(view.angle) / 2.0)  # half the free part's width
         ps.set_vertical_fov_degrees(math.degrees(2.0 * math.atan(tan_free * height / free)))

@@ -3,6 +3,8 @@
 // energy change it made.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <random>
 
 #include "cloth/forces.h"
@@ -75,6 +77,62 @@ TEST(StrainLimit, HoldsTheLimitAndNeverAddsKineticEnergy) {
         EXPECT_LE((f.x.row(i) - f.x.row(a)).norm(),
                   (1 + limit + kStrainLimitSlack) * f.t.tether_length[i]);
     }
+  }
+}
+
+// A hanging pole flag can swing down about its pins with every nearest-pin tether intact: each
+// row at full tether length, turned down by 0.4 rad about its own pin, and only the shear springs
+// notice (Gauss-Seidel over springs needs O(cols^2) sweeps to carry that back to the pole: the
+// 128 x 128 flag of docs/energy.md). The tethers to the pole's two ends catch it in one pass:
+// with no spring sweeps at all, every tether holds its limit afterwards and the lower rows,
+// which hang farthest below the top pin, swing back up.
+TEST(StrainLimit, EndTethersCatchASwingAboutTheNearestPins) {
+  FlagParams p;
+  p.rows = 32;
+  p.cols = 48;
+  p.pin = Pin::kPole;
+  const ClothTopology t = build_flag_topology(p);
+  const double limit = 0.1, theta = 0.4;
+  MatX3 x = t.rest_positions, v = MatX3::Zero(t.num_vertices(), 3);
+  const auto pin_of = [&](Index i) { return i - i % p.cols; };
+  for (Index i = 0; i < t.num_vertices(); ++i) {
+    const Vec3 d =
+        ((1 + limit) * (t.rest_positions.row(i) - t.rest_positions.row(pin_of(i)))).transpose();
+    x.row(i) = t.rest_positions.row(pin_of(i)) +
+               Vec3(d.x() * std::cos(theta), d.y() - d.x() * std::sin(theta), d.z()).transpose();
+  }
+  const auto angle = [&](Index i) {  // below the rest row, about the vertex's own pin
+    const Vec3 d = (x.row(i) - x.row(pin_of(i))).transpose();
+    return std::atan2(-d.y(), std::hypot(d.x(), d.z()));
+  };
+  for (Index i = 0; i < t.num_vertices(); ++i) {  // every nearest tether intact
+    if (i == pin_of(i)) continue;
+    ASSERT_EQ(t.tether_anchor[i], pin_of(i));
+    ASSERT_LE((x.row(i) - x.row(pin_of(i))).norm(), (1 + limit) * t.tether_length[i] * (1 + 1e-12));
+  }
+  ASSERT_TRUE(strain_limit_violated(t, limit, x));
+  limit_strain(t, limit, 0, x, v);
+  for (Index i = 0; i < t.num_vertices(); ++i) {
+    const auto holds = [&](int a, double rest) {
+      if (a >= 0) EXPECT_LE((x.row(i) - x.row(a)).norm(), (1 + limit) * rest * (1 + 1e-12)) << i;
+    };
+    holds(t.tether_anchor[i], t.tether_length[i]);
+    holds(t.tether_end_anchor[2 * i], t.tether_end_length[2 * i]);
+    holds(t.tether_end_anchor[2 * i + 1], t.tether_end_length[2 * i + 1]);
+  }
+  // The far edge: the top row is free to droop (that only compresses the cloth), the rows below
+  // swing back up the more the farther they hang below the top pin.
+  const Index far = p.cols - 1,
+              top = t.rest_positions(far, 1) > t.rest_positions(far + (p.rows - 1) * p.cols, 1)
+                        ? 0
+                        : p.rows - 1,
+              bottom = p.rows - 1 - top;
+  EXPECT_NEAR(angle(top * p.cols + far), theta, 1e-9);
+  EXPECT_LT(angle(bottom * p.cols + far), 0.85 * theta);
+  for (Index r = 1; r < p.rows; ++r) {
+    const Index lower = (top == 0 ? r : p.rows - 1 - r) * p.cols + far;
+    const Index upper = (top == 0 ? r - 1 : p.rows - r) * p.cols + far;
+    EXPECT_LT(angle(lower), angle(upper)) << "row " << r << " below the top";
   }
 }
 

@@ -1,5 +1,5 @@
-// Flag topology: nearest-pin tethers against a brute-force search (bit-identical, ties to the
-// lowest pin index) for every pin mode, explicit pins with ties, a tall thin flag and random
+// Flag topology: nearest-pin and end tethers against a brute-force search (bit-identical, ties to
+// the lowest pin index) for every pin mode, explicit pins with ties, a tall thin flag and random
 // pins; and the basic invariants (counts, lumped masses and areas, rest lengths).
 #include <gtest/gtest.h>
 
@@ -94,6 +94,36 @@ void check_topology(const FlagParams& p, const std::string& label) {
     EXPECT_EQ(t.tether_length[i], length) << "vertex " << i;  // bit-identical, not near
     if (t.tether_anchor[size_t(i)] != best || !(t.tether_length[i] == length)) ++mismatches;
   }
+
+  // End tethers: to the two pins farthest apart, e0 (farthest from the lowest-index pin) and e1
+  // (farthest from e0), each at its rest distance, except where it is the nearest pin (or e1 is
+  // e0); -1 and 0 for pinned vertices and when nothing is pinned.
+  ASSERT_EQ(t.tether_end_anchor.size(), 2 * size_t(N));
+  ASSERT_EQ(t.tether_end_length.size(), 2 * N);
+  int ends[2] = {-1, -1};
+  if (!pins.empty()) {
+    const auto farthest = [&](int from) {
+      int f = pins.front();
+      for (int a : pins)
+        if ((t.rest_positions.row(a) - t.rest_positions.row(from)).squaredNorm() >
+            (t.rest_positions.row(f) - t.rest_positions.row(from)).squaredNorm())
+          f = a;
+      return f;
+    };
+    ends[0] = farthest(pins.front());
+    ends[1] = farthest(ends[0]);
+  }
+  for (int i = 0; i < N; ++i) {
+    for (int k = 0; k < 2; ++k) {
+      const bool none = pin_set.count(i) || ends[k] < 0 || ends[k] == t.tether_anchor[size_t(i)] ||
+                        (k == 1 && ends[1] == ends[0]);
+      const int want = none ? -1 : ends[k];
+      const double length =
+          none ? 0.0 : (t.rest_positions.row(i) - t.rest_positions.row(want)).norm();
+      ASSERT_EQ(t.tether_end_anchor[2 * size_t(i) + k], want) << "vertex " << i << " end " << k;
+      ASSERT_EQ(t.tether_end_length[2 * i + k], length) << "vertex " << i << " end " << k;
+    }
+  }
 }
 
 /// A flag whose rest positions are exact binary fractions (origin 0, spacing a power of two), so
@@ -119,6 +149,23 @@ TEST(FlagTopology, PinModesMatchBruteForceTethers) {
   }
 }
 
+TEST(FlagTopology, EndTethersGoToBothEndsOfThePole) {
+  FlagParams p = exact_grid(9, 7);
+  p.pin = Pin::kPole;
+  const ClothTopology t = build_flag_topology(p);
+  const int top = 0, bottom = 8 * 7;  // column 0 of the first and the last row
+  for (int r = 0; r < 9; ++r)
+    for (int c = 1; c < 7; ++c) {
+      const size_t i = size_t(r * 7 + c);
+      std::set<int> anchors = {t.tether_anchor[i], t.tether_end_anchor[2 * i],
+                               t.tether_end_anchor[2 * i + 1]};
+      anchors.erase(-1);
+      // Its own row's pin and both ends of the pole: three tethers, two in the end rows.
+      const std::set<int> want = {r * 7, top, bottom};
+      EXPECT_EQ(anchors, want) << "row " << r << " col " << c;
+    }
+}
+
 TEST(FlagTopology, NoPinsGiveNoTethers) {
   FlagParams p;
   p.pin = Pin::kNone;
@@ -126,6 +173,8 @@ TEST(FlagTopology, NoPinsGiveNoTethers) {
   for (Index i = 0; i < t.num_vertices(); ++i) {
     EXPECT_EQ(t.tether_anchor[size_t(i)], -1);
     EXPECT_EQ(t.tether_length[i], 0.0);
+    EXPECT_EQ(t.tether_end_anchor[2 * size_t(i)], -1);
+    EXPECT_EQ(t.tether_end_anchor[2 * size_t(i) + 1], -1);
   }
 }
 
