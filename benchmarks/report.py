@@ -906,9 +906,9 @@ def markdown(
                 "3 inverse c2r double transforms, one thread, FFTW_ESTIMATE plans (air's "
                 "nu dt / h^2 is below 0.01 here, so flagsim diffuses explicitly and projects "
                 "with 1 r2c + 1 c2r in place: docs/design.md 'Explicit viscosity'). Memory: a "
-                "periodic semi-Lagrangian fft grid holds 11.6 grid-sized arrays at 128^3 (u 3, "
-                "phi and div 2, the ghost-padded u^n 3.4, the FFT half spectra 3.05; "
-                "docs/design.md 'Memory'); MacCormack adds 6.4, pcg 7.",
+                "periodic semi-Lagrangian fft grid holds 9.6 grid-sized arrays at 128^3 (u 3, "
+                "the ghost-padded u^n 3.4, the FFT half spectra 3.05; "
+                "docs/design.md 'Memory'); MacCormack adds 6.4, pcg 6.9.",
                 "",
             ]
             + _rows_table(air)

@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 
 namespace flagsim {
 
@@ -628,8 +630,9 @@ struct SlRow {
   const T *own, *e1, *e2;  // the row's start in the padded component and in the other two
   const T* rows9[9];       // see upwind_sample
   std::ptrdiff_t dc, d1s, d2s, sx, sy;
-  T st;    // dt / h
-  T beta;  // nu dt / h^2 (explicit diffusion of u^n; read only when the kernel diffuses)
+  T st;      // dt / h
+  double s;  // dt / h in double (the general sampler's trace)
+  T beta;    // nu dt / h^2 (explicit diffusion of u^n; read only when the kernel diffuses)
   T* dst;
   int i, j;  // the row's node indices along x and y
 };
@@ -648,10 +651,10 @@ FLAGSIM_INLINE S viscous_term(const T* own, std::ptrdiff_t sx, std::ptrdiff_t sy
   return beta * ((z + y) + x);
 }
 
-/// The departure displacement (cells) of node k: velocity (own value, 4-node means of the other
-/// components, as padded_velocity) times dt / h, for component C.
+/// The velocity at node k (own value, 4-node means of the other components, as
+/// padded_velocity), per axis, for component C: m/s.
 template <int C, class S, class T>
-FLAGSIM_INLINE void departure(const SlRow<T>& w, int k, S& d0, S& d1, S& d2) {
+FLAGSIM_INLINE void node_velocity(const SlRow<T>& w, int k, S& u0, S& u1, S& u2) {
   const S vc = load_lanes<S>(w.own + k);
   const S v1 =
       T(0.25) * (((load_lanes<S>(w.e1 + k - w.dc) + load_lanes<S>(w.e1 + k + w.d1s - w.dc)) +
@@ -661,92 +664,147 @@ FLAGSIM_INLINE void departure(const SlRow<T>& w, int k, S& d0, S& d1, S& d2) {
       T(0.25) * (((load_lanes<S>(w.e2 + k - w.dc) + load_lanes<S>(w.e2 + k + w.d2s - w.dc)) +
                   load_lanes<S>(w.e2 + k)) +
                  load_lanes<S>(w.e2 + k + w.d2s));
-  d0 = w.st * (C == 0 ? vc : v1);
-  d1 = w.st * (C == 1 ? vc : C == 0 ? v1 : v2);
-  d2 = w.st * (C == 2 ? vc : v2);
+  u0 = C == 0 ? vc : v1;
+  u1 = C == 1 ? vc : C == 0 ? v1 : v2;
+  u2 = C == 2 ? vc : v2;
+}
+
+/// The departure displacement (cells) of node k in T: node_velocity times dt / h.
+template <int C, class S, class T>
+FLAGSIM_INLINE void departure(const SlRow<T>& w, int k, S& d0, S& d1, S& d2) {
+  node_velocity<C>(w, k, d0, d1, d2);
+  d0 = w.st * d0;
+  d1 = w.st * d1;
+  d2 = w.st * d2;
 }
 
 #ifdef FLAGSIM_HAVE_VECTORS
-/// 32-bit integer lanes, as many as a vector of Bytes * 2 bytes has doubles (the lower nodes'
-/// indices in far_sample): double <-> int32 conversions are one instruction each (cvttpd2dq,
+/// Whether every lane of a vector compare's result (0 or all ones per lane) is set: the lanes read
+/// as 64-bit words and folded, not extracted one by one.
+template <class M>
+FLAGSIM_INLINE bool all_lanes(const M& m) {
+  static_assert(sizeof(M) % 8 == 0, "masks of 8 bytes or more");
+  std::uint64_t w[sizeof(M) / 8];
+  std::memcpy(w, &m, sizeof(M));
+  std::uint64_t a = ~std::uint64_t(0);
+  for (const std::uint64_t x : w) a &= x;
+  return a == ~std::uint64_t(0);
+}
+
+/// Lanes of T, as many as given: the lower nodes' indices (int) and the departure points
+/// (double) in far_sample. double <-> int32 conversions are one instruction each (cvttpd2dq,
 /// cvtdq2pd), int64 ones are not before AVX-512.
-template <int Bytes>
-struct IntLanes;
-template <>
-struct IntLanes<8> {
-  typedef int V __attribute__((vector_size(8)));
-};
-template <>
-struct IntLanes<16> {
-  typedef int V __attribute__((vector_size(16)));
+template <class T, int Lanes>
+struct LanesOf {
+  typedef T V __attribute__((vector_size(sizeof(T) * Lanes)));
 };
 
-/// The general sampler's value (PaddedRow::sample: lower node by floor, weights from it,
-/// trilinear along z, y, x) for the W nodes k.. of a double row whose departures d lie within the
-/// ghosts (|d| < G on every axis): the same operations lane by lane, so the same bits, without
-/// wrapping or range checks and on vectors. Where the lanes' lower nodes share one offset from
-/// their node on each axis (a smooth flow moving a cell or more per step: ~88 % of such vectors
-/// at 128^3) the 8 nodes are 8 contiguous vector loads, else they are loaded lane by lane.
-/// Returns false, out untouched, when a departure is a ghost layer's reach or more (or not
-/// finite).
-template <int C, class V>
-FLAGSIM_INLINE bool far_sample(const SlRow<double>& w, int k, V d0, V d1, V d2, V& out) {
-  constexpr int G = PaddedComponent<double>::kGhost;
-  constexpr int W = int(sizeof(V) / sizeof(double));
-  using I = typename IntLanes<sizeof(V) / 2>::V;
+/// The general sampler's value (PaddedRow::sample: departure x - (dt / h) u in double, lower node
+/// by floor, weights from it, trilinear along z, y, x in T) for the W nodes k.. of a row whose
+/// departures lie within the ghosts (|d| < G on every axis), u0..u2 the nodes' velocities
+/// (node_velocity): the same operations lane by lane, so the same bits, without wrapping or range
+/// checks and on vectors. The departure points are computed in parts of as many doubles as V has
+/// bytes for (a float vector: two parts): GCC lowers a compare of doubles wider than the machine's
+/// vectors lane by lane (vcomisd, seta: a float grid's far path ran 1.5x the double's per node).
+/// Where the lanes' lower nodes share one offset from their node on each axis (~78 % of such
+/// vectors of 4 lanes at 128^3, ~55 % of 8) the 8 nodes are 8 contiguous vector loads, else they
+/// are loaded lane by lane (loading both candidates and selecting per lane measured no faster).
+/// Returns false, out untouched, when a departure is a ghost layer's reach or more (or not finite).
+template <int C, class V, class T>
+FLAGSIM_INLINE bool far_sample(const SlRow<T>& w, int k, V u0, V u1, V u2, V& out) {
+  constexpr int G = PaddedComponent<T>::kGhost;
+  constexpr int W = int(sizeof(V) / sizeof(T));
+  constexpr int DW = int(sizeof(V) / sizeof(double));  // lanes of a part
+  constexpr int H = W / DW;                            // parts: 1 (double) or 2 (float)
+  using D = typename LanesOf<double, DW>::V;
+  using I = typename LanesOf<int, DW>::V;
+  using P = typename LanesOf<T, DW>::V;  // a part of V
   constexpr double kO0 = C == 0 ? 0.0 : 0.5, kO1 = C == 1 ? 0.0 : 0.5, kO2 = C == 2 ? 0.0 : 0.5;
-  V reach = V{};
-  reach += double(G);
-  const auto ok = (d0 < reach) & (-d0 < reach) & (d1 < reach) & (-d1 < reach) & (d2 < reach) &
-                  (-d2 < reach);  // false for NaN
-  for (int l = 0; l < W; ++l)
-    if (!ok[l]) return false;
-  V lane = V{};
-  for (int l = 0; l < W; ++l) lane[l] = double(k + l);
-  // Trace: back = x - d, g = back - offset (node units), as trace() and PaddedRow::corner.
-  const V g0 = ((V{} + (double(w.i) + kO0)) - d0) - kO0;
-  const V g1 = ((V{} + (double(w.j) + kO1)) - d1) - kO1;
-  const V g2 = ((lane + kO2) - d2) - kO2;
-  auto floor_of = [](V g, V& f) FLAGSIM_INLINE_LAMBDA {
-    const I t = __builtin_convertvector(g, I);  // toward zero; |g| < 2^31 here
-    const I fl = t + __builtin_convertvector(g < __builtin_convertvector(t, V), I);  // true: -1
-    f = g - __builtin_convertvector(fl, V);
-    return fl;
+  // Part h of s u in double: trace()'s departure. A double grid's st is s, so there it is the
+  // caller's st u (the same bits, computed once).
+  auto part = [&w](const V& x, int h) FLAGSIM_INLINE_LAMBDA {
+    if constexpr (std::is_same<T, double>::value) return D(w.st * x);
+    P y;
+    std::memcpy(&y, reinterpret_cast<const char*>(&x) + h * sizeof(P), sizeof(P));
+    return D(w.s * __builtin_convertvector(y, D));
   };
-  V f0, f1, f2;
-  const I o0 = floor_of(g0, f0) - w.i, o1 = floor_of(g1, f1) - w.j;
-  const I o2 = floor_of(g2, f2) - __builtin_convertvector(lane, I);
-  bool common = true;  // one offset per axis for all lanes: contiguous loads
-  for (int l = 1; l < W; ++l) common = common && o0[l] == o0[0] && o1[l] == o1[0] && o2[l] == o2[0];
+  auto floor_of = [](D g, D& f) FLAGSIM_INLINE_LAMBDA {
+    const D t = __builtin_convertvector(__builtin_convertvector(g, I), D);  // toward zero
+    D one = D{};
+    one += 1.0;
+    const D fl = t - (g < t ? one : D{});  // floor, exactly (|g| < 2^31 here)
+    f = g - fl;
+    return __builtin_convertvector(fl, I);
+  };
+  D f[3][H];
+  I o[3][H];  // lower node's offset from the lane's node, per axis and part
+  D iota;
+  for (int l = 0; l < DW; ++l) iota[l] = double(l);
+  D reach = D{};
+  reach += double(G);
+  for (int h = 0; h < H; ++h) {
+    const D d0 = part(u0, h), d1 = part(u1, h), d2 = part(u2, h);
+    const auto ok = (d0 < reach) & (-d0 < reach) & (d1 < reach) & (-d1 < reach) & (d2 < reach) &
+                    (-d2 < reach);  // false for NaN
+    for (int l = 0; l < DW; ++l)
+      if (!ok[l]) return false;
+    const D lane = iota + double(k + h * DW);  // the lanes' k, exactly
+    // back = x - d, g = back - offset (node units), as trace() and PaddedRow::corner.
+    const D g0 = ((D{} + (double(w.i) + kO0)) - d0) - kO0;
+    const D g1 = ((D{} + (double(w.j) + kO1)) - d1) - kO1;
+    const D g2 = ((lane + kO2) - d2) - kO2;
+    o[0][h] = floor_of(g0, f[0][h]) - w.i;
+    o[1][h] = floor_of(g1, f[1][h]) - w.j;
+    o[2][h] = floor_of(g2, f[2][h]) - __builtin_convertvector(lane, I);
+  }
+  // One offset per axis for all lanes (contiguous loads), compared as vectors (extracting the
+  // 3 W offsets one by one cost 7 % more of the advection at 128^3).
+  auto same = [&](int h) FLAGSIM_INLINE_LAMBDA {
+    return (o[0][h] == o[0][0][0]) & (o[1][h] == o[1][0][0]) & (o[2][h] == o[2][0][0]);
+  };
+  auto eq = same(0);
+  for (int h = 1; h < H; ++h) eq &= same(h);
+  const bool common = all_lanes(eq);
+  const std::ptrdiff_t at[8] = {0, 1, w.sy, w.sy + 1, w.sx, w.sx + 1, w.sx + w.sy, w.sx + w.sy + 1};
   V v[8];  // the 8 nodes of each lane's cell, in trilinear's order
   if (common) {
-    const double* b = w.own + k + o0[0] * w.sx + o1[0] * w.sy + o2[0];
-    const std::ptrdiff_t at[8] = {0,    1,        w.sy,        w.sy + 1,
-                                  w.sx, w.sx + 1, w.sx + w.sy, w.sx + w.sy + 1};
+    const T* b = w.own + k + o[0][0][0] * w.sx + o[1][0][0] * w.sy + o[2][0][0];
     for (int a = 0; a < 8; ++a) v[a] = load_lanes<V>(b + at[a]);
-  } else {  // lane by lane (a crossing of a cell face within the vector: ~12 % at 128^3)
+  } else {  // lane by lane (a cell face crossed within the vector: ~22 % at 128^3, 4 lanes)
+    // Gathered into arrays, then loaded: lanes set one by one in a vector read to GCC as the
+    // unset rest used (-Wmaybe-uninitialized, even when zeroed first).
+    T g[8][W];
     for (int l = 0; l < W; ++l) {
-      const double* b = w.own + (k + l) + o0[l] * w.sx + o1[l] * w.sy + o2[l];
-      v[0][l] = b[0];
-      v[1][l] = b[1];
-      v[2][l] = b[w.sy];
-      v[3][l] = b[w.sy + 1];
-      v[4][l] = b[w.sx];
-      v[5][l] = b[w.sx + 1];
-      v[6][l] = b[w.sx + w.sy];
-      v[7][l] = b[w.sx + w.sy + 1];
+      const int h = l / DW, r = l % DW;
+      const T* p = w.own + (k + l) + o[0][h][r] * w.sx + o[1][h][r] * w.sy + o[2][h][r];
+      g[0][l] = p[0];
+      g[1][l] = p[1];
+      g[2][l] = p[w.sy];
+      g[3][l] = p[w.sy + 1];
+      g[4][l] = p[w.sx];
+      g[5][l] = p[w.sx + 1];
+      g[6][l] = p[w.sx + w.sy];
+      g[7][l] = p[w.sx + w.sy + 1];
     }
+    for (int a = 0; a < 8; ++a) v[a] = load_lanes<V>(g[a]);
   }
-  const V c00 = v[0] + f2 * (v[1] - v[0]), c01 = v[2] + f2 * (v[3] - v[2]);
-  const V c10 = v[4] + f2 * (v[5] - v[4]), c11 = v[6] + f2 * (v[7] - v[6]);
-  const V y0 = c00 + f1 * (c01 - c00), y1 = c10 + f1 * (c11 - c10);
-  out = y0 + f0 * (y1 - y0);
+  // lerp in T (lerp(): a + T(f) (b - a)); for a double grid the conversions are no-ops.
+  V wt[3];
+  for (int a = 0; a < 3; ++a)
+    for (int h = 0; h < H; ++h) {
+      const P x = __builtin_convertvector(f[a][h], P);
+      std::memcpy(reinterpret_cast<char*>(&wt[a]) + h * sizeof(P), &x, sizeof(P));
+    }
+  const V c00 = v[0] + wt[2] * (v[1] - v[0]), c01 = v[2] + wt[2] * (v[3] - v[2]);
+  const V c10 = v[4] + wt[2] * (v[5] - v[4]), c11 = v[6] + wt[2] * (v[7] - v[6]);
+  const V y0 = c00 + wt[1] * (c01 - c00), y1 = c10 + wt[1] * (c11 - c10);
+  out = y0 + wt[0] * (y1 - y0);
   return true;
 }
 #endif
 
 /// The fast path over a row: vectors of L (Lanes16 or Lanes32; void: scalars only), the tail in
-/// scalars. Departures of a cell or more: far_sample where it applies (double grids). Returns
+/// scalars. Departures of a cell or more: far_sample where it applies. Returns
 /// false if some node's departure is a cell or more away (or not finite) and was not sampled so.
 template <int C, bool D, class L, class T>
 FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
@@ -764,8 +822,9 @@ FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
     one += T(1);
     auto inside = V{} == V{};  // all lanes true
     for (; k + L::W <= n2; k += L::W) {
-      V d0, d1, d2;
-      departure<C>(w, k, d0, d1, d2);
+      V u0, u1, u2;
+      node_velocity<C>(w, k, u0, u1, u2);
+      const V d0 = w.st * u0, d1 = w.st * u1, d2 = w.st * u2;
       const auto in =
           (d0 < one) & (-d0 < one) & (d1 < one) & (-d1 < one) & (d2 < one) & (-d2 < one);
       bool all_in = true, any_in = false;
@@ -773,15 +832,13 @@ FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
         all_in = all_in && in[lane];
         any_in = any_in || in[lane];
       }
-      if constexpr (std::is_same<T, double>::value) {
-        V far;
-        if (!all_in && far_sample<C>(w, k, d0, d1, d2, far)) {
-          // the lanes within a cell keep the upwind form's value (its rounding, as before)
-          store_lanes(
-              w.dst + k,
-              viscous(any_in ? (in ? upwind_sample<V, T>(w.rows9, k, d0, d1, d2) : far) : far, k));
-          continue;
-        }
+      V far;
+      if (!all_in && far_sample<C>(w, k, u0, u1, u2, far)) {
+        // the lanes within a cell keep the upwind form's value (its rounding, as before)
+        store_lanes(
+            w.dst + k,
+            viscous(any_in ? (in ? upwind_sample<V, T>(w.rows9, k, d0, d1, d2) : far) : far, k));
+        continue;
       }
       inside &= in;
       store_lanes(w.dst + k, viscous(upwind_sample<V, T>(w.rows9, k, d0, d1, d2), k));
@@ -875,10 +932,10 @@ constexpr int kMaxRows = 4096;
 /// Each plane i first takes the fast path, row by row: upwind_sample on vectors (32 bytes with
 /// AVX, else 16: SSE2 on any x86-64, GCC and Clang generic vectors), each row's tail in scalars.
 /// A vector with a node whose departure is a cell or more away on some axis (CFL >= 1) takes
-/// far_sample (double grids: the general sampler's arithmetic on contiguous loads, when the
-/// lanes share their lower nodes' offsets and stay within the ghosts); the nodes it cannot take
-/// (float grids, offsets that differ across the lanes, departures past the ghosts, not finite)
-/// are then redone in their rows by the general sampler (any_corner: floor, wrap). The upwind form
+/// far_sample (the general sampler's arithmetic on vectors, for double and float grids alike,
+/// when the departures stay within the ghosts); the nodes it cannot take (departures past the
+/// ghosts, not finite) are then redone in their rows by the general sampler (any_corner: floor,
+/// wrap). The upwind form
 /// agrees with the general sampler to round-off (tests/cpp/fluid/test_advect.cpp); far_sample is
 /// it bit for bit. D: every node also gains the explicit viscous term beta lap u^n
 /// (viscous_term), beta = nu dt / h^2.
@@ -909,6 +966,7 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, double s, T beta, T* out) {
     w.sx = sx;
     w.sy = sy;
     w.st = st;
+    w.s = s;
     w.beta = beta;
     w.dst = out + std::size_t(i) * n1 * n2;
     w.i = i;

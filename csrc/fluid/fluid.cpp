@@ -73,9 +73,10 @@ struct TypedSolver final : Fluid::Solver {
   // Grid-sized arrays, each allocated only where a stage of this configuration uses it (counted
   // in docs/design.md "Memory"; tests/cpp/fluid/test_fluid.cpp GridArrays.* hold the counts).
   MacGrid<T> u, prev, hat;     // current field; tunnel advection source; MacCormack / rhs scratch
-  AlignedVector<T> phi;        // nx*ny*nz: potential dt p / rho (m^2/s)
+  AlignedVector<T> phi;        // nx*ny*nz or empty (fft): potential dt p / rho (m^2/s)
   AlignedVector<T> phi_start;  // nx*ny*nz or empty (fft): phi at the step's start (undo_step)
-  // nx*ny*nz, 1/s: the pcg / multigrid right-hand side in a step, divergence() between steps
+  // nx*ny*nz or empty (fft), 1/s: the pcg / multigrid right-hand side in a step, divergence()
+  // between steps
   mutable AlignedVector<T> div;
   std::unique_ptr<FftProjector<T>> fft;
   Laplace7 pressure_op;
@@ -118,8 +119,10 @@ struct TypedSolver final : Fluid::Solver {
     else
       prev = MacGrid<T>(geo);
     const std::size_t cells = geo.cells().size();
-    phi.assign(cells, T(0));
-    div.assign(cells, T(0));
+    // fft projects in its first half spectrum: phi is the pcg / multigrid potential (and the
+    // obstacles' pressure, which fft cannot have).
+    if (!use_fft) phi.assign(cells, T(0));
+    if (!use_fft) div.assign(cells, T(0));  // fft: the divergence readouts use its scratch
     solid.assign(cells, 0);
     // float cannot reach residuals near its epsilon: floor the relative tolerance there.
     tol = std::max(p.pcg_tolerance, 50.0 * double(std::numeric_limits<T>::epsilon()));
@@ -187,7 +190,7 @@ struct TypedSolver final : Fluid::Solver {
                  "\"fft\"");
     for (std::size_t i = 0; i < n; ++i) solid[i] = mask && mask[i] ? 1 : 0;
     pressure_op.solid = any ? solid.data() : nullptr;
-    for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t i = 0; i < phi.size(); ++i)
       if (solid[i]) phi[i] = T(0);  // not an unknown any more (the warm start reads phi)
     if (!use_fft) build_pressure_solver();
   }
@@ -400,15 +403,34 @@ struct TypedSolver final : Fluid::Solver {
     flagsim::sample_weight_squares(u, points, m, out);
   }
 
-  // div is free between steps: each step's pressure_rhs writes it before reading it.
-  void divergence(double* out) const override {
+  // The divergence between steps, in rows of nz values `stride` apart: div (free between steps:
+  // each step's pressure_rhs writes it before reading it) or, fft, the projector's scratch.
+  const T* divergence_rows(int& stride) const {
+    if (fft) {
+      T* rows = fft->scratch(stride);
+      flagsim::divergence(u, rows, stride);
+      return rows;
+    }
+    stride = geo.nz;
     divergence_into(div.data());
-    std::copy(div.begin(), div.end(), out);
+    return div.data();
+  }
+
+  void divergence(double* out) const override {
+    int stride = 0;
+    const T* rows = divergence_rows(stride);
+    const std::size_t nrows = std::size_t(geo.nx) * geo.ny;
+    for (std::size_t r = 0; r < nrows; ++r)
+      std::copy(rows + r * stride, rows + r * stride + geo.nz, out + r * geo.nz);
   }
 
   double max_divergence() const override {
-    divergence_into(div.data());
-    return parallel_max(div.size(), [&](std::size_t i) { return std::fabs(double(div[i])); });
+    int stride = 0;
+    const T* rows = divergence_rows(stride);
+    const std::size_t nz = std::size_t(geo.nz);
+    return parallel_max(geo.cells().size(), [&](std::size_t i) {
+      return std::fabs(double(rows[(i / nz) * stride + i % nz]));
+    });
   }
 };
 

@@ -104,12 +104,13 @@ double FluidParams::memory_bytes() const {
   const bool maccormack = advection == Advection::kMacCormack;
   // The grid-sized arrays of fluid.cpp's TypedSolver, in values of the grid's precision (the
   // table in docs/design.md "Memory"; tests/cpp/fluid/test_fluid.cpp counts them):
-  // u, phi, div; periodic: the ghost-padded u^n (and the MacCormack predictor's); tunnel: u^n;
-  // hat (MacCormack, tunnel, pcg / multigrid); the CG vectors (pcg, multigrid); fft: 3 spectra.
+  // u; div, phi (pcg, multigrid); periodic: the ghost-padded u^n (and the MacCormack predictor's);
+  // tunnel: u^n; hat (MacCormack, tunnel, pcg / multigrid); the CG vectors (pcg, multigrid); fft: 3
+  // spectra.
   constexpr double G = 2 * 3;  // PaddedComponent::kGhost on either side
   const double padded = 3 * (n0 + G) * (n1 + G) * (n2 + G);
   const double faces = 3 * n + (periodic ? 0.0 : n1 * n2 + n0 * n2 + n0 * n1);
-  double values = faces + 2 * n;
+  double values = faces + (fft ? 0 : 2) * n;
   values += periodic ? padded * (maccormack ? 2 : 1) : faces;
   if (maccormack || !periodic || !fft) values += faces;
   if (!fft) values += 4 * (faces / 3 + n1 * n2 + n0 * n2);  // CgScratch: the largest component

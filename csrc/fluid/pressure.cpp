@@ -337,6 +337,12 @@ FftProjector<T>::~FftProjector() {
 }
 
 template <class T>
+T* FftProjector<T>::scratch(int& stride) const {
+  stride = 2 * impl_->nzc;
+  return reinterpret_cast<T*>(impl_->hat[0].data());
+}
+
+template <class T>
 bool FftProjector<T>::project(MacGrid<T>& u) {
   Impl& m = *impl_;
   const GridGeometry& g = m.geo;
@@ -558,6 +564,11 @@ bool FftProjector<T>::project(MacGrid<T>&) {
 template <class T>
 bool FftProjector<T>::diffuse_and_project(MacGrid<T>&, double, const Vec3*) {
   return false;
+}
+template <class T>
+T* FftProjector<T>::scratch(int& stride) const {
+  stride = 0;
+  return nullptr;
 }
 
 #endif

@@ -68,6 +68,9 @@ class FftProjector {
   /// certainly finite (its modes, checked in the spectral pass, are bounded far below overflow);
   /// false says nothing either way: the caller checks u itself.
   bool diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec3* mean);
+  /// Room for nx*ny*nz values in rows of nz, `stride` (set, >= nz) apart: the first spectrum's
+  /// buffer, free between projections (the fluid's divergence readouts use it).
+  T* scratch(int& stride) const;
 
  private:
   struct Impl;

@@ -37,9 +37,10 @@ GridGeometry periodic_geometry(int nx, int ny, int nz) {
   return g;
 }
 
-bool same_bits(const MacGrid<double>& a, const MacGrid<double>& b) {
+template <class T>
+bool same_bits(const MacGrid<T>& a, const MacGrid<T>& b) {
   for (int c = 0; c < 3; ++c)
-    if (std::memcmp(a.comp[c].data(), b.comp[c].data(), a.comp[c].size() * sizeof(double)) != 0)
+    if (std::memcmp(a.comp[c].data(), b.comp[c].data(), a.comp[c].size() * sizeof(T)) != 0)
       return false;
   return true;
 }
@@ -85,11 +86,13 @@ INSTANTIATE_TEST_SUITE_P(Advect, PeriodicFastPath,
 // field's regime): every node's departure is a cell or more away, so every node takes far_sample
 // (within the 3 ghost layers; contiguous loads where the lanes' lower nodes share their offsets,
 // lane by lane where the flow crosses a cell face within a vector), which does the general
-// sampler's arithmetic: the generic kernel's bits on every node, at every vector width.
-TEST(Advect, PeriodicFarDeparturesGiveTheGenericKernelsBits) {
+// sampler's arithmetic: the generic kernel's bits on every node, at every vector width, on double
+// and float grids (float: the departure point in double, the interpolation in float).
+template <class T>
+void expect_far_departures_give_the_generic_bits() {
   const GridGeometry g = periodic_geometry(10, 9, 23);  // 23: a scalar tail at every width
   const double dt = 0.1, s = dt / g.h;                  // cells per step per m/s
-  MacGrid<double> u0(g);
+  MacGrid<T> u0(g);
   const double two_pi = 6.283185307179586;
   for (int c = 0; c < 3; ++c)
     for (int i = 0; i < g.nx; ++i)
@@ -99,14 +102,14 @@ TEST(Advect, PeriodicFarDeparturesGiveTheGenericKernelsBits) {
           const double cells = c == 0   ? 1.85 + 0.75 * std::sin(z + 0.3) * std::cos(y)
                                : c == 1 ? 0.9 * std::sin(x + z)
                                         : -0.6 + 0.3 * std::cos(x - y);
-          u0.at(c, i, j, k) = cells / s;
+          u0.at(c, i, j, k) = T(cells / s);
         }
-  MacGrid<double> generic(g), hat(g);
+  MacGrid<T> generic(g), hat(g);
   advect_semi_lagrangian(u0, dt, SampleBoundary{}, generic);
   for (const int cap : {0, 16}) {
     vector_bytes(cap);
-    MacGrid<double> fast = u0;
-    PeriodicAdvectScratch<double> scratch;
+    MacGrid<T> fast = u0;
+    PeriodicAdvectScratch<T> scratch;
     scratch.resize(g);
     advect_periodic(fast, dt, false, scratch, hat);
     vector_bytes(0);
@@ -114,11 +117,19 @@ TEST(Advect, PeriodicFarDeparturesGiveTheGenericKernelsBits) {
   }
 }
 
+TEST(Advect, PeriodicFarDeparturesGiveTheGenericKernelsBits) {
+  expect_far_departures_give_the_generic_bits<double>();
+}
+
+TEST(Advect, PeriodicFarDeparturesGiveTheGenericKernelsBitsOnAFloatGrid) {
+  expect_far_departures_give_the_generic_bits<float>();
+}
+
 // The fast path reproduces a uniform field exactly, whatever the direction of the flow, on grids
 // whose rows are not a multiple of the vector width (the scalar tail).
 TEST(Advect, PeriodicFastPathKeepsAUniformFieldExactly) {
   const GridGeometry g = periodic_geometry(5, 4, 7);
-  for (const Vec3 w : {Vec3(0.3, -0.2, 0.45), Vec3(-0.7, 0.1, -0.05)}) {
+  for (const Vec3& w : {Vec3(0.3, -0.2, 0.45), Vec3(-0.7, 0.1, -0.05)}) {
     MacGrid<double> u(g), hat(g);
     for (int c = 0; c < 3; ++c) std::fill(u.comp[c].begin(), u.comp[c].end(), w[c]);
     PeriodicAdvectScratch<double> scratch;
