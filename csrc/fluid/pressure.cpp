@@ -37,13 +37,12 @@ void divergence(const MacGrid<T>& u, T* div, int row_stride, double scale) {
       T* d = div + std::size_t(r) * stride;
       const int kend = per ? nz - 1 : nz;  // periodic: the last cell's top face is face 0
       for (int k = 0; k < kend; ++k)
-        d[k] = out(T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) +
-                      (double(w0[k + 1]) - w0[k])) *
-                     inv_h));
+        d[k] = out(
+            T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[k + 1]) - w0[k])) *
+              inv_h));
       if (per) {
         const int k = nz - 1;
-        d[k] = out(T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) +
-                      (double(w0[0]) - w0[k])) *
+        d[k] = out(T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[0]) - w0[k])) *
                      inv_h));
       }
     });
