@@ -745,19 +745,32 @@ FLAGSIM_INLINE void split_interior(const SplitRow<T>& w, const T* xr, int h, int
   int e = lo;
 #ifdef FLAGSIM_HAVE_VECTORS
   if constexpr (!std::is_void<L>::value) {
-    using S = typename L::V;
-    auto chunk = [&](int c) FLAGSIM_INLINE_LAMBDA {
+    auto chunk = [&](auto lanes, int c) FLAGSIM_INLINE_LAMBDA {
+      using S = decltype(lanes);
       S ckm{};
       if constexpr (!Unit) ckm = load_lanes<S>(w.ck + km + c);
       body(off + c, split_sum<Unit, S>(w, xr, off + c, load_lanes<S>(xr + km + c),
                                        load_lanes<S>(xr + kp + c), ckm));
     };
-    for (; e + L::W <= hi; e += L::W) chunk(e);
+    using S = typename L::V;
+    for (; e + L::W <= hi; e += L::W) chunk(S{}, e);
     // The rest as one more vector ending at hi, overlapping the last: a cell's value depends
     // only on the other half and the other rows, so computing it twice gives it twice.
     if (e < hi && hi - lo >= L::W) {
-      chunk(hi - L::W);
+      chunk(S{}, hi - L::W);
       e = hi;
+    }
+    // A half shorter than a wide vector (the coarse levels' rows): the same with 16-byte
+    // vectors, the same bits per lane.
+    if constexpr (sizeof(S) > 16) {
+      using N = Lanes16<T>;
+      if (e < hi && hi - lo >= N::W) {
+        for (; e + N::W <= hi; e += N::W) chunk(typename N::V{}, e);
+        if (e < hi) {
+          chunk(typename N::V{}, hi - N::W);
+          e = hi;
+        }
+      }
     }
   }
 #endif
