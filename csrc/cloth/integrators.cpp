@@ -13,6 +13,7 @@ IntegratorScratch::IntegratorScratch(const ClothTopology& topo) {
   const Index n = topo.num_vertices();
   for (MatX3* m : {&f, &fd, &x0, &v0, &dv, &r, &z, &p, &q, &b, &tmp, &dv_prev, &impulse0})
     m->setZero(n, 3);
+  held.reserve(std::size_t(n));
   sys.B.resize(topo.num_springs());
   sys.D.resize(n);
   sys.J.reserve(topo.triangles.rows());
@@ -49,6 +50,30 @@ namespace {
 inline void filter_pinned(const ClothTopology& topo, MatX3& a) {
   for (Index i = 0; i < a.rows(); ++i)
     if (topo.inv_mass[i] == 0.0) a.row(i).setZero();
+}
+
+// The contacts the solve holds: those of fs.contacts that the forces f push into their solid
+// and whose velocity does not leave it (a vertex held twice keeps its first contact). A vertex
+// the last solve held has v . n = 0 to round-off: "leaves" means faster than kLeaving, so that
+// round-off of either sign does not decide it.
+constexpr double kLeaving = 1e-9;  // m/s
+void hold_contacts(const ClothTopology& topo, const ForceSet& fs, const MatX3& f, const MatX3& v,
+                   std::vector<RestingContact>& held) {
+  held.clear();
+  if (!fs.contacts) return;
+  for (const RestingContact& c : *fs.contacts) {
+    const Index i = c.vertex;
+    if (topo.inv_mass[i] == 0.0 || (!held.empty() && held.back().vertex == c.vertex)) continue;
+    if (f.row(i).dot(c.normal) < 0 && v.row(i).dot(c.normal) <= kLeaving) held.push_back(c);
+  }
+}
+
+// Baraff-Witkin's filter S = I - n n^T on the held contacts' rows.
+inline void filter_held(const std::vector<RestingContact>& held, MatX3& a) {
+  for (const RestingContact& c : held) {
+    const double an = a.row(c.vertex).dot(c.normal);
+    a.row(c.vertex) -= an * c.normal.transpose();
+  }
 }
 
 // The gravity the energy bookkeeping sees: none when the stage is not built.
@@ -299,6 +324,12 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   // b = h (f0 + h K v0)
   s.b = h * (s.f + h * s.tmp);
   filter_pinned(topo, s.b);
+  // Held contacts: dv = S dv + z with z = -(v . n) n (no velocity along n at the end), r = S (b -
+  // A dv), and every product and preconditioned residual filtered by S (Baraff-Witkin §5.3).
+  hold_contacts(topo, fs, s.f, v, s.held);
+  for (const RestingContact& c : s.held)  // the solids' impulse is A dv - b along n (b unfiltered)
+    work.contact_impulse -= s.b.row(c.vertex).dot(c.normal) * c.normal;
+  filter_held(s.held, s.b);
   const bool multigrid = use_multigrid(topo, ip, s);
   if (multigrid) multigrid_setup(topo, A, s.mg);
 
@@ -307,11 +338,17 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   // product). Never further than dv_1 alone in that norm, so never worse than it when the motion
   // turns, and near the straight-line extrapolation (theta ~ 1) when it is smooth.
   filter_pinned(topo, s.dv);
+  filter_held(s.held, s.dv);
+  for (const RestingContact& c : s.held)
+    s.dv.row(c.vertex) -= v.row(c.vertex).dot(c.normal) * c.normal.transpose();
   apply_system(topo, A, s.dv, s.q);
   s.r = s.b - s.q;
+  filter_held(s.held, s.r);
   s.z = s.dv - s.dv_prev;  // d (zero rows where pinned: both are filtered)
   s.dv_prev = s.dv;
+  filter_held(s.held, s.z);
   apply_system(topo, A, s.z, s.p);
+  filter_held(s.held, s.p);
   const double dAd = dot(s.z, s.p);
   if (dAd > 0) {
     const double theta = dot(s.r, s.z) / dAd;
@@ -321,17 +358,21 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   const double bnorm = s.b.norm();
   if (bnorm == 0.0) {
     s.dv.setZero();
+    for (const RestingContact& c : s.held)
+      s.dv.row(c.vertex) = -v.row(c.vertex).dot(c.normal) * c.normal.transpose();
   } else {
     const double tol2 = (ip.cg_tolerance * bnorm) * (ip.cg_tolerance * bnorm);
     int it = 0;
     bool converged = s.r.squaredNorm() <= tol2;
     double rz = 0;
     if (!converged) {
-      rz = precondition(topo, s, multigrid, s.r, s.z);
+      rz = precondition(topo, s, multigrid, s.r, s.z);  // r = S r: r . z = r . S z
+      filter_held(s.held, s.z);
       s.p = s.z;
     }
     for (; !converged && it < ip.cg_max_iterations; ++it) {
       apply_system(topo, A, s.p, s.q);
+      filter_held(s.held, s.q);
       const double pq = dot(s.p, s.q);
       if (!(pq > 0)) break;  // not SPD along p (or NaN): give up, the caller halves h
       const double alpha = rz / pq;
@@ -343,6 +384,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
         break;
       }
       const double rz_new = precondition(topo, s, multigrid, s.r, s.z);
+      filter_held(s.held, s.z);
       // Multigrid's K-cycle is not quite linear: flexible CG (Polak-Ribiere, Notay 2000),
       // beta = z_new . (r_new - r_old) / rz_old with r_new - r_old = -alpha q. Equal to
       // rz_new / rz_old in exact arithmetic for a fixed preconditioner (block Jacobi keeps that).
@@ -352,6 +394,11 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     }
     stats.cg_iterations += it;
     if (!converged) return IntegrateStatus::kCgFailed;
+  }
+  if (!s.held.empty()) {  // the rest of the solids' impulses: A dv along the normals
+    apply_system(topo, A, s.dv, s.q);
+    for (const RestingContact& c : s.held)
+      work.contact_impulse += s.q.row(c.vertex).dot(c.normal) * c.normal;
   }
   parallel_for(N, [&](Index i) {
     v.row(i) += s.dv.row(i);

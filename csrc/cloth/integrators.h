@@ -13,6 +13,13 @@
 
 namespace flagsim {
 
+/// A free vertex resting on a solid: the solid's outward unit normal at it. The implicit solve
+/// holds it there (ForceSet::contacts).
+struct RestingContact {
+  int32_t vertex = -1;
+  Vec3 normal = Vec3::Zero();
+};
+
 /// Which force stages a scene built, with their parameters. A stage left out costs nothing.
 struct ForceSet {
   bool gravity = false;
@@ -45,6 +52,12 @@ struct ForceSet {
   /// coupling's implicit air response, 1 / (1 + kappa_i); docs/coupling.md). A triangle's
   /// Jacobian block ("triangle" drag) takes the mean of its vertices' factors (kept symmetric).
   const VecX* drag_scale = nullptr;
+  /// Resting contacts, or none. Implicit: each one whose forces at the piece's start push it into
+  /// its solid (f . n < 0) and whose velocity does not leave it (v . n <= 1e-9 m/s) ends the piece
+  /// with no velocity along n, its other two directions solved as usual (Baraff-Witkin 1998 §5.3,
+  /// the filter S = I - n n^T inside CG). Without it the springs pull a draped flag into the solid
+  /// in every solve and the solids' projection pushes it back: energy the check cannot explain.
+  const std::vector<RestingContact>* contacts = nullptr;
 };
 
 /// Seconds spent per force stage (accumulated).
@@ -83,6 +96,9 @@ struct StepWork {
   double pins = 0;          ///< pins that move
   double strain_limit = 0;  ///< energy change made by strain limiting inside the step
   double remainder = 0;     ///< the integrator's own (numerical) energy change
+  /// N s, not energy: the impulse the resting contacts' solids gave the flag (ForceSet::contacts),
+  /// so that the pins' impulse leaves it out.
+  Vec3 contact_impulse = Vec3::Zero();
   /// The energy the booked stages account for (everything but the remainder), J.
   double booked() const { return drag + external + drift + damping + pins + strain_limit; }
   StepWork& operator+=(const StepWork& o) {
@@ -90,6 +106,7 @@ struct StepWork {
     pins += o.pins;
     strain_limit += o.strain_limit;
     remainder += o.remainder;
+    contact_impulse += o.contact_impulse;
     return *this;
   }
 };
@@ -108,10 +125,11 @@ struct IntegratorStats {
 /// Scratch for both integrators, sized once for a topology (no allocation inside a step).
 struct IntegratorScratch {
   MatX3 f, fd, x0, v0, dv, r, z, p, q, b, tmp;  // fd: the drag part of f
-  MatX3 impulse0;   ///< implicit: ForceSet::drag_impulse at the start of a halving level
-  MatX3 dv_prev;    ///< implicit: the solve's dv one step before dv (for the warm start)
-  ClothSystem sys;  ///< the implicit system of the current step
-  Multigrid mg;     ///< levels built when the topology is a grid (multigrid_applies)
+  MatX3 impulse0;  ///< implicit: ForceSet::drag_impulse at the start of a halving level
+  MatX3 dv_prev;   ///< implicit: the solve's dv one step before dv (for the warm start)
+  std::vector<RestingContact> held;  ///< implicit: the contacts the current solve holds
+  ClothSystem sys;                   ///< the implicit system of the current step
+  Multigrid mg;  ///< levels built when the topology is a grid (multigrid_applies)
   explicit IntegratorScratch(const ClothTopology& topo);
 };
 

@@ -3,9 +3,6 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
-#ifdef _OPENMP
-#include <omp.h>
-#endif
 
 namespace flagsim {
 
@@ -30,30 +27,10 @@ constexpr int kDirectBuilds = 8, kMaxDirectBuilds = 512;
 constexpr Index kQueryGroup = 8;
 // Pairs per vertex (and per edge) the scratch is reserved for at construction.
 constexpr size_t kExpectedPerItem = 8;
-
-int max_threads() {
-#ifdef _OPENMP
-  return omp_get_max_threads();
-#else
-  return 1;
-#endif
-}
-
-int thread_id() {
-#ifdef _OPENMP
-  return omp_get_thread_num();
-#else
-  return 0;
-#endif
-}
-
-int team_size() {
-#ifdef _OPENMP
-  return omp_get_num_threads();
-#else
-  return 1;
-#endif
-}
+// The queries and the list's filter run in up to kMaxChunks chunks of at least kGroupsPerChunk
+// query groups each (run_chunks): fine enough that a thread that joins late still takes a fair
+// share, coarse enough that a chunk costs far more than taking it.
+constexpr Index kMaxChunks = 32, kGroupsPerChunk = 16;
 
 // A pair with no free vertex (all four inverse masses 0) is never a candidate: nothing to move.
 inline bool none_free(const VecX& inv_mass, int32_t a, int32_t b, int32_t c, int32_t d) {
@@ -117,15 +94,16 @@ Candidates::Candidates(const MatX3i& triangles, Index num_vertices, double thick
       ref_hi_(num_vertices, 3),
       direct_left_(kDirectBuilds),
       direct_streak_(kDirectBuilds) {
-  const size_t threads = static_cast<size_t>(max_threads());
-  thread_pairs_.resize(threads);
   const size_t expected = kExpectedPerItem * static_cast<size_t>(num_vertices) + kListSlack;
   const size_t expected_edges = kExpectedPerItem * static_cast<size_t>(edges_.rows()) + kListSlack;
   reserved_ = expected + expected_edges;
-  // Thread 0 collects every pair when the broad phase runs on one thread.
-  for (ThreadPairs& buffer : thread_pairs_) {
-    buffer.vertex_triangle.reserve(expected);
-    buffer.edge_edge.reserve(expected_edges);
+  const Index groups = (n_ + edges_.rows()) / kQueryGroup;
+  chunk_pairs_.resize(size_t(std::clamp<Index>(groups / kGroupsPerChunk, 1, kMaxChunks)));
+  // Each chunk twice its share (a chunk holds a block of the mesh; a fold may crowd one).
+  const size_t chunks = chunk_pairs_.size();
+  for (ChunkPairs& buffer : chunk_pairs_) {
+    buffer.vertex_triangle.reserve(2 * expected / chunks + kListSlack);
+    buffer.edge_edge.reserve(2 * expected_edges / chunks + kListSlack);
     buffer.hits.reserve(kExpectedPerItem * kQueryGroup * 4);
   }
   // A list that pays is at most kListRatio times the candidates.
@@ -277,8 +255,7 @@ void Candidates::collect_edges(Index e0, Index e1, double wide, const VecX* inv_
 
 // Box-tree queries (the trees refitted to the current boxes), every query `wide` wider, into out
 // (ordered as the header says). With inv_mass, pairs with no free vertex are left out. Returns
-// false, with out incomplete, as soon as out would hold more than `budget` pairs (each thread
-// stops at its share).
+// false, with out incomplete, as soon as out would hold more than `budget` pairs.
 bool Candidates::query_trees(double wide, const VecX* inv_mass, CandidatePairs& out,
                              size_t budget) {
   // The trees take their shape from the first query's boxes and are refitted after that.
@@ -289,53 +266,39 @@ bool Candidates::query_trees(double wide, const VecX* inv_mass, CandidatePairs& 
     tri_tree_.build(tlo_, thi_);
     edge_tree_.build(elo_, ehi_);
   }
-  const size_t threads = static_cast<size_t>(max_threads());
-  if (thread_pairs_.size() < threads) thread_pairs_.resize(threads);
-  for (CandidatePairs& buffer : thread_pairs_) buffer.clear();
   const Index E = edges_.rows();
   const Index VG = (n_ + kQueryGroup - 1) / kQueryGroup, EG = (E + kQueryGroup - 1) / kQueryGroup;
-  auto vertices = [&](Index g, ThreadPairs& p) {
-    collect_vertices(g * kQueryGroup, std::min(n_, (g + 1) * kQueryGroup), wide, inv_mass,
-                     p.vertex_triangle, p.hits);
+  const auto C = static_cast<Index>(chunk_pairs_.size());
+  // Pairs so far over all chunks; a chunk stops once they pass the budget, which a complete query
+  // never does, so `within` is the same whoever ran which chunk.
+  std::atomic<size_t> total{0};
+  const bool budgeted = budget != SIZE_MAX;
+  auto add = [&](size_t before, const ChunkPairs& p) {
+    return !budgeted || total.fetch_add(p.size() - before) + (p.size() - before) <= budget;
   };
-  auto edges = [&](Index g, ThreadPairs& p) {
-    collect_edges(g * kQueryGroup, std::min(E, (g + 1) * kQueryGroup), wide, inv_mass, p.edge_edge,
-                  p.hits);
-  };
-  bool within = true;
-  if (use_team(n_ >= kParallelGrain)) {
-    std::atomic<bool> over{false};
-#pragma omp parallel
-    {
-      ThreadPairs& p = thread_pairs_[static_cast<size_t>(thread_id())];
-      const size_t share = budget / static_cast<size_t>(team_size()) + 1;
-      auto full = [&] {
-        if (p.size() > share) over.store(true, std::memory_order_relaxed);
-        return over.load(std::memory_order_relaxed);
-      };
-      // Static schedule: thread k gets the k-th contiguous block, so concatenating the buffers
-      // in thread order lists pairs by vertex (edge) whatever the thread count.
-#pragma omp for schedule(static)
-      for (Index g = 0; g < VG; ++g)
-        if (!full()) vertices(g, p);
-#pragma omp for schedule(static)
-      for (Index g = 0; g < EG; ++g)
-        if (!full()) edges(g, p);
+  // Chunk c: the c-th block of vertex groups, then the c-th block of edge groups.
+  run_chunks(n_ >= kParallelGrain, C, [&](Index c) {
+    ChunkPairs& p = chunk_pairs_[size_t(c)];
+    p.clear();
+    bool ok = true;
+    for (Index g = c * VG / C; g < (c + 1) * VG / C && ok; ++g) {
+      const size_t before = p.size();
+      if (budgeted && total.load() > budget) break;
+      collect_vertices(g * kQueryGroup, std::min(n_, (g + 1) * kQueryGroup), wide, inv_mass,
+                       p.vertex_triangle, p.hits);
+      ok = add(before, p);
     }
-    within = !over.load();
-  } else {
-    ThreadPairs& p = thread_pairs_[0];
-    for (Index g = 0; g < VG && within; ++g) {
-      vertices(g, p);
-      within = p.size() <= budget;
+    for (Index g = c * EG / C; g < (c + 1) * EG / C && ok; ++g) {
+      const size_t before = p.size();
+      if (budgeted && total.load() > budget) break;
+      collect_edges(g * kQueryGroup, std::min(E, (g + 1) * kQueryGroup), wide, inv_mass,
+                    p.edge_edge, p.hits);
+      ok = add(before, p);
     }
-    for (Index g = 0; g < EG && within; ++g) {
-      edges(g, p);
-      within = p.size() <= budget;
-    }
-  }
+  });
+  const bool within = !budgeted || total.load() <= budget;
   out.clear();
-  append(thread_pairs_, out);
+  append(chunk_pairs_, out);
   return within;
 }
 
@@ -358,28 +321,17 @@ void Candidates::filter_list(const VecX& inv_mass) {
   const std::vector<CandidatePair>& le = list_.edge_edge;
   const auto LV = static_cast<Index>(lv.size()), LE = static_cast<Index>(le.size());
   pairs_.clear();
-  if (use_team(LV + LE >= kPairGrain)) {
-    for (CandidatePairs& buffer : thread_pairs_) buffer.clear();
-#pragma omp parallel
-    {
-      const auto id = static_cast<size_t>(thread_id());
-      std::vector<CandidatePair>& pv = thread_pairs_[id].vertex_triangle;
-      std::vector<CandidatePair>& pe = thread_pairs_[id].edge_edge;
-#pragma omp for schedule(static) nowait
-      for (Index k = 0; k < LV; ++k)
-        if (keep_vertex(lv[size_t(k)])) pv.push_back(lv[size_t(k)]);
-#pragma omp for schedule(static)
-      for (Index k = 0; k < LE; ++k)
-        if (keep_edge(le[size_t(k)])) pe.push_back(le[size_t(k)]);
-    }
-    // Static blocks in thread order: the list's order.
-    append(thread_pairs_, pairs_);
-  } else {
-    for (const CandidatePair& p : lv)
-      if (keep_vertex(p)) pairs_.vertex_triangle.push_back(p);
-    for (const CandidatePair& p : le)
-      if (keep_edge(p)) pairs_.edge_edge.push_back(p);
-  }
+  // Chunk c keeps from the c-th blocks of the list's two parts: concatenated, the list's order.
+  const auto C = static_cast<Index>(chunk_pairs_.size());
+  run_chunks(LV + LE >= kPairGrain, C, [&](Index c) {
+    ChunkPairs& p = chunk_pairs_[size_t(c)];
+    p.clear();
+    for (Index k = c * LV / C; k < (c + 1) * LV / C; ++k)
+      if (keep_vertex(lv[size_t(k)])) p.vertex_triangle.push_back(lv[size_t(k)]);
+    for (Index k = c * LE / C; k < (c + 1) * LE / C; ++k)
+      if (keep_edge(le[size_t(k)])) p.edge_edge.push_back(le[size_t(k)]);
+  });
+  append(chunk_pairs_, pairs_);
   // Too long to pay (see next_skin) at its first use; long later (it came from a fast
   // transient and the motion has calmed): build it again.
   const double ratio = served_ == 1 ? kListRatio : kStaleRatio;

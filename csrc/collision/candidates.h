@@ -101,13 +101,14 @@ class Candidates {
   MatX3 vlo_, vhi_;               // N x 3 swept vertex boxes in the shifted frame
   MatX3 tlo_, thi_;               // T x 3 swept triangle boxes, grown by the thickness
   MatX3 elo_, ehi_;               // E x 3 swept edge boxes, grown by the thickness
-  // Per thread (query_trees, filter_list), each on cache lines of its own: the threads push pairs
-  // at the same time, and two threads' vector ends on one line could bounce it between the cores
-  // at every push (false sharing). On this 2-vCPU machine no difference was measurable either way.
-  struct alignas(64) ThreadPairs : CandidatePairs {
+  // Per chunk of the queries and of the list's filter (run_chunks: any thread may run any chunk,
+  // and the chunks' pairs are concatenated in chunk order), each on cache lines of its own: two
+  // threads push pairs at the same time, and two vector ends on one line could bounce it between
+  // the cores at every push (false sharing).
+  struct alignas(64) ChunkPairs : CandidatePairs {
     std::vector<int32_t> hits;  // a query group's tree hits (collect_vertices, collect_edges)
   };
-  std::vector<ThreadPairs> thread_pairs_;
+  std::vector<ChunkPairs> chunk_pairs_;
   CandidatePairs pairs_;
   // The pair list (a Verlet list): every pair whose boxes come within 2 skin_ of the query, from
   // the vertex boxes ref_lo_/ref_hi_ (less their mean position) of the step that built it.

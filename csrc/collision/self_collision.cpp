@@ -15,17 +15,26 @@ inline void gather(const MatX3& x, const int32_t idx[4], PairPoints& p) {
   for (int k = 0; k < 4; ++k) p[k] = row(x, idx[k]);
 }
 
+// Pair loops whose pairs each write their own slot k share their pairs with the SideBySide helper
+// (for_each_chunk) from this many pairs, in chunks of at least kPairsPerChunk.
+constexpr Index kPairShareGrain = 2048, kPairsPerChunk = 512, kMaxPairChunks = 32;
+
 // body(K{}, pair, k) for every candidate pair k (vertex-triangle pairs, then edge-edge pairs,
-// numbered on), K its contact type: one loop per type, so each body is compiled for its type. On
-// the OpenMP team in static blocks when use_team(parallel) (each pair writes its own slot k, so
-// the split does not matter), else in pair order on the calling thread.
+// numbered on), K its contact type: one loop per type, so each body is compiled for its type.
+// When `parallel` (each pair writes its own slot k, so the split does not matter): on the OpenMP
+// team in static blocks when use_team(parallel), else in chunks of pairs that the SideBySide
+// helper may share (for_each_chunk). Else in pair order on the calling thread.
 template <class Body>
 void for_each_pair(const CandidatePairs& pairs, bool parallel, const Body& body) {
   const std::vector<CandidatePair>& vt = pairs.vertex_triangle;
   const std::vector<CandidatePair>& ee = pairs.edge_edge;
   const auto V = static_cast<Index>(vt.size()), E = static_cast<Index>(ee.size());
+  auto range = [&](Index k0, Index k1) {  // pairs [k0, k1) of the numbering above
+    for (Index k = k0; k < std::min(k1, V); ++k) body(VertexTriangleContact{}, vt[size_t(k)], k);
+    for (Index k = std::max(k0, V); k < k1; ++k) body(EdgeEdgeContact{}, ee[size_t(k - V)], k);
+  };
 #ifdef _OPENMP
-  if (use_team(parallel)) {
+  if (use_team(parallel && V + E >= kPairGrain)) {
 #pragma omp parallel
     {
 #pragma omp for schedule(static) nowait
@@ -35,11 +44,14 @@ void for_each_pair(const CandidatePairs& pairs, bool parallel, const Body& body)
     }
     return;
   }
-#else
-  (void)parallel;
 #endif
-  for (Index k = 0; k < V; ++k) body(VertexTriangleContact{}, vt[size_t(k)], k);
-  for (Index k = 0; k < E; ++k) body(EdgeEdgeContact{}, ee[size_t(k)], V + k);
+  const Index P = V + E;
+  if (parallel && P >= kPairShareGrain) {
+    const Index C = std::min(kMaxPairChunks, P / kPairsPerChunk);
+    for_each_chunk(C, [&](Index c) { range(c * P / C, (c + 1) * P / C); });
+    return;
+  }
+  range(0, P);
 }
 
 }  // namespace
@@ -76,7 +88,7 @@ void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv
   stats_.candidates = P;
   // Each pair's distance at the start of the step: with it, a pair whose points cannot have
   // closed that gap (see out_of_reach) needs no test at all.
-  for_each_pair(pairs, P >= kPairGrain, [&](auto kind, const CandidatePair& pr, Index k) {
+  for_each_pair(pairs, true, [&](auto kind, const CandidatePair& pr, Index k) {
     using K = decltype(kind);
     int32_t i[4];
     K::corners(candidates_, pr, i);
@@ -189,9 +201,8 @@ void SelfCollision::mark_on_pole(const PoleParams& pole, const MatX3& x) {
 void SelfCollision::detect_contacts(const MatX3& x0, const MatX3& x, bool first) {
   const double h = params_.thickness;
   const CandidatePairs& pairs = candidates_.pairs();
-  const auto P = static_cast<Index>(pairs.size());
   measure_motion(x0, x);
-  for_each_pair(pairs, P >= kPairGrain, [&](auto kind, const CandidatePair& pr, Index k) {
+  for_each_pair(pairs, true, [&](auto kind, const CandidatePair& pr, Index k) {
     using K = decltype(kind);
     contacts_[k].kind = Contact::kNone;
     int32_t i[4];
@@ -286,12 +297,11 @@ bool SelfCollision::find_violations(const MatX3& x0, const MatX3& x, const VecX&
                                     const PoleParams* pole) {
   const double floor = 0.5 * params_.thickness;
   const CandidatePairs& pairs = candidates_.pairs();
-  const auto P = static_cast<Index>(pairs.size());
   if (quiet_) {  // the last sweep saw every pair at this x and found none within the thickness
     std::fill(flag_.begin(), flag_.end(), uint8_t{0});
   } else {
     measure_motion(x0, x);
-    for_each_pair(pairs, P >= kPairGrain, [&](auto kind, const CandidatePair& pr, Index k) {
+    for_each_pair(pairs, true, [&](auto kind, const CandidatePair& pr, Index k) {
       using K = decltype(kind);
       int32_t i[4];
       K::corners(candidates_, pr, i);

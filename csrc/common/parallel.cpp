@@ -47,14 +47,52 @@ inline void cpu_relax() {
 }
 }  // namespace
 
+// Chunks shared by the calling thread (detail::share_chunks), on its stack while shared.
+struct SharedChunks {
+  detail::ChunkFn fn;
+  const void* body;
+  Index count;
+  std::atomic<Index> next{0};  // the next chunk to take
+};
+
 struct SideBySide::State {
   std::atomic<int> job{kIdle};  // JobState of the posted job
   std::atomic<bool> stop{false};
   Job fn = nullptr;  // the posted job, written before job = kPosted
   const void* arg = nullptr;
+  // Chunks the calling thread shares while it runs its first job: the helper takes them once
+  // its own job is done. `helping` counts helpers that may hold the pointer: the caller takes it
+  // back (nullptr), then waits for helping == 0 before its chunks leave its stack (both
+  // sequentially consistent: a helper that counted itself in after that wait began reads null).
+  std::atomic<SharedChunks*> shared{nullptr};
+  std::atomic<unsigned> shares{0};  // chunks posted so far (the helper's wake-up)
+  std::atomic<int> helping{0};
   std::mutex m;
   std::condition_variable posted, done;
   std::thread helper;
+
+  // The helper's part of shared chunks, once its own job is done; returns the share it served.
+  unsigned help() {
+    const unsigned seen = shares.load();
+    helping.fetch_add(1);
+    if (SharedChunks* c = shared.load())
+      for (Index k; (k = c->next.fetch_add(1)) < c->count;) c->fn(c->body, k);
+    if (helping.fetch_sub(1) == 1) notify(done);
+    return seen;
+  }
+
+  // Until the caller has seen its job done (job leaves kDone): serve what it shares.
+  void help_until_released() {
+    unsigned served = shares.load() - 1;
+    for (;;) {
+      wait(posted, [&] {
+        return job.load() != kDone || stop.load() ||
+               (shared.load() != nullptr && shares.load() != served);
+      });
+      if (job.load() != kDone || stop.load()) return;
+      served = help();
+    }
+  }
 
   // Spins for up to kSpinMicroseconds until ready(), then sleeps on cv until ready(). The
   // notifier changes the atomics, then locks and unlocks m, then notifies: no wake-up is lost.
@@ -86,9 +124,28 @@ struct SideBySide::State {
       fn(arg);
       job.store(kDone, std::memory_order_release);
       notify(done);
+      help_until_released();
     }
   }
 };
+
+namespace {
+// The SideBySide whose first job runs on this thread (set by run_jobs around it), or null.
+thread_local SideBySide::State* t_sharing = nullptr;
+}  // namespace
+
+bool detail::share_chunks(Index chunks, ChunkFn fn, const void* body) {
+  SideBySide::State* s = t_sharing;
+  if (!s || chunks <= 1) return false;
+  SharedChunks c{fn, body, chunks};
+  s->shared.store(&c);
+  s->shares.fetch_add(1);
+  s->notify(s->posted);
+  for (Index k; (k = c.next.fetch_add(1)) < chunks;) fn(body, k);
+  s->shared.store(nullptr);
+  s->wait(s->done, [&] { return s->helping.load() == 0; });  // a chunk the helper still runs
+  return true;
+}
 
 SideBySide::SideBySide() : s_(std::make_unique<State>()) {
   // The helper's loops run on its own thread (libgomp gives a thread its own settings on the
@@ -117,13 +174,16 @@ void SideBySide::run_jobs(Job first, const void* first_arg, Job second, const vo
   s.notify(s.posted);
   const int threads = num_threads();
   set_num_threads(1);
+  t_sharing = &s;
   first(first_arg);
+  t_sharing = nullptr;
   int expected = kPosted;
   if (s.job.compare_exchange_strong(expected, kIdle, std::memory_order_acq_rel)) {
     second(second_arg);  // the helper has not started it: no waiting for a thread without a core
   } else {
     s.wait(s.done, [&] { return s.job.load(std::memory_order_acquire) == kDone; });
-    s.job.store(kIdle, std::memory_order_relaxed);
+    s.job.store(kIdle);
+    s.notify(s.posted);  // the helper stops serving shared chunks
   }
   set_num_threads(threads);
 }

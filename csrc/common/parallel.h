@@ -54,6 +54,42 @@ inline void parallel_for_cells(Index n, const Body& body) {
   parallel_for_if(n > kGridParallelGrain, n, body);
 }
 
+namespace detail {
+using ChunkFn = void (*)(const void* body, Index chunk);
+// Runs fn(body, c) for every c in [0, chunks) with the SideBySide helper taking chunks too, when
+// called inside a SideBySide::run's first job; false (nothing run) anywhere else.
+bool share_chunks(Index chunks, ChunkFn fn, const void* body);
+}  // namespace detail
+
+/// body(c) for every chunk c in [0, chunks), each chunk writing only outputs of its own (results
+/// merged in chunk order afterwards), so that which thread runs which chunk cannot change a bit.
+/// Inside a SideBySide::run's first job (the cloth's side of a pipelined step) the helper thread,
+/// once its own job is done, takes chunks too (balance: the air's thread helps the cloth's);
+/// elsewhere a plain loop in chunk order. Chunks must not throw and must not enter OpenMP teams
+/// (num_threads() is 1 on both sides there). No heap allocation.
+template <class Body>
+inline void for_each_chunk(Index chunks, const Body& body) {
+  const detail::ChunkFn fn = [](const void* b, Index c) { (*static_cast<const Body*>(b))(c); };
+  if (detail::share_chunks(chunks, fn, &body)) return;
+  for (Index c = 0; c < chunks; ++c) body(c);
+}
+
+/// body(c) for every chunk c in [0, chunks): over the OpenMP team in static blocks when
+/// use_team(parallel), else for_each_chunk (with the SideBySide helper when there is one).
+template <class Body>
+inline void run_chunks(bool parallel, Index chunks, const Body& body) {
+#ifdef _OPENMP
+  if (use_team(parallel)) {
+#pragma omp parallel for schedule(static)
+    for (Index c = 0; c < chunks; ++c) body(c);
+    return;
+  }
+#else
+  (void)parallel;
+#endif
+  for_each_chunk(chunks, body);
+}
+
 /// Set the thread count for flagsim's loops; n >= 1. Throws InvalidArgument otherwise. Inside a
 /// parallel region it sets the count for the calling thread's loops until the region ends.
 void set_num_threads(int n);
@@ -67,7 +103,9 @@ void set_num_threads(int n);
 /// on their own thread (no OpenMP team inside, never more than two busy threads), and since every
 /// flagsim loop gives the same bits on any thread count, each gives the bits it would give alone.
 /// The two must not touch the same data and must not throw (catch inside, rethrow after).
-/// Waiting threads spin for up to kSpinMicroseconds, then sleep. No heap allocation in run().
+/// Once second() is done, the helper takes chunks of the work first() shares (for_each_chunk)
+/// until first() returns. Waiting threads spin for up to kSpinMicroseconds, then sleep. No heap
+/// allocation in run().
 class SideBySide {
  public:
   static constexpr int kSpinMicroseconds = 50;

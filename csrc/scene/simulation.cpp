@@ -76,6 +76,10 @@ Simulation::Simulation(const Scene& scene, Simulation* host)
   choose_stages();
   drag_impulse_.setZero(forces_.drag ? N : 0, 3);
   if (forces_.drag) forces_.drag_impulse = &drag_impulse_;
+  if (built(Stage::kSolids) && scene_.integrator.method == Method::kImplicit) {
+    resting_.reserve(std::size_t(N));
+    forces_.contacts = &resting_;
+  }
   if (built(Stage::kCoupling)) {
     reaction_.setZero(N, 3);
     reaction_at_ = x_;
@@ -678,14 +682,15 @@ bool Simulation::steps_beside_air(int& done) {
 // its checks. A stage the scene does not build returns at once.
 Simulation::Implausible Simulation::step_piece() {
   x_piece_ = x_;
-  stage_air();             // air velocity at the masses: the wind schedule or the grid (eq. 1, 2)
-  stage_flap();            // eq. 5 as a drift of the positions or a force, held over the piece
-  stage_pins();            // moving pins: their velocity over the piece, the pole's motion
-  stage_integrate();       // gravity, drag (eq. 3), springs (eq. 4); strain limiting per substep
-  place_pins();            // the pinned vertices exactly where their motion puts them
-  stage_pole();            // the pole cylinder, alternating with strain limiting
-  stage_solids();          // boxes, spheres, capsules, meshes: swept, with thickness and friction
-  stage_self_collision();  // vertex-triangle and edge-edge contacts (paper §1), pole kept out
+  stage_air();              // air velocity at the masses: the wind schedule or the grid (eq. 1, 2)
+  stage_flap();             // eq. 5 as a drift of the positions or a force, held over the piece
+  stage_pins();             // moving pins: their velocity over the piece, the pole's motion
+  find_resting_contacts();  // vertices on a solid at rest: the implicit solve holds them there
+  stage_integrate();        // gravity, drag (eq. 3), springs (eq. 4); strain limiting per substep
+  place_pins();             // the pinned vertices exactly where their motion puts them
+  stage_pole();             // the pole cylinder, alternating with strain limiting
+  stage_solids();           // boxes, spheres, capsules, meshes: swept, with thickness and friction
+  stage_self_collision();   // vertex-triangle and edge-edge contacts (paper §1), pole kept out
   Implausible bad = stage_check();  // finite, strain within its promise, energy explained
   if (!bad.cause.empty()) return bad;
   if (built(Stage::kFlap)) flap_.commit();
@@ -786,6 +791,30 @@ void Simulation::place_pins() {
     for (Index k = 0; k < Index(pin_index_.size()); ++k) x_.row(pin_index_[k]) = pin_at_.row(k);
   }
   book_energy_change(ledger_.pins, 0.0);  // the last bits of the integrator's x + h v
+}
+
+// The free vertices within the thickness (and a little) of a solid at rest, with its outward
+// normal: the implicit solve keeps them from moving into it (ForceSet::contacts). Solids that
+// move are left to the projection alone.
+void Simulation::find_resting_contacts() {
+  if (!forces_.contacts) return;
+  StageClock::Scope t(&clock_, Stage::kSolids);
+  resting_.clear();
+  for (Index i = 0; i < x_.rows(); ++i) {
+    if (topo_.inv_mass[i] == 0.0) continue;
+    const Vec3 p = row(x_, i);
+    for (std::size_t k = 0; k < cloth_solids_.size(); ++k) {
+      const ClothSolid& s = cloth_solids_[k];
+      if (!solid_motions_[k].empty() || (p.array() < s.lo.array()).any() ||
+          (p.array() > s.hi.array()).any())
+        continue;
+      Vec3 n;
+      if (solid_distance(s.geometry, p, &n) <= (1.0 + kRestingSlack) * s.thickness) {
+        resting_.push_back({int32_t(i), n});
+        break;
+      }
+    }
+  }
 }
 
 // Each solid in turn, moving or at rest; the work a moving solid does (its surface's velocity
@@ -924,7 +953,7 @@ void Simulation::stage_integrate() {
   }
   book_integrator_work();
   if (status != IntegrateStatus::kOk) integrate_failed(status);
-  Vec3 external = topo_.mass.sum() * h_ * scene_.gravity;
+  Vec3 external = topo_.mass.sum() * h_ * scene_.gravity + stats_.work.contact_impulse;
   if (forces_.drag) external += Vec3(drag_impulse_.colwise().sum()) - j0;
   if (forces_.external) external += h_ * Vec3(forces_.external->colwise().sum());
   step_pin_impulse_ += external - (momentum() - p0);

@@ -238,6 +238,7 @@ class Simulation {
   void stage_pins();
   void place_pins();
   void stage_pole();
+  void find_resting_contacts();
   void stage_solids();
   void stage_self_collision();
   Implausible stage_check();
@@ -316,6 +317,10 @@ class Simulation {
   // The scene's solids the flag collides with (cloth = true), and their motions (empty: at rest).
   std::vector<ClothSolid> cloth_solids_;
   std::vector<MotionSchedule> solid_motions_;
+  // Vertices resting on a solid at rest at the piece's start (ForceSet::contacts; implicit only):
+  // within (1 + kRestingSlack) x the thickness of it.
+  static constexpr double kRestingSlack = 0.002;
+  std::vector<RestingContact> resting_;
 
   std::unique_ptr<SelfCollision> self_collision_;
   std::atomic<bool> stepping_{false};          // a step() is running (one thread at a time)

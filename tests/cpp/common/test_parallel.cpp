@@ -4,6 +4,7 @@
 #include <atomic>
 #include <chrono>
 #include <thread>
+#include <vector>
 
 #include "common/parallel.h"
 
@@ -78,6 +79,81 @@ TEST(SideBySide, EveryJobRunsOnceOverManyShortRounds) {
     EXPECT_EQ(firsts, 2000);
     EXPECT_EQ(seconds, 2000);
   }
+}
+
+// Outside a SideBySide, for_each_chunk is a plain loop in chunk order on the calling thread.
+TEST(ForEachChunk, OutsideSideBySideAPlainLoopInOrder) {
+  Threads two(2);
+  std::vector<Index> order;
+  std::vector<std::thread::id> who;
+  order.reserve(10);
+  for_each_chunk(10, [&](Index c) {
+    order.push_back(c);
+    who.push_back(std::this_thread::get_id());
+  });
+  ASSERT_EQ(order.size(), 10u);
+  for (Index c = 0; c < 10; ++c) {
+    EXPECT_EQ(order[size_t(c)], c);
+    EXPECT_EQ(who[size_t(c)], std::this_thread::get_id());
+  }
+}
+
+// Inside the first job, the helper takes chunks once its own job is done (the air's thread
+// helping the cloth's): every chunk runs exactly once, its output is the same whoever ran it,
+// and over a few rounds the helper takes some (each round's chunks wait 0.2 ms, far longer than
+// the helper needs to join unless the machine keeps it off a core throughout).
+TEST(ForEachChunk, InsideSideBySideTheHelperTakesChunksOnceItsJobIsDone) {
+  if (!has_openmp()) GTEST_SKIP() << "built without OpenMP: one thread only";
+  Threads two(2);
+  SideBySide beside;
+  constexpr Index kChunks = 64;
+  long helped = 0;
+  for (int round = 0; round < 20 && helped == 0; ++round) {
+    std::vector<std::atomic<int>> runs(kChunks);
+    std::vector<std::thread::id> who(kChunks);
+    std::vector<double> out(kChunks, 0.0);
+    std::atomic<bool> second_done{false};
+    std::thread::id caller;
+    beside.run(
+        [&]() noexcept {
+          caller = std::this_thread::get_id();
+          const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+          while (!second_done.load() && std::chrono::steady_clock::now() < until)
+            std::this_thread::yield();
+          for_each_chunk(kChunks, [&](Index c) {
+            ++runs[size_t(c)];
+            who[size_t(c)] = std::this_thread::get_id();
+            out[size_t(c)] = 1.0 / double(c + 1);
+            std::this_thread::sleep_for(std::chrono::microseconds(200));
+          });
+        },
+        [&]() noexcept { second_done.store(true); });
+    for (Index c = 0; c < kChunks; ++c) {
+      EXPECT_EQ(runs[size_t(c)].load(), 1) << "chunk " << c;
+      EXPECT_EQ(out[size_t(c)], 1.0 / double(c + 1));
+      helped += who[size_t(c)] != caller;
+    }
+  }
+  EXPECT_GT(helped, 0) << "the helper never took a chunk in 20 rounds";
+}
+
+// Many short rounds with shared chunks in each: nothing runs twice or hangs, whether the helper
+// is still on its own job, helping, or asleep.
+TEST(ForEachChunk, EveryChunkRunsOnceOverManyShortRounds) {
+  Threads two(2);
+  SideBySide beside;
+  long chunks = 0, seconds = 0;
+  std::atomic<long> counted{0};
+  for (int round = 0; round < 2000; ++round)
+    beside.run(
+        [&]() noexcept {
+          for (int share = 0; share < 3; ++share)
+            for_each_chunk(8, [&](Index) { counted.fetch_add(1); });
+          chunks += 24;
+        },
+        [&]() noexcept { ++seconds; });
+  EXPECT_EQ(counted.load(), chunks);
+  EXPECT_EQ(seconds, 2000);
 }
 
 }  // namespace
