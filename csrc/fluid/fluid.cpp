@@ -368,11 +368,7 @@ struct TypedSolver final : Fluid::Solver {
   }
 
   /// div <- -h^2 div u: the right-hand side of K phi = -h^2 div u.
-  void pressure_rhs() {
-    divergence_into(div.data());
-    const double h2 = geo.h * geo.h;
-    for (std::size_t i = 0; i < div.size(); ++i) div[i] = T(-h2 * div[i]);
-  }
+  void pressure_rhs() { flagsim::divergence(u, div.data(), 0, -geo.h * geo.h); }
 
   void report(const CgResult& r) {
     stats.pressure_iterations = r.iterations;

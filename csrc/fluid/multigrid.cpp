@@ -624,6 +624,74 @@ FLAGSIM_INLINE SplitRow<T> split_row(const LevelArgs<T>& a, int i, int j) {
   return w;
 }
 
+/// The rows of plane i in order, their SplitRow advanced row by row: the plane's neighbouring
+/// planes and the wraps along j are looked up once per plane, not per row (split_row's result,
+/// the same pointers).
+template <class T>
+struct RowWalker {
+  SplitRow<T> w;
+  const T *x, *zero, *c1;
+  std::size_t plane;  // index of (i, 0, 0)
+  int n1;
+  bool wrap1;  // j wraps (periodic, more than one row)
+  FLAGSIM_INLINE RowWalker(const LevelArgs<T>& a, int i) {
+    const MultigridLevel<T>& L = *a.L;
+    w = split_row(a, i, 0);
+    x = a.x;
+    zero = a.zero;
+    c1 = L.unit ? nullptr : L.c[1].data();
+    plane = w.base;
+    n1 = L.shape.n[1];
+    wrap1 = L.periodic[1] && n1 > 1;
+  }
+  /// Row j's pointers (j = 0, 1, ... in order; row 0 is set by the constructor).
+  FLAGSIM_INLINE void to_row(int j) {
+    if (j == 0) return;
+    const std::size_t n2 = std::size_t(w.n2);
+    w.base += n2;
+    if (w.xim != zero) w.xim += n2;
+    if (w.xip != zero) w.xip += n2;
+    w.xjm = x + w.base - n2;
+    w.xjp = j + 1 < n1 ? x + w.base + n2 : (wrap1 ? x + plane : zero);
+    if (c1) {
+      if (w.cim != zero) w.cim += n2;
+      w.cip += n2;
+      w.cjm = c1 + w.base - n2;
+      w.cjp += n2;
+      w.ck += n2;
+    }
+  }
+};
+
+/// The cells of half h of a row outside split_interior's interior (at most two; all of them on a
+/// row of at most 3 cells): their split positions and those of their k - 1 and k + 1 (-1: none,
+/// beyond a bounded end), the same for every row of a level.
+struct HalfEnds {
+  int n = 0;
+  int q[4], qm[4], qp[4];
+  HalfEnds(int n2, bool wrap2, int h, bool skip_last) {
+    const int ne = (n2 + 1) / 2, no = n2 / 2;
+    const int lo = h == 0 ? 1 : 0, hi = h == 0 ? no : std::min(no, ne - 1);
+    const int len = h == 0 ? ne : no;
+    auto add = [&](int e) {
+      const int k = 2 * e + h;
+      if (skip_last && k == n2 - 1) return;
+      const int km = k > 0 ? k - 1 : (wrap2 ? n2 - 1 : -1);
+      const int kp = k + 1 < n2 ? k + 1 : (wrap2 ? 0 : -1);
+      q[n] = split_pos(k, n2);
+      qm[n] = km >= 0 ? split_pos(km, n2) : -1;
+      qp[n] = kp >= 0 ? split_pos(kp, n2) : -1;
+      ++n;
+    };
+    if (hi <= lo) {
+      for (int e = 0; e < len; ++e) add(e);
+    } else {
+      for (int e = 0; e < lo; ++e) add(e);
+      for (int e = hi; e < len; ++e) add(e);
+    }
+  }
+};
+
 /// sum over the six neighbours of conductance * x at split position q (xr: x of the row), the
 /// k-neighbours at positions qm (k - 1, also where c along k couples it) and qp (k + 1), S one
 /// lane type. One expression for every lane width: the same bits.
@@ -677,19 +745,32 @@ FLAGSIM_INLINE void split_interior(const SplitRow<T>& w, const T* xr, int h, int
   int e = lo;
 #ifdef FLAGSIM_HAVE_VECTORS
   if constexpr (!std::is_void<L>::value) {
-    using S = typename L::V;
-    auto chunk = [&](int c) FLAGSIM_INLINE_LAMBDA {
+    auto chunk = [&](auto lanes, int c) FLAGSIM_INLINE_LAMBDA {
+      using S = decltype(lanes);
       S ckm{};
       if constexpr (!Unit) ckm = load_lanes<S>(w.ck + km + c);
       body(off + c, split_sum<Unit, S>(w, xr, off + c, load_lanes<S>(xr + km + c),
                                        load_lanes<S>(xr + kp + c), ckm));
     };
-    for (; e + L::W <= hi; e += L::W) chunk(e);
+    using S = typename L::V;
+    for (; e + L::W <= hi; e += L::W) chunk(S{}, e);
     // The rest as one more vector ending at hi, overlapping the last: a cell's value depends
     // only on the other half and the other rows, so computing it twice gives it twice.
     if (e < hi && hi - lo >= L::W) {
-      chunk(hi - L::W);
+      chunk(S{}, hi - L::W);
       e = hi;
+    }
+    // A half shorter than a wide vector (the coarse levels' rows): the same with 16-byte
+    // vectors, the same bits per lane.
+    if constexpr (sizeof(S) > 16) {
+      using N = Lanes16<T>;
+      if (e < hi && hi - lo >= N::W) {
+        for (; e + N::W <= hi; e += N::W) chunk(typename N::V{}, e);
+        if (e < hi) {
+          chunk(typename N::V{}, hi - N::W);
+          e = hi;
+        }
+      }
     }
   }
 #endif
@@ -719,6 +800,34 @@ struct SmoothPlane {
     const MultigridLevel<T>& Lv = *a.L;
     const Shape3& sh = Lv.shape;
     const int n0 = sh.n[0], n1 = sh.n[1], n2 = sh.n[2];
+    if (Lv.passes == 1) {  // no wrap pass: every row whole, its ends from a table
+      RowWalker<T> rw(a, i);
+      const HalfEnds ends[2] = {HalfEnds(n2, rw.w.wrap2, 0, false),
+                                HalfEnds(n2, rw.w.wrap2, 1, false)};
+      for (int j = 0; j < n1; ++j) {
+        rw.to_row(j);
+        const SplitRow<T>& w = rw.w;
+        T* xr = a.x + w.base;
+        const T* br = a.b + w.base;
+        const T* dr = Lv.inv_diag.data() + w.base;
+        const int h = (a.colour + i + j) & 1;  // the half (parity of k) of this colour
+        int lo, hi;
+        split_interior<Unit, L>(
+            w, xr, h, lo, hi, [&](int q, const auto& sum) FLAGSIM_INLINE_LAMBDA {
+              using S = std::decay_t<decltype(sum)>;
+              store_lanes(xr + q, load_lanes<S>(dr + q) * (load_lanes<S>(br + q) + sum));
+            });
+        const HalfEnds& E = ends[h];
+        for (int t = 0; t < E.n; ++t) {
+          const int q = E.q[t], qm = E.qm[t], qp = E.qp[t];
+          const T xkm = qm >= 0 ? xr[qm] : T(0), xkp = qp >= 0 ? xr[qp] : T(0);
+          T ckm = T(0);
+          if constexpr (!Unit) ckm = qm >= 0 ? w.ck[qm] : T(0);
+          xr[q] = dr[q] * (br[q] + split_sum<Unit, T>(w, xr, q, xkm, xkp, ckm));
+        }
+      }
+      return;
+    }
     const bool odd0 = Lv.periodic[0] && n0 > 1 && n0 % 2 == 1;
     const bool odd1 = Lv.periodic[1] && n1 > 1 && n1 % 2 == 1;
     const bool odd2 = Lv.periodic[2] && n2 > 1 && n2 % 2 == 1;
@@ -754,18 +863,24 @@ struct SmoothPlane {
 };
 
 /// f(q, sum) for every position q of row w (x of the row: xr), sum the neighbour sum there: by
-/// vectors of L::W lanes inside each half, one by one at its ends. f takes a lane type or T and
-/// must give the same result when called twice for a position (see split_interior).
+/// vectors of L::W lanes inside each half, one by one at its ends (ends: the row's HalfEnds of
+/// half 0 and 1, no cell skipped). f takes a lane type or T and must give the same result when
+/// called twice for a position (see split_interior). only >= 0: that half alone.
 template <bool Unit, class L, class T, class F>
-FLAGSIM_INLINE void each_cell_sum(const SplitRow<T>& w, const T* xr, const F& f, int only = -1) {
+FLAGSIM_INLINE void each_cell_sum(const SplitRow<T>& w, const T* xr, const HalfEnds* ends,
+                                  const F& f, int only = -1) {
   for (int h = 0; h < 2; ++h) {
     if (only >= 0 && h != only) continue;
     int lo, hi;
     split_interior<Unit, L>(w, xr, h, lo, hi, f);
-    for_each_end(half_len(w.n2, h), lo, hi, [&](int e) FLAGSIM_INLINE_LAMBDA {
-      const int k = 2 * e + h;
-      f(split_pos(k, w.n2), split_cell_sum<Unit>(w, xr, k));
-    });
+    const HalfEnds& E = ends[h];
+    for (int t = 0; t < E.n; ++t) {
+      const int q = E.q[t], qm = E.qm[t], qp = E.qp[t];
+      const T xkm = qm >= 0 ? xr[qm] : T(0), xkp = qp >= 0 ? xr[qp] : T(0);
+      T ckm = T(0);
+      if constexpr (!Unit) ckm = qm >= 0 ? w.ck[qm] : T(0);
+      f(q, split_sum<Unit, T>(w, xr, q, xkm, xkp, ckm));
+    }
   }
 }
 
@@ -774,8 +889,12 @@ struct ResidualPlane {
   template <class L, bool Unit, class T>
   FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
     const MultigridLevel<T>& Lv = *a.L;
+    RowWalker<T> rw(a, i);
+    const HalfEnds ends[2] = {HalfEnds(rw.w.n2, rw.w.wrap2, 0, false),
+                              HalfEnds(rw.w.n2, rw.w.wrap2, 1, false)};
     for (int j = 0; j < Lv.shape.n[1]; ++j) {
-      const SplitRow<T> w = split_row(a, i, j);
+      rw.to_row(j);
+      const SplitRow<T>& w = rw.w;
       const T* xr = a.x + w.base;
       const T* br = a.b + w.base;
       const T* dg = Lv.diag.data() + w.base;
@@ -784,7 +903,7 @@ struct ResidualPlane {
       // colour 0's half only: colour 1's residual is 0, which the restriction takes as read
       const int only = a.colour0_only ? (i + j) & 1 : -1;
       each_cell_sum<Unit, L>(
-          w, xr,
+          w, xr, ends,
           [&](int q, const auto& sum) FLAGSIM_INLINE_LAMBDA {
             using S = std::decay_t<decltype(sum)>;
             const S ax = load_lanes<S>(dg + q) * load_lanes<S>(xr + q) - sum;
@@ -941,12 +1060,16 @@ struct ProductPlane {
   FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
     const MultigridLevel<T>& Lv = *a.L;
     const int n1 = Lv.shape.n[1], n2 = Lv.shape.n[2];
+    RowWalker<T> rw(a, i);
+    const HalfEnds ends[2] = {HalfEnds(n2, rw.w.wrap2, 0, false),
+                              HalfEnds(n2, rw.w.wrap2, 1, false)};
     for (int j = 0; j < n1; ++j) {
-      const SplitRow<T> w = split_row(a, i, j);
+      rw.to_row(j);
+      const SplitRow<T>& w = rw.w;
       const T* xr = a.x + w.base;
       const MgScalar* dg = a.diag_f + w.base;
       T* yr = a.r + w.base;
-      each_cell_sum<Unit, L>(w, xr, [&](int q, const auto& sum) FLAGSIM_INLINE_LAMBDA {
+      each_cell_sum<Unit, L>(w, xr, ends, [&](int q, const auto& sum) FLAGSIM_INLINE_LAMBDA {
         using S = std::decay_t<decltype(sum)>;
         const S zero{};
         S d;
@@ -1200,10 +1323,10 @@ struct RestrictPlane {
         nat[K] = (w[0] * tmp[split_pos(f[0], nf2)] + w[1] * tmp[split_pos(f[1], nf2)]) +
                  (w[2] * tmp[split_pos(f[2], nf2)] + w[3] * tmp[split_pos(f[3], nf2)]);
       }
-      for (int K = 0; K < nc2; ++K) {
-        const int q = split_pos(K, nc2);
-        out[q] = active[q] != T(0) ? nat[K] : T(0);
-      }
+      // to the coarse split row: even K to its first half, odd K to its second
+      const int nec = (nc2 + 1) / 2, noc = nc2 / 2;
+      for (int e = 0; e < nec; ++e) out[e] = active[e] != T(0) ? nat[2 * e] : T(0);
+      for (int o = 0; o < noc; ++o) out[nec + o] = active[nec + o] != T(0) ? nat[2 * o + 1] : T(0);
     }
   }
 };
@@ -1231,8 +1354,13 @@ struct ProlongPlane {
         for (int q = even ? 0 : nef; q < (odd ? nf2 : nef); ++q) xr[q] += nr[q] * tmp[q];
         continue;
       }
-      const int nec = (nc2 + 1) / 2;
-      for (int K = 0; K < nc2; ++K) nat[K] = tmp[(K & 1) ? nec + (K >> 1) : (K >> 1)];
+      // the coarse split row to natural order: its two halves interleaved
+      const int nec = (nc2 + 1) / 2, noc = nc2 / 2;
+      for (int o = 0; o < noc; ++o) {
+        nat[2 * o] = tmp[o];
+        nat[2 * o + 1] = tmp[nec + o];
+      }
+      if (nec > noc) nat[nc2 - 1] = tmp[nec - 1];
       const T* w = F.p_w[2].data();
       const int32_t* c = F.p_idx[2].data();
       auto edge = [&](int k) {

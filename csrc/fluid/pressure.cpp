@@ -17,7 +17,7 @@
 namespace flagsim {
 
 template <class T>
-void divergence(const MacGrid<T>& u, T* div, int row_stride) {
+void divergence(const MacGrid<T>& u, T* div, int row_stride, double scale) {
   const GridGeometry& g = u.geo;
   const int nx = g.nx, ny = g.ny, nz = g.nz;
   const std::size_t stride = row_stride > 0 ? std::size_t(row_stride) : std::size_t(nz);
@@ -25,24 +25,32 @@ void divergence(const MacGrid<T>& u, T* div, int row_stride) {
   const double inv_h = 1.0 / g.h;
   const Shape3 su = u.shape[0], sv = u.shape[1], sw = u.shape[2], sc = g.cells();
   const T *U = u.comp[0].data(), *V = u.comp[1].data(), *W = u.comp[2].data();
-  parallel_for_if(Index(sc.size()) > kGridParallelGrain, long(nx) * ny, [&](Index r) {
-    const int i = int(r / ny), j = int(r % ny);
-    const int ip = (per && i + 1 == nx) ? 0 : i + 1;
-    const int jp = (per && j + 1 == ny) ? 0 : j + 1;
-    const T *u0 = U + su.index(i, j, 0), *u1 = U + su.index(ip, j, 0);
-    const T *v0 = V + sv.index(i, j, 0), *v1 = V + sv.index(i, jp, 0);
-    const T* w0 = W + sw.index(i, j, 0);
-    T* d = div + std::size_t(r) * stride;
-    const int kend = per ? nz - 1 : nz;  // periodic: the last cell's top face is face 0
-    for (int k = 0; k < kend; ++k)
-      d[k] = T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[k + 1]) - w0[k])) *
-               inv_h);
-    if (per) {
-      const int k = nz - 1;
-      d[k] =
-          T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[0]) - w0[k])) * inv_h);
-    }
-  });
+  // One row: out(v) of each cell's T divergence v; the periodic row's last cell reads face 0.
+  auto rows = [&](auto out) {
+    parallel_for_if(Index(sc.size()) > kGridParallelGrain, long(nx) * ny, [&](Index r) {
+      const int i = int(r / ny), j = int(r % ny);
+      const int ip = (per && i + 1 == nx) ? 0 : i + 1;
+      const int jp = (per && j + 1 == ny) ? 0 : j + 1;
+      const T *u0 = U + su.index(i, j, 0), *u1 = U + su.index(ip, j, 0);
+      const T *v0 = V + sv.index(i, j, 0), *v1 = V + sv.index(i, jp, 0);
+      const T* w0 = W + sw.index(i, j, 0);
+      T* d = div + std::size_t(r) * stride;
+      const int kend = per ? nz - 1 : nz;  // periodic: the last cell's top face is face 0
+      for (int k = 0; k < kend; ++k)
+        d[k] = out(
+            T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[k + 1]) - w0[k])) *
+              inv_h));
+      if (per) {
+        const int k = nz - 1;
+        d[k] = out(T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[0]) - w0[k])) *
+                     inv_h));
+      }
+    });
+  };
+  if (scale == 0)
+    rows([](T v) { return v; });
+  else
+    rows([scale](T v) { return T(scale * v); });
 }
 
 Laplace7 pressure_operator(const GridGeometry& geo) {
@@ -94,11 +102,15 @@ void subtract_gradient(const T* phi, MacGrid<T>& u, int row_stride) {
         if (held) return;
         int lo[2] = {i, j}, hi[2] = {i, j};
         lo[c] = per ? (f == 0 ? nc - 1 : f - 1) : f - 1;
+        const int n = sh.n[2];
         const T* ph = (per || f < nc) ? phi_row(hi[0], hi[1]) : nullptr;  // null: ghost 0
         const T* pl = lo[c] >= 0 ? phi_row(lo[0], lo[1]) : nullptr;
-        for (int k = 0; k < sh.n[2]; ++k) {
-          const T a = ph ? ph[k] : T(0), b = pl ? pl[k] : T(0);
-          dst[k] -= (a - b) * inv_h;
+        if (ph && pl) {
+          for (int k = 0; k < n; ++k) dst[k] -= (ph[k] - pl[k]) * inv_h;
+        } else if (pl) {  // the open end: p = 0 in the ghost cell beyond
+          for (int k = 0; k < n; ++k) dst[k] -= (T(0) - pl[k]) * inv_h;
+        } else if (ph) {
+          for (int k = 0; k < n; ++k) dst[k] -= (ph[k] - T(0)) * inv_h;
         }
       } else {
         const T* pr = phi_row(i, j);
@@ -574,7 +586,7 @@ T* FftProjector<T>::scratch(int& stride) const {
 #endif
 
 #define FLAGSIM_INSTANTIATE_PRESSURE(T)                                            \
-  template void divergence<T>(const MacGrid<T>&, T*, int);                         \
+  template void divergence<T>(const MacGrid<T>&, T*, int, double);                 \
   template void subtract_gradient<T>(const T*, MacGrid<T>&, int);                  \
   template bool subtract_gradient_periodic<T>(const T*, int, MacGrid<T>&);         \
   template void apply_tunnel_boundary<T>(const Vec3&, const double*, MacGrid<T>&); \

@@ -15,9 +15,11 @@
 namespace flagsim {
 
 /// Cell divergence of the face field (1/s). div: nx*ny*nz, C order, each (i, j) row of nz values
-/// starting row_stride values after the previous one (0: nz, contiguous).
+/// starting row_stride values after the previous one (0: nz, contiguous). scale != 0: div =
+/// T(scale * T(div u)) in the same pass, the bits of scaling it afterwards (the pressure solve's
+/// right-hand side -h^2 div u, unit m).
 template <class T>
-void divergence(const MacGrid<T>& u, T* div, int row_stride = 0);
+void divergence(const MacGrid<T>& u, T* div, int row_stride = 0, double scale = 0);
 
 /// K-operator of the pressure solve for this grid (periodic, or the tunnel conditions above).
 Laplace7 pressure_operator(const GridGeometry& geo);

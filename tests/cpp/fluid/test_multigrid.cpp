@@ -246,7 +246,9 @@ TEST(PressureMultigrid, SameBitsAtEveryVectorWidth) {
   // Every cell by one expression at every width (a last vector may overlap the one before and
   // recompute cells), dot products in 8 fixed lanes: 16-byte and 32-byte vectors agree.
   if (vector_bytes() < 32) GTEST_SKIP() << "this CPU has one vector width only (no AVX)";
-  Laplace7 op = pressure_like(28, 18, 22, true);  // rows of 22: an overlapping last vector
+  // Rows of 22: an overlapping last vector; level 1's rows of 11: halves shorter than a 32-byte
+  // vector, which the 32-byte code runs by 16-byte vectors.
+  Laplace7 op = pressure_like(28, 18, 22, true);
   const AlignedVector<uint8_t> mask = box_mask(op.shape);
   op.solid = mask.data();
   const std::size_t n = op.shape.size();
