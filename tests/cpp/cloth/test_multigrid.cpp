@@ -74,8 +74,11 @@ TEST_P(Multigrid32, CycleIsPositiveHomogeneousAndContracts) {
     EXPECT_GT(dot(x, vx), 0.0);
     multigrid_vcycle(topo, s.sys, s.mg, MatX3(-3.0 * x), v3x);
     EXPECT_LE((v3x + 3.0 * vx).norm(), 1e-12 * v3x.norm());
-    for (Index i = 0; i < topo.num_vertices(); ++i)
-      if (topo.pinned(i)) EXPECT_EQ(vx.row(i).norm(), 0.0);
+    for (Index i = 0; i < topo.num_vertices(); ++i) {
+      if (topo.pinned(i)) {
+        EXPECT_EQ(vx.row(i).norm(), 0.0);
+      }
+    }
   }
   // As a solver, e <- e - V(A e): the A-norm contraction of the slowest error, found by repeating
   // the step (power iteration from a random e). Gauss-Seidel alone takes a random error down by

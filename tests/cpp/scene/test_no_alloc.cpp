@@ -45,7 +45,9 @@ TEST(NoAlloc, CounterSeesOperatorNewAndEigenTemporaries) {
     EXPECT_NEAR(c(0, 0), a(0, 0) + b(0, 0), 1e-15);
   }
   EXPECT_GE(n_new, 2);
-  if (testing::counts_c_allocations()) EXPECT_GE(n_eigen, 1);
+  if (testing::counts_c_allocations()) {
+    EXPECT_GE(n_eigen, 1);
+  }
 }
 
 long allocations_in_steps(Simulation& sim, long steps) {
