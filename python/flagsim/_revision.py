@@ -26,32 +26,17 @@ def _checkout_revision(where: str) -> str:
     """HEAD of the git checkout whose tracked files include `where`/__init__.py (+ "-dirty"), or
     "" if there is none: a package installed into a virtual environment inside a checkout is
     not that checkout's source."""
+
+    def git(*args):
+        return subprocess.run(["git", *args], cwd=where, capture_output=True, text=True, timeout=10)
+
     try:
-        tracked = subprocess.run(
-            ["git", "ls-files", "--error-unmatch", "__init__.py"],
-            cwd=where,
-            capture_output=True,
-            text=True,
-            timeout=10,
-        )
-        if tracked.returncode != 0:
+        if git("ls-files", "--error-unmatch", "__init__.py").returncode != 0:
             return ""
-        rev = subprocess.run(
-            ["git", "rev-parse", "--short=12", "HEAD"],
-            cwd=where,
-            capture_output=True,
-            text=True,
-            timeout=10,
-        )
+        rev = git("rev-parse", "--short=12", "HEAD")
         if rev.returncode != 0 or not rev.stdout.strip():
             return ""
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
-            cwd=where,
-            capture_output=True,
-            text=True,
-            timeout=10,
-        )
-        return rev.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
+        dirty = git("status", "--porcelain", "--untracked-files=no").stdout.strip()
+        return rev.stdout.strip() + ("-dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
         return ""

@@ -34,6 +34,18 @@ def falling_flag(**solid):
     return s
 
 
+def assert_rests_on_the_box(x, on_top, atol):
+    """More than `on_top` vertices rest on BOX's top face (z = -0.05) at the 5 mm thickness
+    (within atol), none is inside the thickness, and the rest hangs down over the edges."""
+    d = np.abs(x - BOX["center"]) - BOX["half_size"]
+    outside = np.linalg.norm(np.maximum(d, 0), axis=1) + np.minimum(d.max(axis=1), 0)
+    assert outside.min() > 0.005 * (1 - 1e-2)
+    top = (np.abs(x[:, 0] - 0.3) < 0.1) & (np.abs(x[:, 1] + 0.2) < 0.06)
+    assert top.sum() > on_top
+    np.testing.assert_allclose(x[top, 2], -0.05 + 0.005, atol=atol)
+    assert x[:, 2].min() < -0.1
+
+
 def test_flag_dropped_on_a_box_and_on_its_mesh_rests_the_same():
     v, f = box_mesh(BOX["center"], BOX["half_size"])
     rests = []
@@ -43,15 +55,7 @@ def test_flag_dropped_on_a_box_and_on_its_mesh_rests_the_same():
         sim.step(200)  # 1 s: falls 2 cm, drapes and settles
         rests.append(sim.positions.copy())
     np.testing.assert_allclose(rests[1], rests[0], rtol=0, atol=1e-6)
-    # resting on the top face (z = -0.05), the thickness kept, nothing inside the box
-    x = rests[0]
-    d = np.abs(x - BOX["center"]) - BOX["half_size"]
-    outside = np.linalg.norm(np.maximum(d, 0), axis=1) + np.minimum(d.max(axis=1), 0)
-    assert outside.min() > 0.005 * (1 - 1e-2)
-    on_top = (np.abs(x[:, 0] - 0.3) < 0.1) & (np.abs(x[:, 1] + 0.2) < 0.06)
-    assert on_top.sum() > 4
-    np.testing.assert_allclose(x[on_top, 2], -0.05 + 0.005, atol=2e-3)
-    assert x[:, 2].min() < -0.1  # the rest hangs down over the edges
+    assert_rests_on_the_box(rests[0], on_top=4, atol=2e-3)
 
 
 def test_a_flag_draped_over_a_box_rests_without_redoing_steps():
@@ -71,13 +75,7 @@ def test_a_flag_draped_over_a_box_rests_without_redoing_steps():
     ledger = sim.energy_ledger()
     assert redone == 0
     assert abs(ledger["solids"]) < 0.05 * ledger["gravity"]
-    x = sim.positions
-    d = np.abs(x - BOX["center"]) - BOX["half_size"]
-    outside = np.linalg.norm(np.maximum(d, 0), axis=1) + np.minimum(d.max(axis=1), 0)
-    assert outside.min() > 0.005 * (1 - 1e-2)
-    on_top = (np.abs(x[:, 0] - 0.3) < 0.1) & (np.abs(x[:, 1] + 0.2) < 0.06)
-    assert on_top.sum() > 50
-    np.testing.assert_allclose(x[on_top, 2], -0.05 + 0.005, atol=1e-3)
+    assert_rests_on_the_box(sim.positions, on_top=50, atol=1e-3)
     weight = sim.node_mass.sum() * 9.81 * sim.time
     assert np.abs(sim.pole_impulse).max() < 1e-4 * weight
 
