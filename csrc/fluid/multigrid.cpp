@@ -624,45 +624,6 @@ FLAGSIM_INLINE SplitRow<T> split_row(const LevelArgs<T>& a, int i, int j) {
   return w;
 }
 
-/// The rows of plane i in order, their SplitRow advanced row by row: the plane's neighbouring
-/// planes and the wraps along j are looked up once per plane, not per row (split_row's result,
-/// the same pointers).
-template <class T>
-struct RowWalker {
-  SplitRow<T> w;
-  const T *x, *zero, *c1;
-  std::size_t plane;  // index of (i, 0, 0)
-  int n1;
-  bool wrap1;  // j wraps (periodic, more than one row)
-  FLAGSIM_INLINE RowWalker(const LevelArgs<T>& a, int i) {
-    const MultigridLevel<T>& L = *a.L;
-    w = split_row(a, i, 0);
-    x = a.x;
-    zero = a.zero;
-    c1 = L.unit ? nullptr : L.c[1].data();
-    plane = w.base;
-    n1 = L.shape.n[1];
-    wrap1 = L.periodic[1] && n1 > 1;
-  }
-  /// Row j's pointers (j = 0, 1, ... in order; row 0 is set by the constructor).
-  FLAGSIM_INLINE void to_row(int j) {
-    if (j == 0) return;
-    const std::size_t n2 = std::size_t(w.n2);
-    w.base += n2;
-    if (w.xim != zero) w.xim += n2;
-    if (w.xip != zero) w.xip += n2;
-    w.xjm = x + w.base - n2;
-    w.xjp = j + 1 < n1 ? x + w.base + n2 : (wrap1 ? x + plane : zero);
-    if (c1) {
-      if (w.cim != zero) w.cim += n2;
-      w.cip += n2;
-      w.cjm = c1 + w.base - n2;
-      w.cjp += n2;
-      w.ck += n2;
-    }
-  }
-};
-
 /// The cells of half h of a row outside split_interior's interior (at most two; all of them on a
 /// row of at most 3 cells): their split positions and those of their k - 1 and k + 1 (-1: none,
 /// beyond a bounded end), the same for every row of a level.
@@ -688,6 +649,47 @@ struct HalfEnds {
     } else {
       for (int e = 0; e < lo; ++e) add(e);
       for (int e = hi; e < len; ++e) add(e);
+    }
+  }
+};
+
+/// The rows of plane i in order, their SplitRow advanced row by row: the plane's neighbouring
+/// planes and the wraps along j are looked up once per plane, not per row (split_row's result,
+/// the same pointers); with each half's end cells (the same for every row).
+template <class T>
+struct RowWalker {
+  SplitRow<T> w;
+  HalfEnds ends[2];
+  const T *x, *zero, *c1;
+  std::size_t plane;  // index of (i, 0, 0)
+  int n1;
+  bool wrap1;  // j wraps (periodic, more than one row)
+  FLAGSIM_INLINE RowWalker(const LevelArgs<T>& a, int i)
+      : w(split_row(a, i, 0)),
+        ends{HalfEnds(w.n2, w.wrap2, 0, false), HalfEnds(w.n2, w.wrap2, 1, false)} {
+    const MultigridLevel<T>& L = *a.L;
+    x = a.x;
+    zero = a.zero;
+    c1 = L.unit ? nullptr : L.c[1].data();
+    plane = w.base;
+    n1 = L.shape.n[1];
+    wrap1 = L.periodic[1] && n1 > 1;
+  }
+  /// Row j's pointers (j = 0, 1, ... in order; row 0 is set by the constructor).
+  FLAGSIM_INLINE void to_row(int j) {
+    if (j == 0) return;
+    const std::size_t n2 = std::size_t(w.n2);
+    w.base += n2;
+    if (w.xim != zero) w.xim += n2;
+    if (w.xip != zero) w.xip += n2;
+    w.xjm = x + w.base - n2;
+    w.xjp = j + 1 < n1 ? x + w.base + n2 : (wrap1 ? x + plane : zero);
+    if (c1) {
+      if (w.cim != zero) w.cim += n2;
+      w.cip += n2;
+      w.cjm = c1 + w.base - n2;
+      w.cjp += n2;
+      w.ck += n2;
     }
   }
 };
@@ -802,8 +804,6 @@ struct SmoothPlane {
     const int n0 = sh.n[0], n1 = sh.n[1], n2 = sh.n[2];
     if (Lv.passes == 1) {  // no wrap pass: every row whole, its ends from a table
       RowWalker<T> rw(a, i);
-      const HalfEnds ends[2] = {HalfEnds(n2, rw.w.wrap2, 0, false),
-                                HalfEnds(n2, rw.w.wrap2, 1, false)};
       for (int j = 0; j < n1; ++j) {
         rw.to_row(j);
         const SplitRow<T>& w = rw.w;
@@ -817,7 +817,7 @@ struct SmoothPlane {
               using S = std::decay_t<decltype(sum)>;
               store_lanes(xr + q, load_lanes<S>(dr + q) * (load_lanes<S>(br + q) + sum));
             });
-        const HalfEnds& E = ends[h];
+        const HalfEnds& E = rw.ends[h];
         for (int t = 0; t < E.n; ++t) {
           const int q = E.q[t], qm = E.qm[t], qp = E.qp[t];
           const T xkm = qm >= 0 ? xr[qm] : T(0), xkp = qp >= 0 ? xr[qp] : T(0);
@@ -890,8 +890,6 @@ struct ResidualPlane {
   FLAGSIM_INLINE static void run(const LevelArgs<T>& a, int i) {
     const MultigridLevel<T>& Lv = *a.L;
     RowWalker<T> rw(a, i);
-    const HalfEnds ends[2] = {HalfEnds(rw.w.n2, rw.w.wrap2, 0, false),
-                              HalfEnds(rw.w.n2, rw.w.wrap2, 1, false)};
     for (int j = 0; j < Lv.shape.n[1]; ++j) {
       rw.to_row(j);
       const SplitRow<T>& w = rw.w;
@@ -903,7 +901,7 @@ struct ResidualPlane {
       // colour 0's half only: colour 1's residual is 0, which the restriction takes as read
       const int only = a.colour0_only ? (i + j) & 1 : -1;
       each_cell_sum<Unit, L>(
-          w, xr, ends,
+          w, xr, rw.ends,
           [&](int q, const auto& sum) FLAGSIM_INLINE_LAMBDA {
             using S = std::decay_t<decltype(sum)>;
             const S ax = load_lanes<S>(dg + q) * load_lanes<S>(xr + q) - sum;
@@ -1061,15 +1059,13 @@ struct ProductPlane {
     const MultigridLevel<T>& Lv = *a.L;
     const int n1 = Lv.shape.n[1], n2 = Lv.shape.n[2];
     RowWalker<T> rw(a, i);
-    const HalfEnds ends[2] = {HalfEnds(n2, rw.w.wrap2, 0, false),
-                              HalfEnds(n2, rw.w.wrap2, 1, false)};
     for (int j = 0; j < n1; ++j) {
       rw.to_row(j);
       const SplitRow<T>& w = rw.w;
       const T* xr = a.x + w.base;
       const MgScalar* dg = a.diag_f + w.base;
       T* yr = a.r + w.base;
-      each_cell_sum<Unit, L>(w, xr, ends, [&](int q, const auto& sum) FLAGSIM_INLINE_LAMBDA {
+      each_cell_sum<Unit, L>(w, xr, rw.ends, [&](int q, const auto& sum) FLAGSIM_INLINE_LAMBDA {
         using S = std::decay_t<decltype(sum)>;
         const S zero{};
         S d;
