@@ -164,17 +164,25 @@ TEST(Advect, PaddedComponentWrapsItsGhosts) {
   EXPECT_EQ(p.data[p.index(4, 3, 2)], 3.0);
 }
 
+// A periodic 6 x 5 x 21 field of normal values of standard deviation `scale` (m/s): rows of 21
+// nodes leave a scalar tail at every vector width.
+template <class T>
+MacGrid<T> random_width_field(unsigned seed, double scale) {
+  MacGrid<T> u(periodic_geometry(6, 5, 21));
+  std::mt19937 rng(seed);
+  std::normal_distribution<double> n(0.0, scale);
+  for (auto& comp : u.comp)
+    for (T& x : comp) x = T(n(rng));
+  return u;
+}
+
 // The fast path's vector widths (32-byte AVX where the CPU has it, 16-byte SSE2) do the same
 // operations per lane, so they give the same bits, in double and in float; rows of 21 nodes
 // leave a scalar tail at every width.
 template <class T>
 void expect_widths_agree(double scale) {
-  const GridGeometry g = periodic_geometry(6, 5, 21);
-  MacGrid<T> u0(g);
-  std::mt19937 rng(17);
-  std::normal_distribution<double> n(0.0, scale);
-  for (auto& comp : u0.comp)
-    for (T& x : comp) x = T(n(rng));
+  const MacGrid<T> u0 = random_width_field<T>(17, scale);
+  const GridGeometry& g = u0.geo;
   auto run = [&](int cap) {
     vector_bytes(cap);
     MacGrid<T> u = u0, hat(g);
@@ -206,12 +214,8 @@ TEST(Advect, PeriodicFastPathVectorWidthsGiveTheSameBits) {
 // after MacCormack, at both vector widths, in double and in float.
 template <class T>
 void expect_viscous_term_exact(bool maccormack, double scale) {
-  const GridGeometry g = periodic_geometry(6, 5, 21);
-  MacGrid<T> u0(g);
-  std::mt19937 rng(23);
-  std::normal_distribution<double> n(0.0, scale);
-  for (auto& comp : u0.comp)
-    for (T& x : comp) x = T(n(rng));
+  const MacGrid<T> u0 = random_width_field<T>(23, scale);
+  const GridGeometry& g = u0.geo;
   const double beta = 0.0075;
   auto run = [&](double b, int cap) {
     vector_bytes(cap);
