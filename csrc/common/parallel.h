@@ -78,15 +78,10 @@ inline void for_each_chunk(Index chunks, const Body& body) {
 /// use_team(parallel), else for_each_chunk (with the SideBySide helper when there is one).
 template <class Body>
 inline void run_chunks(bool parallel, Index chunks, const Body& body) {
-#ifdef _OPENMP
   if (use_team(parallel)) {
-#pragma omp parallel for schedule(static)
-    for (Index c = 0; c < chunks; ++c) body(c);
+    parallel_for_if(true, chunks, body);
     return;
   }
-#else
-  (void)parallel;
-#endif
   for_each_chunk(chunks, body);
 }
 
