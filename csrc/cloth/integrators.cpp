@@ -52,10 +52,10 @@ inline void filter_pinned(const ClothTopology& topo, MatX3& a) {
     if (topo.inv_mass[i] == 0.0) a.row(i).setZero();
 }
 
-// The contacts the solve holds: those of fs.contacts that the forces f push into their solid
-// and whose velocity does not leave it (a vertex held twice keeps its first contact). A vertex
-// the last solve held has v . n = 0 to round-off: "leaves" means faster than kLeaving, so that
-// round-off of either sign does not decide it.
+// The contacts the solve holds: those of fs.contacts (one per vertex) that the forces f push into
+// their solid and whose velocity does not leave it. A vertex the last solve held has v . n = 0 to
+// round-off: "leaves" means faster than kLeaving, so that round-off of either sign does not decide
+// it.
 constexpr double kLeaving = 1e-9;  // m/s
 void hold_contacts(const ClothTopology& topo, const ForceSet& fs, const MatX3& f, const MatX3& v,
                    std::vector<RestingContact>& held) {
@@ -63,7 +63,7 @@ void hold_contacts(const ClothTopology& topo, const ForceSet& fs, const MatX3& f
   if (!fs.contacts) return;
   for (const RestingContact& c : *fs.contacts) {
     const Index i = c.vertex;
-    if (topo.inv_mass[i] == 0.0 || (!held.empty() && held.back().vertex == c.vertex)) continue;
+    if (topo.inv_mass[i] == 0.0) continue;
     if (f.row(i).dot(c.normal) < 0 && v.row(i).dot(c.normal) <= kLeaving) held.push_back(c);
   }
 }
@@ -74,6 +74,13 @@ inline void filter_held(const std::vector<RestingContact>& held, MatX3& a) {
     const double an = a.row(c.vertex).dot(c.normal);
     a.row(c.vertex) -= an * c.normal.transpose();
   }
+}
+
+// dv = S dv + z, z = -(v . n) n on the held rows: no velocity along n at the piece's end.
+inline void prescribe_held(const std::vector<RestingContact>& held, const MatX3& v, MatX3& dv) {
+  filter_held(held, dv);
+  for (const RestingContact& c : held)
+    dv.row(c.vertex) -= v.row(c.vertex).dot(c.normal) * c.normal.transpose();
 }
 
 // The gravity the energy bookkeeping sees: none when the stage is not built.
@@ -324,8 +331,8 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   // b = h (f0 + h K v0)
   s.b = h * (s.f + h * s.tmp);
   filter_pinned(topo, s.b);
-  // Held contacts: dv = S dv + z with z = -(v . n) n (no velocity along n at the end), r = S (b -
-  // A dv), and every product and preconditioned residual filtered by S (Baraff-Witkin §5.3).
+  // Held contacts: dv = S dv + z (prescribe_held), r = S (b - A dv), and every product and
+  // preconditioned residual filtered by S (Baraff-Witkin §5.3).
   hold_contacts(topo, fs, s.f, v, s.held);
   for (const RestingContact& c : s.held)  // the solids' impulse is A dv - b along n (b unfiltered)
     work.contact_impulse -= s.b.row(c.vertex).dot(c.normal) * c.normal;
@@ -338,9 +345,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   // product). Never further than dv_1 alone in that norm, so never worse than it when the motion
   // turns, and near the straight-line extrapolation (theta ~ 1) when it is smooth.
   filter_pinned(topo, s.dv);
-  filter_held(s.held, s.dv);
-  for (const RestingContact& c : s.held)
-    s.dv.row(c.vertex) -= v.row(c.vertex).dot(c.normal) * c.normal.transpose();
+  prescribe_held(s.held, v, s.dv);
   apply_system(topo, A, s.dv, s.q);
   s.r = s.b - s.q;
   filter_held(s.held, s.r);
@@ -358,8 +363,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   const double bnorm = s.b.norm();
   if (bnorm == 0.0) {
     s.dv.setZero();
-    for (const RestingContact& c : s.held)
-      s.dv.row(c.vertex) = -v.row(c.vertex).dot(c.normal) * c.normal.transpose();
+    prescribe_held(s.held, v, s.dv);
   } else {
     const double tol2 = (ip.cg_tolerance * bnorm) * (ip.cg_tolerance * bnorm);
     int it = 0;

@@ -52,11 +52,12 @@ struct ForceSet {
   /// coupling's implicit air response, 1 / (1 + kappa_i); docs/coupling.md). A triangle's
   /// Jacobian block ("triangle" drag) takes the mean of its vertices' factors (kept symmetric).
   const VecX* drag_scale = nullptr;
-  /// Resting contacts, or none. Implicit: each one whose forces at the piece's start push it into
-  /// its solid (f . n < 0) and whose velocity does not leave it (v . n <= 1e-9 m/s) ends the piece
-  /// with no velocity along n, its other two directions solved as usual (Baraff-Witkin 1998 §5.3,
-  /// the filter S = I - n n^T inside CG). Without it the springs pull a draped flag into the solid
-  /// in every solve and the solids' projection pushes it back: energy the check cannot explain.
+  /// Resting contacts (at most one per vertex), or none. Implicit: each one whose forces at the
+  /// piece's start push it into its solid (f . n < 0) and whose velocity does not leave it (v . n
+  /// <= 1e-9 m/s) ends the piece with no velocity along n, its other two directions solved as usual
+  /// (Baraff-Witkin 1998 §5.3, the filter S = I - n n^T inside CG). Without it the springs pull a
+  /// draped flag into the solid in every solve and the solids' projection pushes it back: energy
+  /// the check cannot explain.
   const std::vector<RestingContact>* contacts = nullptr;
 };
 
