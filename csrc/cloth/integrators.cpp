@@ -200,6 +200,23 @@ bool use_multigrid(const ClothTopology& topo, const IntegratorParams& ip,
          topo.num_vertices() >= kAutoMultigridVertices;
 }
 
+// Explicit substeps hold no contact inside their update: a vertex a substep carries through its
+// contact plane (ForceSet::contacts) is put back on it and loses its velocity into it. Substeps
+// are short, so each such move is small; at the end of the step the pole and solids stages
+// would otherwise push back a whole step's worth at once, against the springs.
+void keep_out_of_planes(const ForceSet& fs, MatX3& x, MatX3& v) {
+  if (!fs.contacts) return;
+  const MatX3& normal = *fs.contacts;
+  for (Index i = 0; i < normal.rows(); ++i) {
+    const Vec3 n = row(normal, i);
+    const double gap = x.row(i).dot(n) - (*fs.contact_offset)[i];
+    if (!(gap < 0) || n.isZero()) continue;
+    x.row(i) -= gap * n.transpose();
+    const double vn = v.row(i).dot(n);
+    if (vn < 0) v.row(i) -= vn * n.transpose();
+  }
+}
+
 // Symplectic Euler over h. With ip.adaptive, every substep is at most safety x the stable step
 // estimated from the state at its start (the state can stiffen within a step: a gust accelerates
 // the masses, a stretched spring stiffens), and the substep count is bounded by max_substeps.
@@ -233,6 +250,7 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
       if (fs.drift) work.drift += drift_work(topo, fs, s.f, s.v0, s.fd, hs);
       book_force_work(topo, fs, s.v0, v, hs, s, work);  // forces at the substep's start
     }
+    keep_out_of_planes(fs, x, v);
     if (ip.strain_limit > 0) {
       StageClock::Scope timer(t, Stage::kStrainLimit);
       work.strain_limit +=

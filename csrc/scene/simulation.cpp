@@ -76,8 +76,7 @@ Simulation::Simulation(const Scene& scene, Simulation* host)
   choose_stages();
   drag_impulse_.setZero(forces_.drag ? N : 0, 3);
   if (forces_.drag) forces_.drag_impulse = &drag_impulse_;
-  if ((built(Stage::kSolids) || built(Stage::kPole)) &&
-      scene_.integrator.method == Method::kImplicit) {
+  if (built(Stage::kSolids) || built(Stage::kPole)) {  // explicit: strain limiting reads them
     resting_.setZero(N, 3);
     resting_offset_.setZero(N);
     forces_.contacts = &resting_;
@@ -807,6 +806,7 @@ void Simulation::find_resting_contacts() {
   if (!forces_.contacts) return;
   StageClock::Scope t(&clock_, built(Stage::kSolids) ? Stage::kSolids : Stage::kPole);
   resting_.setZero();
+  resting_offset_.setZero();
   const PoleParams& pole = scene_.pole;
   const bool pole_held = built(Stage::kPole) && !pole_moves_;
   const double pole_plane = (1.0 + kRestingSlack) * pole.radius;
