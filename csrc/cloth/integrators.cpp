@@ -109,6 +109,14 @@ inline void filter_held(const std::vector<RestingContact>& held, MatX3& a) {
   filter_held(held.data(), held.size(), a);
 }
 
+// a without its component into the surface (along -n) on the held rows.
+inline void filter_inward(const std::vector<RestingContact>& held, MatX3& a) {
+  for (const RestingContact& c : held) {
+    const double an = a.row(c.vertex).dot(c.normal);
+    if (an < 0) a.row(c.vertex) -= an * c.normal.transpose();
+  }
+}
+
 // dv = S dv + z, z = (approach - v . n) n on the held rows: velocity `approach` along n at the
 // piece's end.
 inline void prescribe_held(const std::vector<RestingContact>& held, const MatX3& v, MatX3& dv) {
@@ -171,12 +179,11 @@ double timed_energy(const ClothTopology& topo, const ForceSet& fs, const MatX3& 
 // Minus the work of the conservative forces (springs, gravity) as the integrator applied them,
 // f_c = f - drag - k_d (a_j - a_i) - external with f the total applied force (explicit: at the
 // substep's start, damping at velocities a = v; implicit: M dv / h, a = v'), over the drift's
-// share h r of the displacement, J. The first-order work of the prescribed motion: what is left
-// of the change of potential energy is the integrator's own, in its remainder (docs/energy.md).
-// Pinned rows have no drift.
-double drift_work(const ClothTopology& topo, const ForceSet& fs, const MatX3& f, const MatX3& a,
-                  const MatX3& fd, double h) {
-  const MatX3& r = *fs.drift;
+// share h r of the displacement (r: fs.drift as applied), J. The first-order work of the prescribed
+// motion: what is left of the change of potential energy is the integrator's own, in its remainder
+// (docs/energy.md). Pinned rows have no drift.
+double drift_work(const ClothTopology& topo, const ForceSet& fs, const MatX3& r, const MatX3& f,
+                  const MatX3& a, const MatX3& fd, double h) {
   double w = 0;
   for (Index i = 0; i < topo.num_vertices(); ++i) {
     if (topo.inv_mass[i] == 0.0) continue;
@@ -247,7 +254,7 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
     if (fs.drift) x += hs * *fs.drift;
     {
       StageClock::Scope timer(t, Stage::kCheck);
-      if (fs.drift) work.drift += drift_work(topo, fs, s.f, s.v0, s.fd, hs);
+      if (fs.drift) work.drift += drift_work(topo, fs, *fs.drift, s.f, s.v0, s.fd, hs);
       book_force_work(topo, fs, s.v0, v, hs, s, work);  // forces at the substep's start
     }
     keep_out_of_planes(fs, x, v);
@@ -482,7 +489,15 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     v.row(i) += s.dv.row(i);
     x.row(i) += h * v.row(i);
   });
-  if (fs.drift) x += h * *fs.drift;
+  // The drift as applied: none into the surface on a held row (eq. 5's displacement of a vertex
+  // the solve holds on the pole would carry it in, and the pole's stage would push it back).
+  const MatX3* drift = fs.drift;
+  if (drift && !s.held.empty()) {
+    s.tmp = *drift;  // free since b was formed
+    filter_inward(s.held, s.tmp);
+    drift = &s.tmp;
+  }
+  if (drift) x += h * *drift;
   {
     // The linearised end-of-step forces over the displacement h v'; damping is linear in v, so
     // the applied damping is exactly k_d (v'_j - v'_i).
@@ -490,7 +505,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     if (fs.drag) implicit_drag_applied(topo, A, h, s.dv, s.fd);
     if (fs.drift) {
       for (Index i = 0; i < N; ++i) s.q.row(i) = (topo.mass[i] / h) * s.dv.row(i);  // applied f
-      work.drift += drift_work(topo, fs, s.q, v, s.fd, h);
+      work.drift += drift_work(topo, fs, *drift, s.q, v, s.fd, h);
     }
     book_force_work(topo, fs, v, v, h, s, work);
   }
