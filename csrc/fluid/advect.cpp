@@ -634,7 +634,8 @@ struct SlRow {
   double s;  // dt / h in double (the general sampler's trace)
   T beta;    // nu dt / h^2 (explicit diffusion of u^n; read only when the kernel diffuses)
   T* dst;
-  int i, j;  // the row's node indices along x and y
+  int i, j;        // the row's node indices along x and y
+  double x0, x1;   // the row's nodes along x and y in cell units: i + offset, j + offset
 };
 
 /// beta times the 7-point Laplacian (h^2 units) of a padded component at node k of the row that
@@ -757,12 +758,11 @@ FLAGSIM_INLINE bool far_sample(const SlRow<T>& w, int k, V u0, V u1, V u2, V& ou
     const D d0 = part(u0, h), d1 = part(u1, h), d2 = part(u2, h);
     const auto ok = (d0 < reach) & (-d0 < reach) & (d1 < reach) & (-d1 < reach) & (d2 < reach) &
                     (-d2 < reach);  // false for NaN
-    for (int l = 0; l < DW; ++l)
-      if (!ok[l]) return false;
+    if (!all_lanes(ok)) return false;
     const D lane = iota + double(k + h * DW);  // the lanes' k, exactly
     // back = x - d, g = back - offset (node units), as trace() and PaddedRow::corner.
-    const D g0 = ((D{} + (double(w.i) + kO0)) - d0) - kO0;
-    const D g1 = ((D{} + (double(w.j) + kO1)) - d1) - kO1;
+    const D g0 = ((D{} + w.x0) - d0) - kO0;
+    const D g1 = ((D{} + w.x1) - d1) - kO1;
     const D g2 = ((lane + kO2) - d2) - kO2;
     o[0][h] = floor_of(g0, f[0][h]) - w.i;
     o[1][h] = floor_of(g1, f[1][h]) - w.j;
@@ -874,6 +874,7 @@ FLAGSIM_INLINE bool sl_plane_body(SlRow<T> w, int n1, int n2, std::ptrdiff_t sy,
   bool near = true;
   for (int j = 0; j < n1; ++j) {
     w.j = j;
+    w.x1 = j + GridGeometry::offset(C, 1);
     row_done[j] = sl_row_body<C, D, L>(w, n2);
     near = row_done[j] && near;
     w.own += sy;
@@ -982,6 +983,7 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, double s, T beta, T* out) {
     w.dst = out + std::size_t(i) * n1 * n2;
     w.i = i;
     w.j = 0;
+    w.x0 = i + GridGeometry::offset(C, 0);
     unsigned char row_done[kMaxRows];  // rows of at most 4096 nodes (the resolution limit)
     if (plane_fn(w, n1, n2, sy, row_done)) return;
     // Departures of a cell or more (or not finite) that far_sample did not take: those nodes
