@@ -727,6 +727,13 @@ FLAGSIM_INLINE bool far_sample(const SlRow<T>& w, int k, V u0, V u1, V u2, V& ou
     if constexpr (std::is_same<T, double>::value) return D(w.st * x);
     P y;
     std::memcpy(&y, reinterpret_cast<const char*>(&x) + h * sizeof(P), sizeof(P));
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+    if constexpr (sizeof(D) == 32) {  // AVX code: one vcvtps2pd (GCC splits it into 3)
+      D yd;
+      __asm__("vcvtps2pd %1, %0" : "=x"(yd) : "x"(y));
+      return D(w.s * yd);
+    }
+#endif
     return D(w.s * __builtin_convertvector(y, D));
   };
   auto floor_of = [](D g, D& f) FLAGSIM_INLINE_LAMBDA {
