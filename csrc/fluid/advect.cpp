@@ -692,6 +692,32 @@ FLAGSIM_INLINE bool all_lanes(const M& m) {
   return a == ~std::uint64_t(0);
 }
 
+/// Whether every lane, and whether any lane, of a vector compare's result (0 or all ones per
+/// lane) is set. In the AVX code one vmovmskpd / vmovmskps reads the lanes' sign bits (GCC
+/// extracts and ORs the lanes one by one).
+template <class M>
+FLAGSIM_INLINE void all_any_lanes(const M& m, bool& all, bool& any) {
+  constexpr int kLanes = int(sizeof(m) / sizeof(m[0]));
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+  if constexpr (sizeof(M) == 32) {
+    int bits;
+    if constexpr (kLanes == 4)
+      __asm__("vmovmskpd %1, %0" : "=r"(bits) : "x"(m));
+    else
+      __asm__("vmovmskps %1, %0" : "=r"(bits) : "x"(m));
+    all = bits == (1 << kLanes) - 1;
+    any = bits != 0;
+    return;
+  }
+#endif
+  all = true;
+  any = false;
+  for (int lane = 0; lane < kLanes; ++lane) {
+    all = all && m[lane];
+    any = any || m[lane];
+  }
+}
+
 /// Lanes of T, as many as given: the lower nodes' indices (int) and the departure points
 /// (double) in far_sample. double <-> int32 conversions are one instruction each (cvttpd2dq,
 /// cvtdq2pd), int64 ones are not before AVX-512.
@@ -845,11 +871,8 @@ FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
       const V d0 = w.st * u0, d1 = w.st * u1, d2 = w.st * u2;
       const auto in =
           (d0 < one) & (-d0 < one) & (d1 < one) & (-d1 < one) & (d2 < one) & (-d2 < one);
-      bool all_in = true, any_in = false;
-      for (int lane = 0; lane < L::W; ++lane) {
-        all_in = all_in && in[lane];
-        any_in = any_in || in[lane];
-      }
+      bool all_in, any_in;
+      all_any_lanes(in, all_in, any_in);
       V far;
       if (!all_in && far_sample<C>(w, k, u0, u1, u2, far)) {
         // the lanes within a cell keep the upwind form's value (its rounding, as before)
