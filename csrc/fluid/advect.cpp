@@ -634,8 +634,8 @@ struct SlRow {
   double s;  // dt / h in double (the general sampler's trace)
   T beta;    // nu dt / h^2 (explicit diffusion of u^n; read only when the kernel diffuses)
   T* dst;
-  int i, j;        // the row's node indices along x and y
-  double x0, x1;   // the row's nodes along x and y in cell units: i + offset, j + offset
+  int i, j;       // the row's node indices along x and y
+  double x0, x1;  // the row's nodes along x and y in cell units: i + offset, j + offset
 };
 
 /// beta times the 7-point Laplacian (h^2 units) of a padded component at node k of the row that
