@@ -768,7 +768,8 @@ FLAGSIM_INLINE bool far_sample(const SlRow<T>& w, int k, V u0, V u1, V u2, V& ou
     if constexpr (sizeof(D) == 32) {
       // AVX code: vroundpd toward -inf, one instruction for the eight below (GCC splits the
       // int32 -> double conversion of 4 lanes into 4); the same value (g is never -0 here).
-      // (the builtin is not declared in this lambda, which is not compiled for AVX itself)
+      // (inline asm: GCC declares the builtin only in code parsed for AVX, and this lambda
+      // becomes AVX code by inlining)
       __asm__("vroundpd $9, %1, %0" : "=x"(fl) : "x"(g));  // floor, no precision exception
     } else
 #endif
