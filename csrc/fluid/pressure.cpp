@@ -2,6 +2,7 @@
 #include "common/parallel.h"
 #include "common/simd.h"
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <limits>
@@ -130,30 +131,65 @@ void subtract_gradient(const T* phi, MacGrid<T>& u, int row_stride) {
 namespace {
 
 /// dst[k] -= (hi[k] - lo[k]) * inv_h for k in [0, n) (subtract_gradient's arithmetic, the same
-/// bits); returns false when a new value is not finite. The test sums v - v per lane: 0 for a
-/// finite v, NaN for NaN or infinity, and NaN stays NaN (no integer masks: SSE2 has no 64-bit
-/// lane compares, and a mask reduction went scalar).
-template <class T>
+/// bits) on lanes L (Lanes16 or Lanes32 of T, or void: scalars); returns false when a new value
+/// is not finite. The test sums v - v per lane: 0 for a finite v, NaN for NaN or infinity, and
+/// NaN stays NaN (no integer masks: SSE2 has no 64-bit lane compares, and a mask reduction went
+/// scalar).
+template <class L, class T>
 FLAGSIM_INLINE bool gradient_row(T* dst, const T* hi, const T* lo, int n, T inv_h) {
   int k = 0;
   T zero = 0;
-#ifdef FLAGSIM_HAVE_VECTORS
-  using V = typename NarrowLanes<T>::V;
-  constexpr int W = NarrowLanes<T>::W;
-  V zeros = V{};
-  for (; k + W <= n; k += W) {
-    const V v = load_lanes<V>(dst + k) - (load_lanes<V>(hi + k) - load_lanes<V>(lo + k)) * inv_h;
-    store_lanes(dst + k, v);
-    zeros += v - v;
+  if constexpr (!std::is_void<L>::value) {
+    using V = typename L::V;
+    constexpr int W = L::W;
+    V zeros = V{};
+    for (; k + W <= n; k += W) {
+      const V v = load_lanes<V>(dst + k) - (load_lanes<V>(hi + k) - load_lanes<V>(lo + k)) * inv_h;
+      store_lanes(dst + k, v);
+      zeros += v - v;
+    }
+    for (int l = 0; l < W; ++l) zero += zeros[l];
   }
-  for (int l = 0; l < W; ++l) zero += zeros[l];
-#endif
   for (; k < n; ++k) {
     dst[k] -= (hi[k] - lo[k]) * inv_h;
     zero += dst[k] - dst[k];
   }
   return zero == 0;
 }
+
+/// The faces of the periodic grid's cell row r (all three components) take the gradient of phi
+/// (rows `stride` apart) on lanes L: subtract_gradient_periodic's row.
+template <class L, class T>
+FLAGSIM_INLINE bool gradient_periodic_row(const T* phi, std::size_t stride, int nx, int ny, int nz,
+                                          T inv_h, T* U, T* V, T* W, Index r) {
+  const int i = int(r / ny), j = int(r % ny);
+  const std::size_t row = std::size_t(r) * nz;
+  const T* hi = phi + std::size_t(r) * stride;  // cell (i, j): the faces' upper cell
+  const T* lo_x = phi + (std::size_t(i == 0 ? nx - 1 : i - 1) * ny + j) * stride;
+  const T* lo_y = phi + (std::size_t(i) * ny + (j == 0 ? ny - 1 : j - 1)) * stride;
+  bool ok = gradient_row<L>(U + row, hi, lo_x, nz, inv_h);
+  ok = gradient_row<L>(V + row, hi, lo_y, nz, inv_h) && ok;
+  // Face k of w lies between cells k - 1 and k of the row; face 0 wraps to cell nz - 1.
+  T* w = W + row;
+  w[0] -= (hi[0] - hi[nz - 1]) * inv_h;
+  ok = w[0] - w[0] == 0 && ok;  // false for NaN and infinity
+  return gradient_row<L>(w + 1, hi + 1, hi, nz - 1, inv_h) && ok;
+}
+
+template <class T>
+bool gradient_periodic_row_narrow(const T* phi, std::size_t stride, int nx, int ny, int nz, T inv_h,
+                                  T* U, T* V, T* W, Index r) {
+  return gradient_periodic_row<NarrowLanes<T>>(phi, stride, nx, ny, nz, inv_h, U, V, W, r);
+}
+
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+// The same row on 32-byte vectors (AVX without FMA: the same operations per lane, the same bits).
+template <class T>
+FLAGSIM_TARGET_AVX bool gradient_periodic_row_wide(const T* phi, std::size_t stride, int nx, int ny,
+                                                   int nz, T inv_h, T* U, T* V, T* W, Index r) {
+  return gradient_periodic_row<Lanes32<T>>(phi, stride, nx, ny, nz, inv_h, U, V, W, r);
+}
+#endif
 
 }  // namespace
 
@@ -164,22 +200,15 @@ bool subtract_gradient_periodic(const T* phi, int row_stride, MacGrid<T>& u) {
   const T inv_h = T(1.0 / g.h);
   const std::size_t stride = row_stride > 0 ? std::size_t(row_stride) : std::size_t(nz);
   T *U = u.comp[0].data(), *V = u.comp[1].data(), *W = u.comp[2].data();
+  auto row_fn = &gradient_periodic_row_narrow<T>;
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+  if (vector_bytes() == 32) row_fn = &gradient_periodic_row_wide<T>;
+#endif
   std::atomic<bool> finite{true};  // an AND of per-row answers: the same for any order
   // One task per (i, j) row, all three components: the potential's rows are read once.
   parallel_for_if(Index(g.cells().size()) > kGridParallelGrain, long(nx) * ny, [&](Index r) {
-    const int i = int(r / ny), j = int(r % ny);
-    const std::size_t row = std::size_t(r) * nz;
-    const T* hi = phi + std::size_t(r) * stride;  // cell (i, j): the faces' upper cell
-    const T* lo_x = phi + (std::size_t(i == 0 ? nx - 1 : i - 1) * ny + j) * stride;
-    const T* lo_y = phi + (std::size_t(i) * ny + (j == 0 ? ny - 1 : j - 1)) * stride;
-    bool ok = gradient_row(U + row, hi, lo_x, nz, inv_h);
-    ok = gradient_row(V + row, hi, lo_y, nz, inv_h) && ok;
-    // Face k of w lies between cells k - 1 and k of the row; face 0 wraps to cell nz - 1.
-    T* w = W + row;
-    w[0] -= (hi[0] - hi[nz - 1]) * inv_h;
-    ok = w[0] - w[0] == 0 && ok;  // false for NaN and infinity
-    ok = gradient_row(w + 1, hi + 1, hi, nz - 1, inv_h) && ok;
-    if (!ok) finite.store(false, std::memory_order_relaxed);
+    if (!row_fn(phi, stride, nx, ny, nz, inv_h, U, V, W, r))
+      finite.store(false, std::memory_order_relaxed);
   });
   return finite.load();
 }
@@ -196,11 +225,50 @@ void apply_tunnel_boundary(const Vec3& inflow, const double* weights, MacGrid<T>
     for (int j = 0; j < g.ny; ++j) u.at(2, i, j, 0) = u.at(2, i, j, g.nz) = T(0);
 }
 
+namespace {
+
+// set_mean_flow of one component on a grid below kGridParallelGrain, where deterministic_sum
+// sums its blocks on one thread: the same block sums added in the same order, and the same
+// shift, here in one function so the AVX copy vectorises both loops 32 bytes wide (the same
+// operations per lane: the same bits).
+template <class T>
+FLAGSIM_INLINE void shift_mean_serial(T* q, std::size_t n, double target) {
+  constexpr std::size_t kBlock = 4096;  // deterministic_sum's block (n is far below 256 of them)
+  const auto f = [q](std::size_t i) FLAGSIM_INLINE_LAMBDA { return double(q[i]); };
+  double sum = 0;
+  for (std::size_t b = 0; b < n; b += kBlock) sum += ordered_sum(b, std::min(n, b + kBlock), f);
+  const double shift = target - sum / double(n);
+  if (shift == 0) return;
+  for (std::size_t i = 0; i < n; ++i) q[i] = T(q[i] + shift);
+}
+
+template <class T>
+void shift_mean_narrow(T* q, std::size_t n, double target) {
+  shift_mean_serial(q, n, target);
+}
+
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+template <class T>
+FLAGSIM_TARGET_AVX void shift_mean_wide(T* q, std::size_t n, double target) {
+  shift_mean_serial(q, n, target);
+}
+#endif
+
+}  // namespace
+
 template <class T>
 void set_mean_flow(const Vec3& target, MacGrid<T>& u) {
+  auto serial = &shift_mean_narrow<T>;
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+  if (vector_bytes() == 32) serial = &shift_mean_wide<T>;
+#endif
   for (int c = 0; c < 3; ++c) {
     AlignedVector<T>& q = u.comp[c];
     const std::size_t n = q.size();
+    if (Index(n) <= kGridParallelGrain) {
+      serial(q.data(), n, target[c]);
+      continue;
+    }
     const double mean =
         deterministic_sum(n, [&](std::size_t i) { return double(q[i]); }) / double(n);
     const double shift = target[c] - mean;
