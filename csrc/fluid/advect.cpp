@@ -634,7 +634,8 @@ struct SlRow {
   double s;  // dt / h in double (the general sampler's trace)
   T beta;    // nu dt / h^2 (explicit diffusion of u^n; read only when the kernel diffuses)
   T* dst;
-  int i, j;  // the row's node indices along x and y
+  int i, j;       // the row's node indices along x and y
+  double x0, x1;  // the row's nodes along x and y in cell units: i + offset, j + offset
 };
 
 /// beta times the 7-point Laplacian (h^2 units) of a padded component at node k of the row that
@@ -691,6 +692,32 @@ FLAGSIM_INLINE bool all_lanes(const M& m) {
   return a == ~std::uint64_t(0);
 }
 
+/// Whether every lane, and whether any lane, of a vector compare's result (0 or all ones per
+/// lane) is set. In the AVX code one vmovmskpd / vmovmskps reads the lanes' sign bits (GCC
+/// extracts and ORs the lanes one by one).
+template <class M>
+FLAGSIM_INLINE void all_any_lanes(const M& m, bool& all, bool& any) {
+  constexpr int kLanes = int(sizeof(m) / sizeof(m[0]));
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+  if constexpr (sizeof(M) == 32) {
+    int bits;
+    if constexpr (kLanes == 4)
+      __asm__("vmovmskpd %1, %0" : "=r"(bits) : "x"(m));
+    else
+      __asm__("vmovmskps %1, %0" : "=r"(bits) : "x"(m));
+    all = bits == (1 << kLanes) - 1;
+    any = bits != 0;
+    return;
+  }
+#endif
+  all = true;
+  any = false;
+  for (int lane = 0; lane < kLanes; ++lane) {
+    all = all && m[lane];
+    any = any || m[lane];
+  }
+}
+
 /// Lanes of T, as many as given: the lower nodes' indices (int) and the departure points
 /// (double) in far_sample. double <-> int32 conversions are one instruction each (cvttpd2dq,
 /// cvtdq2pd), int64 ones are not before AVX-512.
@@ -726,13 +753,32 @@ FLAGSIM_INLINE bool far_sample(const SlRow<T>& w, int k, V u0, V u1, V u2, V& ou
     if constexpr (std::is_same<T, double>::value) return D(w.st * x);
     P y;
     std::memcpy(&y, reinterpret_cast<const char*>(&x) + h * sizeof(P), sizeof(P));
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+    if constexpr (sizeof(D) == 32) {  // AVX code: one vcvtps2pd (GCC splits it into 3)
+      D yd;
+      __asm__("vcvtps2pd %1, %0" : "=x"(yd) : "x"(y));
+      return D(w.s * yd);
+    }
+#endif
     return D(w.s * __builtin_convertvector(y, D));
   };
   auto floor_of = [](D g, D& f) FLAGSIM_INLINE_LAMBDA {
-    const D t = __builtin_convertvector(__builtin_convertvector(g, I), D);  // toward zero
-    D one = D{};
-    one += 1.0;
-    const D fl = t - (g < t ? one : D{});  // floor, exactly (|g| < 2^31 here)
+    D fl;
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+    if constexpr (sizeof(D) == 32) {
+      // AVX code: vroundpd toward -inf, one instruction for the eight below (GCC splits the
+      // int32 -> double conversion of 4 lanes into 4); the same value (g is never -0 here).
+      // (inline asm: GCC declares the builtin only in code parsed for AVX, and this lambda
+      // becomes AVX code by inlining)
+      __asm__("vroundpd $9, %1, %0" : "=x"(fl) : "x"(g));  // floor, no precision exception
+    } else
+#endif
+    {
+      const D t = __builtin_convertvector(__builtin_convertvector(g, I), D);  // toward zero
+      D one = D{};
+      one += 1.0;
+      fl = t - (g < t ? one : D{});  // floor, exactly (|g| < 2^31 here)
+    }
     f = g - fl;
     return __builtin_convertvector(fl, I);
   };
@@ -746,12 +792,11 @@ FLAGSIM_INLINE bool far_sample(const SlRow<T>& w, int k, V u0, V u1, V u2, V& ou
     const D d0 = part(u0, h), d1 = part(u1, h), d2 = part(u2, h);
     const auto ok = (d0 < reach) & (-d0 < reach) & (d1 < reach) & (-d1 < reach) & (d2 < reach) &
                     (-d2 < reach);  // false for NaN
-    for (int l = 0; l < DW; ++l)
-      if (!ok[l]) return false;
+    if (!all_lanes(ok)) return false;
     const D lane = iota + double(k + h * DW);  // the lanes' k, exactly
     // back = x - d, g = back - offset (node units), as trace() and PaddedRow::corner.
-    const D g0 = ((D{} + (double(w.i) + kO0)) - d0) - kO0;
-    const D g1 = ((D{} + (double(w.j) + kO1)) - d1) - kO1;
+    const D g0 = ((D{} + w.x0) - d0) - kO0;
+    const D g1 = ((D{} + w.x1) - d1) - kO1;
     const D g2 = ((lane + kO2) - d2) - kO2;
     o[0][h] = floor_of(g0, f[0][h]) - w.i;
     o[1][h] = floor_of(g1, f[1][h]) - w.j;
@@ -827,11 +872,8 @@ FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
       const V d0 = w.st * u0, d1 = w.st * u1, d2 = w.st * u2;
       const auto in =
           (d0 < one) & (-d0 < one) & (d1 < one) & (-d1 < one) & (d2 < one) & (-d2 < one);
-      bool all_in = true, any_in = false;
-      for (int lane = 0; lane < L::W; ++lane) {
-        all_in = all_in && in[lane];
-        any_in = any_in || in[lane];
-      }
+      bool all_in, any_in;
+      all_any_lanes(in, all_in, any_in);
       V far;
       if (!all_in && far_sample<C>(w, k, u0, u1, u2, far)) {
         // the lanes within a cell keep the upwind form's value (its rounding, as before)
@@ -863,6 +905,7 @@ FLAGSIM_INLINE bool sl_plane_body(SlRow<T> w, int n1, int n2, std::ptrdiff_t sy,
   bool near = true;
   for (int j = 0; j < n1; ++j) {
     w.j = j;
+    w.x1 = j + GridGeometry::offset(C, 1);
     row_done[j] = sl_row_body<C, D, L>(w, n2);
     near = row_done[j] && near;
     w.own += sy;
@@ -971,6 +1014,7 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, double s, T beta, T* out) {
     w.dst = out + std::size_t(i) * n1 * n2;
     w.i = i;
     w.j = 0;
+    w.x0 = i + GridGeometry::offset(C, 0);
     unsigned char row_done[kMaxRows];  // rows of at most 4096 nodes (the resolution limit)
     if (plane_fn(w, n1, n2, sy, row_done)) return;
     // Departures of a cell or more (or not finite) that far_sample did not take: those nodes
