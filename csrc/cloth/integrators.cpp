@@ -14,6 +14,7 @@ IntegratorScratch::IntegratorScratch(const ClothTopology& topo) {
   for (MatX3* m : {&f, &fd, &x0, &v0, &dv, &r, &z, &p, &q, &b, &tmp, &dv_prev, &impulse0})
     m->setZero(n, 3);
   held.reserve(std::size_t(n));
+  is_held.assign(std::size_t(n), 0);
   sys.B.resize(topo.num_springs());
   sys.D.resize(n);
   sys.J.reserve(topo.triangles.rows());
@@ -52,35 +53,68 @@ inline void filter_pinned(const ClothTopology& topo, MatX3& a) {
     if (topo.inv_mass[i] == 0.0) a.row(i).setZero();
 }
 
-// The contacts the solve holds: those of fs.contacts (one per vertex) that the forces f push into
-// their solid and whose velocity does not leave it. A vertex the last solve held has v . n = 0 to
-// round-off: "leaves" means faster than kLeaving, so that round-off of either sign does not decide
-// it.
+// The contacts the solve holds first: those of fs.contacts that touch (on or inside their plane),
+// that the forces f push into their solid and whose velocity does not leave it. A vertex the last
+// solve held has v . n = 0 to round-off: "leaves" means faster than kLeaving, so that round-off of
+// either sign does not decide it.
 constexpr double kLeaving = 1e-9;  // m/s
-void hold_contacts(const ClothTopology& topo, const ForceSet& fs, const MatX3& f, const MatX3& v,
-                   std::vector<RestingContact>& held) {
-  held.clear();
+void hold_contacts(const ClothTopology& topo, const ForceSet& fs, const MatX3& f, const MatX3& x,
+                   const MatX3& v, IntegratorScratch& s) {
+  for (const RestingContact& c : s.held) s.is_held[std::size_t(c.vertex)] = 0;
+  s.held.clear();
   if (!fs.contacts) return;
-  for (const RestingContact& c : *fs.contacts) {
-    const Index i = c.vertex;
-    if (topo.inv_mass[i] == 0.0) continue;
-    if (f.row(i).dot(c.normal) < 0 && v.row(i).dot(c.normal) <= kLeaving) held.push_back(c);
+  const MatX3& normal = *fs.contacts;
+  for (Index i = 0; i < normal.rows(); ++i) {
+    const Vec3 n = row(normal, i);
+    if (topo.inv_mass[i] == 0.0 || n.isZero()) continue;
+    const bool touching = x.row(i).dot(n) <= (*fs.contact_offset)[i];
+    if (touching && f.row(i).dot(n) < 0 && v.row(i).dot(n) <= kLeaving) {
+      s.held.push_back({int32_t(i), n, 0.0});
+      s.is_held[std::size_t(i)] = 1;
+    }
   }
 }
 
+// Contacts of fs.contacts not held yet that the answer v + dv carries more than kCrossing through
+// their plane over h: held from now on, ending the piece on the plane (approach -gap / h).
+// Returns how many were added.
+constexpr double kCrossing = 1e-6;  // m
+constexpr int kContactRounds = 3;
+std::size_t hold_crossing(const ClothTopology& topo, const ForceSet& fs, const MatX3& x,
+                          const MatX3& v, const MatX3& dv, double h, IntegratorScratch& s) {
+  if (!fs.contacts) return 0;
+  const std::size_t before = s.held.size();
+  const MatX3& normal = *fs.contacts;
+  for (Index i = 0; i < normal.rows(); ++i) {
+    const Vec3 n = row(normal, i);
+    if (topo.inv_mass[i] == 0.0 || n.isZero() || s.is_held[std::size_t(i)]) continue;
+    const double gap = std::max(0.0, x.row(i).dot(n) - (*fs.contact_offset)[i]);
+    if (h * (v.row(i) + dv.row(i)).dot(n) < -gap - kCrossing) {
+      s.held.push_back({int32_t(i), n, -gap / h});
+      s.is_held[std::size_t(i)] = 1;
+    }
+  }
+  return s.held.size() - before;
+}
+
 // Baraff-Witkin's filter S = I - n n^T on the held contacts' rows.
-inline void filter_held(const std::vector<RestingContact>& held, MatX3& a) {
-  for (const RestingContact& c : held) {
+inline void filter_held(const RestingContact* held, std::size_t n, MatX3& a) {
+  for (std::size_t k = 0; k < n; ++k) {
+    const RestingContact& c = held[k];
     const double an = a.row(c.vertex).dot(c.normal);
     a.row(c.vertex) -= an * c.normal.transpose();
   }
 }
+inline void filter_held(const std::vector<RestingContact>& held, MatX3& a) {
+  filter_held(held.data(), held.size(), a);
+}
 
-// dv = S dv + z, z = -(v . n) n on the held rows: no velocity along n at the piece's end.
+// dv = S dv + z, z = (approach - v . n) n on the held rows: velocity `approach` along n at the
+// piece's end.
 inline void prescribe_held(const std::vector<RestingContact>& held, const MatX3& v, MatX3& dv) {
   filter_held(held, dv);
   for (const RestingContact& c : held)
-    dv.row(c.vertex) -= v.row(c.vertex).dot(c.normal) * c.normal.transpose();
+    dv.row(c.vertex) += (c.approach - v.row(c.vertex).dot(c.normal)) * c.normal.transpose();
 }
 
 // The gravity the energy bookkeeping sees: none when the stage is not built.
@@ -166,6 +200,23 @@ bool use_multigrid(const ClothTopology& topo, const IntegratorParams& ip,
          topo.num_vertices() >= kAutoMultigridVertices;
 }
 
+// Explicit substeps hold no contact inside their update: a vertex a substep carries through its
+// contact plane (ForceSet::contacts) is put back on it and loses its velocity into it. Substeps
+// are short, so each such move is small; at the end of the step the pole and solids stages
+// would otherwise push back a whole step's worth at once, against the springs.
+void keep_out_of_planes(const ForceSet& fs, MatX3& x, MatX3& v) {
+  if (!fs.contacts) return;
+  const MatX3& normal = *fs.contacts;
+  for (Index i = 0; i < normal.rows(); ++i) {
+    const Vec3 n = row(normal, i);
+    const double gap = x.row(i).dot(n) - (*fs.contact_offset)[i];
+    if (!(gap < 0) || n.isZero()) continue;
+    x.row(i) -= gap * n.transpose();
+    const double vn = v.row(i).dot(n);
+    if (vn < 0) v.row(i) -= vn * n.transpose();
+  }
+}
+
 // Symplectic Euler over h. With ip.adaptive, every substep is at most safety x the stable step
 // estimated from the state at its start (the state can stiffen within a step: a gust accelerates
 // the masses, a stretched spring stiffens), and the substep count is bounded by max_substeps.
@@ -199,10 +250,12 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
       if (fs.drift) work.drift += drift_work(topo, fs, s.f, s.v0, s.fd, hs);
       book_force_work(topo, fs, s.v0, v, hs, s, work);  // forces at the substep's start
     }
+    keep_out_of_planes(fs, x, v);
     if (ip.strain_limit > 0) {
       StageClock::Scope timer(t, Stage::kStrainLimit);
-      work.strain_limit += limit_strain_work(topo, gravity_of(fs), ip.strain_limit,
-                                             ip.strain_limit_iterations, x, v);
+      work.strain_limit +=
+          limit_strain_work(topo, gravity_of(fs), ip.strain_limit, ip.strain_limit_iterations, x, v,
+                            fs.contacts, fs.contact_offset);
     }
     ++n;
     done = (h - done <= hs) ? h : done + hs;
@@ -333,10 +386,15 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   filter_pinned(topo, s.b);
   // Held contacts: dv = S dv + z (prescribe_held), r = S (b - A dv), and every product and
   // preconditioned residual filtered by S (Baraff-Witkin §5.3).
-  hold_contacts(topo, fs, s.f, v, s.held);
-  for (const RestingContact& c : s.held)  // the solids' impulse is A dv - b along n (b unfiltered)
-    work.contact_impulse -= s.b.row(c.vertex).dot(c.normal) * c.normal;
-  filter_held(s.held, s.b);
+  hold_contacts(topo, fs, s.f, x, v, s);
+  const auto book_held = [&](std::size_t first) {  // the solids' impulse is A dv - b along n
+    for (std::size_t k = first; k < s.held.size(); ++k) {
+      const RestingContact& c = s.held[k];
+      work.contact_impulse -= s.b.row(c.vertex).dot(c.normal) * c.normal;  // b unfiltered
+    }
+    filter_held(s.held.data() + first, s.held.size() - first, s.b);
+  };
+  book_held(0);
   const bool multigrid = use_multigrid(topo, ip, s);
   if (multigrid) multigrid_setup(topo, A, s.mg);
 
@@ -360,11 +418,14 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     s.dv += theta * s.z;
     s.r -= theta * s.p;
   }
-  const double bnorm = s.b.norm();
-  if (bnorm == 0.0) {
-    s.dv.setZero();
-    prescribe_held(s.held, v, s.dv);
-  } else {
+  // CG from dv with residual r (both filtered): false when it did not converge.
+  const auto solve = [&]() {
+    const double bnorm = s.b.norm();
+    if (bnorm == 0.0) {
+      s.dv.setZero();
+      prescribe_held(s.held, v, s.dv);
+      return true;
+    }
     const double tol2 = (ip.cg_tolerance * bnorm) * (ip.cg_tolerance * bnorm);
     int it = 0;
     bool converged = s.r.squaredNorm() <= tol2;
@@ -397,7 +458,20 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
       rz = rz_new;
     }
     stats.cg_iterations += it;
-    if (!converged) return IntegrateStatus::kCgFailed;
+    return converged;
+  };
+  if (!solve()) return IntegrateStatus::kCgFailed;
+  // Contacts the answer carries through their planes are held too, and the solve finished with
+  // them; a few rounds (the projection stages answer what is left).
+  for (int round = 0; round < kContactRounds; ++round) {
+    const std::size_t first = s.held.size();
+    if (hold_crossing(topo, fs, x, v, s.dv, h, s) == 0) break;
+    book_held(first);
+    prescribe_held(s.held, v, s.dv);
+    apply_system(topo, A, s.dv, s.q);
+    s.r = s.b - s.q;
+    filter_held(s.held, s.r);
+    if (!solve()) return IntegrateStatus::kCgFailed;
   }
   if (!s.held.empty()) {  // the rest of the solids' impulses: A dv along the normals
     apply_system(topo, A, s.dv, s.q);
@@ -423,7 +497,8 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   if (ip.strain_limit > 0) {
     StageClock::Scope timer(t, Stage::kStrainLimit);
     work.strain_limit +=
-        limit_strain_work(topo, gravity_of(fs), ip.strain_limit, ip.strain_limit_iterations, x, v);
+        limit_strain_work(topo, gravity_of(fs), ip.strain_limit, ip.strain_limit_iterations, x, v,
+                          fs.contacts, fs.contact_offset);
   }
   return IntegrateStatus::kOk;
 }

@@ -13,11 +13,13 @@
 
 namespace flagsim {
 
-/// A free vertex resting on a solid: the solid's outward unit normal at it. The implicit solve
-/// holds it there (ForceSet::contacts).
+/// A free vertex held on a solid by the implicit solve: the solid's outward unit normal at it,
+/// and the velocity along it the vertex ends the piece with (0 on the surface; -gap / h when it
+/// starts gap short of the surface, so that it ends there: a speculative contact).
 struct RestingContact {
   int32_t vertex = -1;
   Vec3 normal = Vec3::Zero();
+  double approach = 0;  ///< m/s, <= 0
 };
 
 /// Which force stages a scene built, with their parameters. A stage left out costs nothing.
@@ -52,13 +54,20 @@ struct ForceSet {
   /// coupling's implicit air response, 1 / (1 + kappa_i); docs/coupling.md). A triangle's
   /// Jacobian block ("triangle" drag) takes the mean of its vertices' factors (kept symmetric).
   const VecX* drag_scale = nullptr;
-  /// Resting contacts (at most one per vertex), or none. Implicit: each one whose forces at the
-  /// piece's start push it into its solid (f . n < 0) and whose velocity does not leave it (v . n
-  /// <= 1e-9 m/s) ends the piece with no velocity along n, its other two directions solved as usual
-  /// (Baraff-Witkin 1998 §5.3, the filter S = I - n n^T inside CG). Without it the springs pull a
-  /// draped flag into the solid in every solve and the solids' projection pushes it back: energy
-  /// the check cannot explain.
-  const std::vector<RestingContact>* contacts = nullptr;
+  /// Contact planes of the free vertices near a solid (or the pole) at rest, or none: per vertex
+  /// the outward unit normal n of the surface (a zero row: no contact) and an offset o, so that
+  /// x . n >= o keeps the vertex out (o is the surface, a little outside it: gap = x . n - o <= 0
+  /// means touching). Implicit: each touching one whose forces at the piece's start push it in
+  /// (f . n < 0) and whose velocity does not leave it (v . n <= 1e-9 m/s) ends the piece with no
+  /// velocity along n, its other two directions solved as usual (Baraff-Witkin 1998 §5.3, the
+  /// filter S = I - n n^T inside CG); any other that the solve's answer carries through its plane
+  /// is held too, ending the piece on the plane (speed gap / h along -n), and the solve is
+  /// finished with it. Without this the springs pull a draped flag into its solid, or a flag
+  /// wrapped round its pole into the pole, in every solve and the projection pushes it back:
+  /// energy the check cannot explain. Strain limiting keeps these vertices on their side of the
+  /// plane too (limit_strain's `surface`).
+  const MatX3* contacts = nullptr;
+  const VecX* contact_offset = nullptr;  ///< (N) m, the planes' offsets o (with contacts)
 };
 
 /// Seconds spent per force stage (accumulated).
@@ -129,6 +138,7 @@ struct IntegratorScratch {
   MatX3 impulse0;  ///< implicit: ForceSet::drag_impulse at the start of a halving level
   MatX3 dv_prev;   ///< implicit: the solve's dv one step before dv (for the warm start)
   std::vector<RestingContact> held;  ///< implicit: the contacts the current solve holds
+  std::vector<uint8_t> is_held;      ///< implicit: per vertex, 1 when in `held`
   ClothSystem sys;                   ///< the implicit system of the current step
   Multigrid mg;  ///< levels built when the topology is a grid (multigrid_applies)
   explicit IntegratorScratch(const ClothTopology& topo);

@@ -1,10 +1,35 @@
 #include "cloth/strain_limit.h"
 
+#include <algorithm>
+
 #include "cloth/forces.h"
 
 namespace flagsim {
 
-void limit_strain(const ClothTopology& topo, double limit, int iterations, MatX3& x, MatX3& v) {
+namespace {
+
+// Keeps vertex i (at x) on its side of its contact plane: a move a is cut where it would cross
+// the plane, or, when i is on (or past) the plane, loses its component along -n. With velocity
+// = true, a is a velocity change: it loses its component along -n when i is on the plane.
+struct Surface {
+  const MatX3* normal;
+  const VecX* offset;
+  Vec3 operator()(Index i, const Vec3& x, const Vec3& a, bool velocity = false) const {
+    if (!normal) return a;
+    const Vec3 n = row(*normal, i);
+    const double an = a.dot(n);
+    if (!(an < 0)) return a;
+    const double gap = x.dot(n) - (*offset)[i];
+    const double keep = velocity ? (gap > 0 ? an : 0.0) : std::max(an, std::min(0.0, -gap));
+    return a + (keep - an) * n;
+  }
+};
+
+}  // namespace
+
+void limit_strain(const ClothTopology& topo, double limit, int iterations, MatX3& x, MatX3& v,
+                  const MatX3* surface, const VecX* offset) {
+  const Surface along{surface, offset};
   // Velocities: the limited pair loses the relative velocity along it that still stretches it
   // (an inelastic, momentum-conserving impulse, as Bridson, Fedkiw, Anderson 2002 §7 limit
   // strain rates), so a correction never adds kinetic energy. Turning the correction itself into
@@ -20,10 +45,10 @@ void limit_strain(const ClothTopology& topo, double limit, int iterations, MatX3
     const Vec3 d = x.row(i) - x.row(a);
     const double l = d.norm(), lmax = (1.0 + limit) * rest;
     if (l <= lmax) return;
-    x.row(i) += (d * (lmax / l - 1.0)).transpose();
+    x.row(i) += along(i, row(x, i), d * (lmax / l - 1.0)).transpose();
     const Vec3 n = d / l;
     const double vr = (v.row(i) - v.row(a)).dot(n.transpose());  // the pin does not move for it
-    if (vr > 0) v.row(i) -= (vr * n).transpose();
+    if (vr > 0) v.row(i) += along(i, row(x, i), -vr * n, true).transpose();
   };
   const Index N = topo.num_vertices();
   for (Index i = 0; i < N; ++i) {
@@ -44,14 +69,14 @@ void limit_strain(const ClothTopology& topo, double limit, int iterations, MatX3
       if (l <= lmax || l == 0) continue;
       violated = violated || l > lmax * 1.001;
       const Vec3 corr = (l - lmax) / l * d / (wa + wb);
-      x.row(a) += wa * corr.transpose();
-      x.row(b) -= wb * corr.transpose();
+      x.row(a) += along(a, row(x, a), wa * corr).transpose();
+      x.row(b) += along(b, row(x, b), -wb * corr).transpose();
       const Vec3 n = d / l;
       const double vr = (v.row(b) - v.row(a)).dot(n.transpose());
       if (vr > 0) {
         const Vec3 j = (vr / (wa + wb)) * n;  // impulse per unit inverse mass
-        v.row(a) += wa * j.transpose();
-        v.row(b) -= wb * j.transpose();
+        v.row(a) += along(a, row(x, a), wa * j, true).transpose();
+        v.row(b) += along(b, row(x, b), -wb * j, true).transpose();
       }
     }
     if (!violated) break;
@@ -77,10 +102,10 @@ bool strain_limit_violated(const ClothTopology& topo, double limit, const MatX3&
 }
 
 double limit_strain_work(const ClothTopology& topo, const Vec3& g, double limit, int iterations,
-                         MatX3& x, MatX3& v) {
+                         MatX3& x, MatX3& v, const MatX3* surface, const VecX* offset) {
   if (!strain_limit_violated(topo, limit, x)) return 0.0;
   const double before = total_energy(topo, g, x, v);
-  limit_strain(topo, limit, iterations, x, v);
+  limit_strain(topo, limit, iterations, x, v, surface, offset);
   return total_energy(topo, g, x, v) - before;
 }
 

@@ -12,7 +12,15 @@ namespace flagsim {
 /// by moving their ends (mass-weighted, pinned ends fixed). Velocities: each limited pair loses the
 /// relative velocity along it that still stretches it (inelastic, momentum-conserving; never adds
 /// kinetic energy).
-void limit_strain(const ClothTopology& topo, double limit, int iterations, MatX3& x, MatX3& v);
+/// surface, offset: contact planes or none (ForceSet::contacts, contact_offset): per vertex an
+/// outward unit normal n (zero rows: none) and x . n >= offset keeps it out. A move that would
+/// take such a vertex through its plane is cut at the plane, and one on the plane loses its
+/// component along -n (it slides along the surface, and the surface takes the rest, as a rope
+/// over a post); so does a velocity change of a vertex on its plane. Pulled straight along a tether
+/// or spring that runs as a chord through the pole, a vertex would go in, the pole would push it
+/// out radially, and each round of the two left the springs more energy (docs/energy.md).
+void limit_strain(const ClothTopology& topo, double limit, int iterations, MatX3& x, MatX3& v,
+                  const MatX3* surface = nullptr, const VecX* offset = nullptr);
 
 /// True when limit_strain would move something: a tether or a structural or shear spring longer
 /// than (1 + limit) x its rest length.
@@ -21,6 +29,7 @@ bool strain_limit_violated(const ClothTopology& topo, double limit, const MatX3&
 /// limit_strain, returning the change of total_energy it made, J: 0, with neither the
 /// projection nor the energy evaluated, when nothing exceeds the limit.
 double limit_strain_work(const ClothTopology& topo, const Vec3& g, double limit, int iterations,
-                         MatX3& x, MatX3& v);
+                         MatX3& x, MatX3& v, const MatX3* surface = nullptr,
+                         const VecX* offset = nullptr);
 
 }  // namespace flagsim

@@ -76,9 +76,11 @@ Simulation::Simulation(const Scene& scene, Simulation* host)
   choose_stages();
   drag_impulse_.setZero(forces_.drag ? N : 0, 3);
   if (forces_.drag) forces_.drag_impulse = &drag_impulse_;
-  if (built(Stage::kSolids) && scene_.integrator.method == Method::kImplicit) {
-    resting_.reserve(std::size_t(N));
+  if (built(Stage::kSolids) || built(Stage::kPole)) {  // explicit: strain limiting reads them
+    resting_.setZero(N, 3);
+    resting_offset_.setZero(N);
     forces_.contacts = &resting_;
+    forces_.contact_offset = &resting_offset_;
   }
   if (built(Stage::kCoupling)) {
     reaction_.setZero(N, 3);
@@ -188,7 +190,7 @@ void Simulation::build_self_collision() {
   // Its energy is booked with the self-collision response's (one evaluation around it).
   strain_projector_ = [this](MatX3& x, MatX3& v) {
     limit_strain(topo_, scene_.integrator.strain_limit, scene_.integrator.strain_limit_iterations,
-                 x, v);
+                 x, v, forces_.contacts, forces_.contact_offset);
   };
 }
 
@@ -432,7 +434,8 @@ void Simulation::build_between_flags() {
       f.x_ = x.middleRows(o, m);
       f.v_ = v.middleRows(o, m);
       limit_strain(f.topo_, f.scene_.integrator.strain_limit,
-                   f.scene_.integrator.strain_limit_iterations, f.x_, f.v_);
+                   f.scene_.integrator.strain_limit_iterations, f.x_, f.v_, f.forces_.contacts,
+                   f.forces_.contact_offset);
       x.middleRows(o, m) = f.x_;
       v.middleRows(o, m) = f.v_;
     }
@@ -734,7 +737,8 @@ void Simulation::stage_flap() {
 
 double Simulation::limit_cloth_strain(MatX3& x, MatX3& v) {
   return limit_strain_work(topo_, scene_.gravity, scene_.integrator.strain_limit,
-                           scene_.integrator.strain_limit_iterations, x, v);
+                           scene_.integrator.strain_limit_iterations, x, v, forces_.contacts,
+                           forces_.contact_offset);
 }
 
 // Each projection's entry in the ledger is the change of E it made: the pole's less the strain
@@ -793,24 +797,43 @@ void Simulation::place_pins() {
   book_energy_change(ledger_.pins, 0.0);  // the last bits of the integrator's x + h v
 }
 
-// The free vertices within the thickness (and a little) of a solid at rest, with its outward
-// normal: the implicit solve keeps them from moving into it (ForceSet::contacts). Solids that
-// move are left to the projection alone.
+// The contact planes (ForceSet::contacts) of the free vertices within the thickness (and a
+// little) of a solid at rest, and of those near the side of the pole at rest: within a radius of
+// it, or as close as their speed takes them in the piece. The plane is tangent to the surface,
+// (1 + kRestingSlack) x the thickness (the radius) from it. Solids and a pole that move are left
+// to the projection alone.
 void Simulation::find_resting_contacts() {
   if (!forces_.contacts) return;
-  StageClock::Scope t(&clock_, Stage::kSolids);
-  resting_.clear();
+  StageClock::Scope t(&clock_, built(Stage::kSolids) ? Stage::kSolids : Stage::kPole);
+  resting_.setZero();
+  resting_offset_.setZero();
+  const PoleParams& pole = scene_.pole;
+  const bool pole_held = built(Stage::kPole) && !pole_moves_;
+  const double pole_plane = (1.0 + kRestingSlack) * pole.radius;
   for (Index i = 0; i < x_.rows(); ++i) {
     if (topo_.inv_mass[i] == 0.0) continue;
     const Vec3 p = row(x_, i);
+    if (pole_held && p.y() >= pole.base.y() && p.y() <= pole.base.y() + pole.height) {
+      const Vec3 radial(p.x() - pole.base.x(), 0.0, p.z() - pole.base.z());
+      const double r = radial.norm();
+      if (r > 0 && r - pole_plane <= std::max(pole.radius, h_ * row(v_, i).norm())) {
+        const Vec3 n = radial / r;
+        resting_.row(i) = n.transpose();
+        resting_offset_[i] = pole.base.dot(n) + pole_plane;
+        continue;
+      }
+    }
     for (std::size_t k = 0; k < cloth_solids_.size(); ++k) {
       const ClothSolid& s = cloth_solids_[k];
       if (!solid_motions_[k].empty() || (p.array() < s.lo.array()).any() ||
           (p.array() > s.hi.array()).any())
         continue;
       Vec3 n;
-      if (solid_distance(s.geometry, p, &n) <= (1.0 + kRestingSlack) * s.thickness) {
-        resting_.push_back({int32_t(i), n});
+      const double d = solid_distance(s.geometry, p, &n),
+                   reach = (1.0 + kRestingSlack) * s.thickness;
+      if (d <= reach) {
+        resting_.row(i) = n.transpose();
+        resting_offset_[i] = p.dot(n) - (d - reach);
         break;
       }
     }

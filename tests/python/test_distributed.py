@@ -61,7 +61,7 @@ def executor(cluster):
 def _quick_cases():
     """A third of the reduced stability study (every kind of case, every integrator), without
     its slowest cases (explicit adaptive substeps at k_s = 1e7 on a 1e-3 kg/m^2 flag, ~2 s
-    each): 55 cases, a few seconds."""
+    each): 56 cases, a few seconds."""
     return [
         c
         for c in stability.cases(reduced=True)
@@ -91,7 +91,7 @@ def test_reduced_study_on_two_workers_equals_the_serial_run(cluster, executor, t
         progress=False,
         desc="stability",
     )
-    assert len(rows) == len(cases) == 55
+    assert len(rows) == len(cases) == 56
     a, b = _table(serial), _table(spread)
     assert sorted(a, key=lambda r: r["id"]) == sorted(b, key=lambda r: r["id"])
     # byte for byte apart from the measured times: same case order as given

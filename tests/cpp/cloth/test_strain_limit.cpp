@@ -171,3 +171,37 @@ TEST(StrainLimit, WorkIsTheEnergyChangeAndZeroWhenNothingIsViolated) {
   EXPECT_EQ(limit_strain_work(rest.t, g, 0.1, 200, rest.x, rest.v), 0.0);
   EXPECT_TRUE(rest.x == x_rest && rest.v == v_rest);
 }
+
+// Contact planes (a flag held on a surface: limit_strain's `surface`): every free vertex of the
+// stretched flag starts on a plane of its own, normal +z, every other one 2 mm above it. Pulls
+// with a -z part move a vertex on its plane along it and one above it at most onto it; the limit
+// is still reached by sliding, no vertex on its plane is given velocity into it, and no kinetic
+// energy is added.
+TEST(StrainLimit, VerticesOnAContactPlaneSlideAlongItAndStayOut) {
+  Stretched f(Pin::kPole);
+  const Index N = f.t.num_vertices();
+  const double limit = 0.1;
+  MatX3 normal = MatX3::Zero(N, 3);
+  VecX offset = VecX::Zero(N);
+  for (Index i = 0; i < N; ++i) {
+    if (f.t.inv_mass[i] == 0) continue;
+    normal(i, 2) = 1.0;
+    offset[i] = f.x(i, 2) - (i % 2 ? 0.002 : 0.0);
+  }
+  const MatX3 v0 = f.v;
+  MatX3 x_free = f.x, v_free = f.v;
+  limit_strain(f.t, limit, 200, x_free, v_free);  // the same flag with no planes
+  Index pulled_down = 0;
+  for (Index i = 0; i < N; ++i) pulled_down += f.t.inv_mass[i] > 0 && x_free(i, 2) < offset[i];
+  ASSERT_GT(pulled_down, N / 4);  // without planes many would cross theirs
+
+  limit_strain(f.t, limit, 200, f.x, f.v, &normal, &offset);
+  EXPECT_LE(worst_ratio(f.t, f.x), 1 + limit + kStrainLimitSlack);
+  EXPECT_LE(kinetic(f.t, f.v), kinetic(f.t, v0) * (1 + 1e-12));
+  for (Index i = 0; i < N; ++i) {
+    if (f.t.inv_mass[i] == 0) continue;
+    EXPECT_GE(f.x(i, 2), offset[i] - 1e-15) << i;  // never through its plane
+    if (i % 2 == 0 && v0(i, 2) >= 0)               // started on it, not moving into it: none given
+      EXPECT_GE(f.v(i, 2), 0.0) << i;
+  }
+}
