@@ -53,13 +53,19 @@ inline void filter_pinned(const ClothTopology& topo, MatX3& a) {
     if (topo.inv_mass[i] == 0.0) a.row(i).setZero();
 }
 
-// The contacts the solve holds first: those of fs.contacts that touch (on or inside their plane),
-// that the forces f push into their solid and whose velocity does not leave it. A vertex the last
-// solve held has v . n = 0 to round-off: "leaves" means faster than kLeaving, so that round-off of
-// either sign does not decide it.
+// The speed of vertex i's contact plane along its normal over the piece, m/s (0: still).
+inline double plane_speed(const ForceSet& fs, Index i) {
+  return fs.contact_speed ? (*fs.contact_speed)[i] : 0.0;
+}
+
+// The contacts the solve holds first: those of fs.contacts that touch (on or inside their plane
+// at the piece's start), that the forces f push into their solid and whose velocity does not
+// leave it (move out faster than the plane). A vertex the last solve held has v . n = w to
+// round-off: "leaves" means faster than kLeaving beyond it, so that round-off of either sign does
+// not decide it. They end the piece moving with the plane.
 constexpr double kLeaving = 1e-9;  // m/s
 void hold_contacts(const ClothTopology& topo, const ForceSet& fs, const MatX3& f, const MatX3& x,
-                   const MatX3& v, IntegratorScratch& s) {
+                   const MatX3& v, double h, IntegratorScratch& s) {
   for (const RestingContact& c : s.held) s.is_held[std::size_t(c.vertex)] = 0;
   s.held.clear();
   if (!fs.contacts) return;
@@ -67,17 +73,18 @@ void hold_contacts(const ClothTopology& topo, const ForceSet& fs, const MatX3& f
   for (Index i = 0; i < normal.rows(); ++i) {
     const Vec3 n = row(normal, i);
     if (topo.inv_mass[i] == 0.0 || n.isZero()) continue;
-    const bool touching = x.row(i).dot(n) <= (*fs.contact_offset)[i];
-    if (touching && f.row(i).dot(n) < 0 && v.row(i).dot(n) <= kLeaving) {
-      s.held.push_back({int32_t(i), n, 0.0});
+    const double w = plane_speed(fs, i);
+    const bool touching = x.row(i).dot(n) <= (*fs.contact_offset)[i] - w * h;
+    if (touching && f.row(i).dot(n) < 0 && v.row(i).dot(n) <= w + kLeaving) {
+      s.held.push_back({int32_t(i), n, w});
       s.is_held[std::size_t(i)] = 1;
     }
   }
 }
 
-// Contacts of fs.contacts not held yet that the answer v + dv carries more than kCrossing through
-// their plane over h: held from now on, ending the piece on the plane (approach -gap / h).
-// Returns how many were added.
+// Contacts of fs.contacts not held yet that the answer v + dv leaves more than kCrossing behind
+// their plane at the piece's end: held from now on, ending the piece on the plane (approach
+// w - gap / h, gap >= 0 at the start). Returns how many were added.
 constexpr double kCrossing = 1e-6;  // m
 constexpr int kContactRounds = 3;
 std::size_t hold_crossing(const ClothTopology& topo, const ForceSet& fs, const MatX3& x,
@@ -88,9 +95,10 @@ std::size_t hold_crossing(const ClothTopology& topo, const ForceSet& fs, const M
   for (Index i = 0; i < normal.rows(); ++i) {
     const Vec3 n = row(normal, i);
     if (topo.inv_mass[i] == 0.0 || n.isZero() || s.is_held[std::size_t(i)]) continue;
-    const double gap = std::max(0.0, x.row(i).dot(n) - (*fs.contact_offset)[i]);
-    if (h * (v.row(i) + dv.row(i)).dot(n) < -gap - kCrossing) {
-      s.held.push_back({int32_t(i), n, -gap / h});
+    const double w = plane_speed(fs, i);
+    const double gap = std::max(0.0, x.row(i).dot(n) - ((*fs.contact_offset)[i] - w * h));
+    if (h * (v.row(i) + dv.row(i)).dot(n) < h * w - gap - kCrossing) {
+      s.held.push_back({int32_t(i), n, w - gap / h});
       s.is_held[std::size_t(i)] = 1;
     }
   }
@@ -208,9 +216,10 @@ bool use_multigrid(const ClothTopology& topo, const IntegratorParams& ip,
 }
 
 // Explicit substeps hold no contact inside their update: a vertex a substep carries through its
-// contact plane (ForceSet::contacts) is put back on it and loses its velocity into it. Substeps
-// are short, so each such move is small; at the end of the step the pole and solids stages
-// would otherwise push back a whole step's worth at once, against the springs.
+// contact plane (ForceSet::contacts; where it is at the piece's end) is put back on it and loses
+// its velocity into it beyond the plane's own. Substeps are short, so each such move is small; at
+// the end of the step the pole and solids stages would otherwise push back a whole step's worth
+// at once, against the springs.
 void keep_out_of_planes(const ForceSet& fs, MatX3& x, MatX3& v) {
   if (!fs.contacts) return;
   const MatX3& normal = *fs.contacts;
@@ -219,8 +228,8 @@ void keep_out_of_planes(const ForceSet& fs, MatX3& x, MatX3& v) {
     const double gap = x.row(i).dot(n) - (*fs.contact_offset)[i];
     if (!(gap < 0) || n.isZero()) continue;
     x.row(i) -= gap * n.transpose();
-    const double vn = v.row(i).dot(n);
-    if (vn < 0) v.row(i) -= vn * n.transpose();
+    const double vn = v.row(i).dot(n), w = plane_speed(fs, i);
+    if (vn < w) v.row(i) += (w - vn) * n.transpose();
   }
 }
 
@@ -393,7 +402,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   filter_pinned(topo, s.b);
   // Held contacts: dv = S dv + z (prescribe_held), r = S (b - A dv), and every product and
   // preconditioned residual filtered by S (Baraff-Witkin §5.3).
-  hold_contacts(topo, fs, s.f, x, v, s);
+  hold_contacts(topo, fs, s.f, x, v, h, s);
   const auto book_held = [&](std::size_t first) {  // the solids' impulse is A dv - b along n
     for (std::size_t k = first; k < s.held.size(); ++k) {
       const RestingContact& c = s.held[k];

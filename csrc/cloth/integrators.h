@@ -67,7 +67,10 @@ struct ForceSet {
   /// energy the check cannot explain. Strain limiting keeps these vertices on their side of the
   /// plane too (limit_strain's `surface`).
   const MatX3* contacts = nullptr;
-  const VecX* contact_offset = nullptr;  ///< (N) m, the planes' offsets o (with contacts)
+  const VecX* contact_offset = nullptr;  ///< (N) m, the planes' offsets o at the piece's end
+  /// (N) m/s or none (still): each plane's speed w along its normal over the piece (a moving
+  /// pole), so that it is at o - w h at the piece's start; a held vertex ends moving with it.
+  const VecX* contact_speed = nullptr;
 };
 
 /// Seconds spent per force stage (accumulated).

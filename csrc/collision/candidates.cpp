@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <limits>
+
+#include "common/simd.h"
 
 namespace flagsim {
 
@@ -188,7 +191,7 @@ namespace {
 // the boxes [lo, hi] of rows [first, last), grown by reach: every member's hits, and more.
 void query_group(const BoxTree& tree, const MatX3& item_lo, const MatX3& item_hi, const MatX3& lo,
                  const MatX3& hi, Index first, Index last, double reach, int32_t after,
-                 std::vector<int32_t>& hits) {
+                 QueryGroupHits& hits) {
   Vec3 glo = lo.row(first).transpose(), ghi = hi.row(first).transpose();
   for (Index i = first + 1; i < last; ++i) {
     glo = glo.cwiseMin(lo.row(i).transpose());
@@ -197,17 +200,115 @@ void query_group(const BoxTree& tree, const MatX3& item_lo, const MatX3& item_hi
   hits.clear();
   tree.query(
       item_lo, item_hi, glo.array() - reach, ghi.array() + reach,
-      [&](int32_t t) { hits.push_back(t); }, after);
+      [&](int32_t t) { hits.add(t, item_lo.data() + 3 * Index(t), item_hi.data() + 3 * Index(t)); },
+      after);
+  hits.finish();
 }
 
+// out[0, n) = the items of the hits above `after` whose boxes meet [qlo, qhi] (closed: the
+// trees' test on the same numbers), in order; returns n. Lane type L as in common/simd.h (void:
+// scalars), the same comparisons at every width (item numbers are exact as doubles). Branch-free:
+// whether a hit is kept is close to random for the branch predictor, whose misses were most of
+// the filter's time; every hit is written, and a kept one moves the end on.
+template <class L>
+FLAGSIM_INLINE size_t meeting_on(const QueryGroupHits& g, const Vec3& qlo, const Vec3& qhi,
+                                 int32_t after, int32_t* out) {
+  constexpr size_t B = QueryGroupHits::kBlock, R = QueryGroupHits::kRuns;
+  const size_t blocks = g.blocks.size() / (R * B);
+  const double* runs = g.blocks.data();
+  const double above = after;
+  size_t n = 0;
+  if constexpr (std::is_void<L>::value) {
+    for (size_t h = 0; h < g.items.size(); ++h) {
+      const double* b = runs + R * B * (h / B) + h % B;
+      const bool meets = (b[0] <= qhi[0]) & (b[B] <= qhi[1]) & (b[2 * B] <= qhi[2]) &
+                         (b[3 * B] >= qlo[0]) & (b[4 * B] >= qlo[1]) & (b[5 * B] >= qlo[2]) &
+                         (b[6 * B] > above);
+      out[n] = g.items[h];
+      n += meets;
+    }
+  } else {
+    using V = typename L::V;
+    constexpr size_t W = L::W;
+    const V x0 = V{} + qlo[0], y0 = V{} + qlo[1], z0 = V{} + qlo[2];
+    const V x1 = V{} + qhi[0], y1 = V{} + qhi[1], z1 = V{} + qhi[2], a = V{} + above;
+    for (size_t k = 0; k < blocks; ++k)
+      for (size_t w = 0; w < B; w += W) {
+        const double* b = runs + R * B * k + w;
+        const auto meets = (load_lanes<V>(b) <= x1) & (load_lanes<V>(b + B) <= y1) &
+                           (load_lanes<V>(b + 2 * B) <= z1) & (load_lanes<V>(b + 3 * B) >= x0) &
+                           (load_lanes<V>(b + 4 * B) >= y0) & (load_lanes<V>(b + 5 * B) >= z0) &
+                           (load_lanes<V>(b + 6 * B) > a);
+        for (size_t lane = 0; lane < W; ++lane) {
+          out[n] = g.items[B * k + w + lane];
+          n += size_t(meets[lane] & 1);
+        }
+      }
+  }
+  return n;
+}
+
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+FLAGSIM_TARGET_AVX size_t meeting_wide(const QueryGroupHits& g, const Vec3& qlo, const Vec3& qhi,
+                                       int32_t after, int32_t* out) {
+  return meeting_on<Lanes32<double>>(g, qlo, qhi, after, out);
+}
+#endif
+
 }  // namespace
+
+void QueryGroupHits::reserve(size_t n) {
+  items.reserve(n + kBlock);
+  kept.reserve(n + kBlock);
+  blocks.reserve(kRuns * (n + kBlock));
+}
+
+void QueryGroupHits::clear() {
+  items.clear();
+  blocks.clear();
+}
+
+void QueryGroupHits::add(int32_t item, const double* lo, const double* hi) {
+  const size_t h = items.size() % kBlock;
+  items.push_back(item);
+  if (h == 0) blocks.resize(blocks.size() + kRuns * kBlock);
+  double* b = blocks.data() + blocks.size() - kRuns * kBlock + h;
+  for (size_t d = 0; d < 3; ++d) {
+    b[d * kBlock] = lo[d];
+    b[(3 + d) * kBlock] = hi[d];
+  }
+  b[6 * kBlock] = item;
+}
+
+// The last block's unused lanes: NaN boxes (never kept) and item 0, so that items fill whole
+// blocks.
+void QueryGroupHits::finish() {
+  const size_t used = items.size() % kBlock;
+  if (used > 0) {
+    double* b = blocks.data() + blocks.size() - kRuns * kBlock;
+    for (size_t r = 0; r < kRuns; ++r)
+      for (size_t h = used; h < kBlock; ++h)
+        b[r * kBlock + h] = std::numeric_limits<double>::quiet_NaN();
+    items.resize(items.size() + kBlock - used, 0);
+  }
+  kept.resize(items.size());
+}
+
+// kept[0, n) = the items above `after` whose boxes meet [qlo, qhi], in the hits' order; returns
+// n. On the widest lanes the CPU has (meeting_on).
+size_t QueryGroupHits::meeting(const Vec3& qlo, const Vec3& qhi, int32_t after) {
+  if (items.empty()) return 0;
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+  if (vector_bytes() == 32) return meeting_wide(*this, qlo, qhi, after, kept.data());
+#endif
+  return meeting_on<NarrowLanes<double>>(*this, qlo, qhi, after, kept.data());
+}
 
 // Appends to buffer the pairs of each vertex i in [i0, i1) with the triangles whose boxes the
 // tree finds within the vertex query's reach, `wide` wider, by vertex, then by triangle. hits:
 // scratch.
 void Candidates::collect_vertices(Index i0, Index i1, double wide, const VecX* inv_mass,
-                                  std::vector<CandidatePair>& buffer,
-                                  std::vector<int32_t>& hits) const {
+                                  std::vector<CandidatePair>& buffer, QueryGroupHits& hits) const {
   const double reach = kVertexQuery * thickness_ + wide;
   query_group(tri_tree_, tlo_, thi_, vlo_, vhi_, i0, i1, reach, -1, hits);
   for (Index i = i0; i < i1; ++i) {
@@ -215,13 +316,19 @@ void Candidates::collect_vertices(Index i0, Index i1, double wide, const VecX* i
     const Vec3 qhi = vhi_.row(i).transpose().array() + reach;
     const size_t begin = buffer.size();
     const auto vi = static_cast<int32_t>(i);
-    for (const int32_t t : hits) {
-      if (!boxes_meet(qlo.data(), qhi.data(), tlo_.data() + 3 * Index(t),
-                      thi_.data() + 3 * Index(t), 0))
-        continue;
-      const int32_t a = tris_(t, 0), b = tris_(t, 1), c = tris_(t, 2);
-      if (a == vi || b == vi || c == vi) continue;  // never against its own triangles
-      if (inv_mass && none_free(*inv_mass, vi, a, b, c)) continue;
+    // Own triangles out without a branch (they are a vertex's nearest hits), then the rare
+    // pairs with no free vertex.
+    const size_t n = hits.meeting(qlo, qhi, -1);
+    int32_t* kept = hits.kept.data();
+    size_t m = 0;
+    for (size_t k = 0; k < n; ++k) {
+      const int32_t t = kept[k];
+      kept[m] = t;
+      m += (tris_(t, 0) != vi) & (tris_(t, 1) != vi) & (tris_(t, 2) != vi);
+    }
+    for (size_t k = 0; k < m; ++k) {
+      const int32_t t = kept[k];
+      if (inv_mass && none_free(*inv_mass, vi, tris_(t, 0), tris_(t, 1), tris_(t, 2))) continue;
       buffer.push_back({vi, t});
     }
     sort_by_second(buffer, begin);
@@ -231,8 +338,7 @@ void Candidates::collect_vertices(Index i0, Index i1, double wide, const VecX* i
 // Appends to buffer the pairs of each edge e in [e0, e1) with the edges above it whose boxes the
 // tree finds within the edge query's reach, `wide` wider, by edge, then by the second edge.
 void Candidates::collect_edges(Index e0, Index e1, double wide, const VecX* inv_mass,
-                               std::vector<CandidatePair>& buffer,
-                               std::vector<int32_t>& hits) const {
+                               std::vector<CandidatePair>& buffer, QueryGroupHits& hits) const {
   const double reach = kEdgeQuery * thickness_ + wide;
   query_group(edge_tree_, elo_, ehi_, elo_, ehi_, e0, e1, reach, static_cast<int32_t>(e0), hits);
   for (Index e = e0; e < e1; ++e) {
@@ -240,13 +346,19 @@ void Candidates::collect_edges(Index e0, Index e1, double wide, const VecX* inv_
     const Vec3 qhi = ehi_.row(e).transpose().array() + reach;
     const size_t begin = buffer.size();
     const int32_t a = edges_(e, 0), b = edges_(e, 1);
-    for (const int32_t f : hits) {
-      if (f <= e || !boxes_meet(qlo.data(), qhi.data(), elo_.data() + 3 * Index(f),
-                                ehi_.data() + 3 * Index(f), 0))
-        continue;  // f > e: each pair once
-      const int32_t c = edges_(f, 0), d = edges_(f, 1);
-      if (a == c || a == d || b == c || b == d) continue;  // edges sharing a vertex never cross
-      if (inv_mass && none_free(*inv_mass, a, b, c, d)) continue;
+    // f > e (each pair once) and edges sharing a vertex (they never cross) out without a
+    // branch, then the rare pairs with no free vertex.
+    const size_t n = hits.meeting(qlo, qhi, static_cast<int32_t>(e));
+    int32_t* kept = hits.kept.data();
+    size_t m = 0;
+    for (size_t k = 0; k < n; ++k) {
+      const int32_t f = kept[k], c = edges_(f, 0), d = edges_(f, 1);
+      kept[m] = f;
+      m += (a != c) & (a != d) & (b != c) & (b != d);
+    }
+    for (size_t k = 0; k < m; ++k) {
+      const int32_t f = kept[k];
+      if (inv_mass && none_free(*inv_mass, a, b, edges_(f, 0), edges_(f, 1))) continue;
       buffer.push_back({static_cast<int32_t>(e), f});
     }
     sort_by_second(buffer, begin);

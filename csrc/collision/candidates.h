@@ -50,6 +50,21 @@ struct CandidatePairs {
   }
 };
 
+// Scratch of the broad phase's tree queries (Candidates): a query group's hits, in the tree's
+// order, with their boxes and item numbers in blocks of kBlock hits laid out run by run (lo x, y,
+// z, hi x, y, z, the item as a double; a block's unused lanes are NaN, which meets nothing), and
+// the hits one member keeps.
+struct QueryGroupHits {
+  static constexpr size_t kBlock = 4, kRuns = 7;
+  std::vector<int32_t> items, kept;
+  std::vector<double> blocks;  // kRuns kBlock per block
+  void reserve(size_t n);
+  void clear();
+  void add(int32_t item, const double* lo, const double* hi);
+  void finish();
+  size_t meeting(const Vec3& qlo, const Vec3& qhi, int32_t after);
+};
+
 class Candidates {
  public:
   /// triangles: T x 3 vertex indices into [0, num_vertices); thickness: m, > 0.
@@ -84,9 +99,9 @@ class Candidates {
   void miss();
   size_t list_budget() const;
   void collect_vertices(Index i0, Index i1, double wide, const VecX* inv_mass,
-                        std::vector<CandidatePair>& buffer, std::vector<int32_t>& hits) const;
+                        std::vector<CandidatePair>& buffer, QueryGroupHits& hits) const;
   void collect_edges(Index e0, Index e1, double wide, const VecX* inv_mass,
-                     std::vector<CandidatePair>& buffer, std::vector<int32_t>& hits) const;
+                     std::vector<CandidatePair>& buffer, QueryGroupHits& hits) const;
   bool query_trees(double wide, const VecX* inv_mass, CandidatePairs& out,
                    size_t budget = SIZE_MAX);
   void filter_list(const VecX& inv_mass);
@@ -106,7 +121,7 @@ class Candidates {
   // threads push pairs at the same time, and two vector ends on one line could bounce it between
   // the cores at every push (false sharing).
   struct alignas(64) ChunkPairs : CandidatePairs {
-    std::vector<int32_t> hits;  // a query group's tree hits (collect_vertices, collect_edges)
+    QueryGroupHits hits;
   };
   std::vector<ChunkPairs> chunk_pairs_;
   CandidatePairs pairs_;

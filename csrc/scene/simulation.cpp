@@ -79,8 +79,10 @@ Simulation::Simulation(const Scene& scene, Simulation* host)
   if (built(Stage::kSolids) || built(Stage::kPole)) {  // explicit: strain limiting reads them
     resting_.setZero(N, 3);
     resting_offset_.setZero(N);
+    resting_speed_.setZero(N);
     forces_.contacts = &resting_;
     forces_.contact_offset = &resting_offset_;
+    forces_.contact_speed = &resting_speed_;
   }
   if (built(Stage::kCoupling)) {
     reaction_.setZero(N, 3);
@@ -798,28 +800,40 @@ void Simulation::place_pins() {
 }
 
 // The contact planes (ForceSet::contacts) of the free vertices within the thickness (and a
-// little) of a solid at rest, and of those near the side of the pole at rest: within a radius of
-// it, or as close as their speed takes them in the piece. The plane is tangent to the surface,
-// (1 + kRestingSlack) x the thickness (the radius) from it. Solids and a pole that move are left
-// to the projection alone.
+// little) of a solid at rest, and of those near the side of the pole: within a radius of it, or
+// as close as their speed takes them in the piece. The plane is tangent to the surface,
+// (1 + kRestingSlack) x the thickness (the radius) from it. A moving pole's plane is where its
+// surface is at the piece's end, moving along its normal with the surface's speed there
+// (ForceSet::contact_speed). Solids that move are left to the projection alone.
 void Simulation::find_resting_contacts() {
   if (!forces_.contacts) return;
   StageClock::Scope t(&clock_, built(Stage::kSolids) ? Stage::kSolids : Stage::kPole);
   resting_.setZero();
   resting_offset_.setZero();
+  resting_speed_.setZero();
   const PoleParams& pole = scene_.pole;
-  const bool pole_held = built(Stage::kPole) && !pole_moves_;
   const double pole_plane = (1.0 + kRestingSlack) * pole.radius;
   for (Index i = 0; i < x_.rows(); ++i) {
     if (topo_.inv_mass[i] == 0.0) continue;
     const Vec3 p = row(x_, i);
-    if (pole_held && p.y() >= pole.base.y() && p.y() <= pole.base.y() + pole.height) {
-      const Vec3 radial(p.x() - pole.base.x(), 0.0, p.z() - pole.base.z());
+    // The pole, in its own frame at the piece's end (at rest: the world's).
+    const Vec3 q = pole_moves_ ? pole_motion_.to.inverse(p) : p;
+    if (built(Stage::kPole) && q.y() >= pole.base.y() && q.y() <= pole.base.y() + pole.height) {
+      const Vec3 radial(q.x() - pole.base.x(), 0.0, q.z() - pole.base.z());
       const double r = radial.norm();
       if (r > 0 && r - pole_plane <= std::max(pole.radius, h_ * row(v_, i).norm())) {
         const Vec3 n = radial / r;
-        resting_.row(i) = n.transpose();
-        resting_offset_[i] = pole.base.dot(n) + pole_plane;
+        if (!pole_moves_) {
+          resting_.row(i) = n.transpose();
+          resting_offset_[i] = pole.base.dot(n) + pole_plane;
+        } else {
+          const Vec3 surface(pole.base.x() + n.x() * pole_plane, q.y(),
+                             pole.base.z() + n.z() * pole_plane);  // in the pole's frame
+          const Vec3 nw = pole_motion_.to.R * n;
+          resting_.row(i) = nw.transpose();
+          resting_offset_[i] = nw.dot(pole_motion_.to.apply(surface));
+          resting_speed_[i] = nw.dot(pole_motion_.velocity_at(surface));
+        }
         continue;
       }
     }

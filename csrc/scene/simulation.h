@@ -317,13 +317,13 @@ class Simulation {
   // The scene's solids the flag collides with (cloth = true), and their motions (empty: at rest).
   std::vector<ClothSolid> cloth_solids_;
   std::vector<MotionSchedule> solid_motions_;
-  // Contact planes of the free vertices near a solid or the pole at rest at the piece's start
-  // (ForceSet::contacts, contact_offset; implicit only): normals (N x 3, zero rows: none) and
-  // offsets (N, m). A vertex within (1 + kRestingSlack) x the thickness of a solid (the radius of
-  // the pole) touches.
+  // Contact planes of the free vertices near a solid at rest or the pole at the piece's start
+  // (ForceSet::contacts, contact_offset, contact_speed; find_resting_contacts): normals (N x 3,
+  // zero rows: none), offsets at the piece's end and speeds along n. A vertex within
+  // (1 + kRestingSlack) x the thickness of a solid (the radius of the pole) touches.
   static constexpr double kRestingSlack = 0.002;
   MatX3 resting_;
-  VecX resting_offset_;
+  VecX resting_offset_, resting_speed_;  // (N) m at the piece's end; m/s along n (a moving pole)
 
   std::unique_ptr<SelfCollision> self_collision_;
   std::atomic<bool> stepping_{false};          // a step() is running (one thread at a time)

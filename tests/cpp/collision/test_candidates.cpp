@@ -7,6 +7,7 @@
 #include <utility>
 #include <vector>
 
+#include "common/simd.h"
 #include "crossing_checker.h"
 
 namespace flagsim {
@@ -130,9 +131,6 @@ TEST(Candidates, TreeQueriesGiveEveryPairWhoseBoxesMeetInOrder) {
     return x;
   };
   const MatX3 x0 = folded(0), x = folded(1);
-  Candidates got(s.tris, s.rest.rows(), h);
-  got.collect(x0, x, s.w, /*shifted=*/false);
-  ASSERT_FALSE(got.from_list());
   const Index N = x.rows(), T = s.tris.rows();
   auto box = [&](std::initializer_list<int32_t> vs, double grow, Vec3& lo, Vec3& hi) {
     lo = Vec3::Constant(1e300);
@@ -157,7 +155,7 @@ TEST(Candidates, TreeQueriesGiveEveryPairWhoseBoxesMeetInOrder) {
       box({a, b, c}, h, t0, t1);
       if (meet(v0, v1, t0, t1, 2 * h)) vt.emplace_back(int32_t(i), int32_t(t));
     }
-  const MatX2i& E = got.edges();
+  const MatX2i E = Candidates(s.tris, s.rest.rows(), h).edges();
   for (Index e = 0; e < E.rows(); ++e)
     for (Index f = e + 1; f < E.rows(); ++f) {
       const int32_t a = E(e, 0), b = E(e, 1), c = E(f, 0), d = E(f, 1);
@@ -168,8 +166,16 @@ TEST(Candidates, TreeQueriesGiveEveryPairWhoseBoxesMeetInOrder) {
       if (meet(e0, e1, f0, f1, h)) ee.emplace_back(int32_t(e), int32_t(f));
     }
   EXPECT_GT(vt.size(), size_t(4 * N)) << "the fold should pair far more than mesh neighbours";
-  EXPECT_EQ(as_list(got.pairs().vertex_triangle), vt);
-  EXPECT_EQ(as_list(got.pairs().edge_edge), ee);
+  // At every vector width the queries' filter runs on (common/simd.h; 0: the widest).
+  for (const int width : {0, 16}) {
+    vector_bytes(width);
+    Candidates got(s.tris, s.rest.rows(), h);
+    got.collect(x0, x, s.w, /*shifted=*/false);
+    vector_bytes(0);
+    ASSERT_FALSE(got.from_list());
+    EXPECT_EQ(as_list(got.pairs().vertex_triangle), vt) << "width " << width;
+    EXPECT_EQ(as_list(got.pairs().edge_edge), ee) << "width " << width;
+  }
 }
 
 TEST(Candidates, VerletListServesWhileNothingMovedMoreThanItsSkinAndIsRebuiltAfter) {
