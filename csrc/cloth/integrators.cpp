@@ -58,6 +58,12 @@ inline double plane_speed(const ForceSet& fs, Index i) {
   return fs.contact_speed ? (*fs.contact_speed)[i] : 0.0;
 }
 
+// How far vertex i is out of its contact plane (normal n) at the piece's start, when the plane is
+// at offset - w h, m: <= 0 touching.
+inline double start_gap(const ForceSet& fs, const MatX3& x, Index i, const Vec3& n, double h) {
+  return x.row(i).dot(n) - ((*fs.contact_offset)[i] - plane_speed(fs, i) * h);
+}
+
 // The contacts the solve holds first: those of fs.contacts that touch (on or inside their plane
 // at the piece's start), that the forces f push into their solid and whose velocity does not
 // leave it (move out faster than the plane). A vertex the last solve held has v . n = w to
@@ -74,8 +80,7 @@ void hold_contacts(const ClothTopology& topo, const ForceSet& fs, const MatX3& f
     const Vec3 n = row(normal, i);
     if (topo.inv_mass[i] == 0.0 || n.isZero()) continue;
     const double w = plane_speed(fs, i);
-    const bool touching = x.row(i).dot(n) <= (*fs.contact_offset)[i] - w * h;
-    if (touching && f.row(i).dot(n) < 0 && v.row(i).dot(n) <= w + kLeaving) {
+    if (start_gap(fs, x, i, n, h) <= 0 && f.row(i).dot(n) < 0 && v.row(i).dot(n) <= w + kLeaving) {
       s.held.push_back({int32_t(i), n, w});
       s.is_held[std::size_t(i)] = 1;
     }
@@ -95,8 +100,7 @@ std::size_t hold_crossing(const ClothTopology& topo, const ForceSet& fs, const M
   for (Index i = 0; i < normal.rows(); ++i) {
     const Vec3 n = row(normal, i);
     if (topo.inv_mass[i] == 0.0 || n.isZero() || s.is_held[std::size_t(i)]) continue;
-    const double w = plane_speed(fs, i);
-    const double gap = std::max(0.0, x.row(i).dot(n) - ((*fs.contact_offset)[i] - w * h));
+    const double w = plane_speed(fs, i), gap = std::max(0.0, start_gap(fs, x, i, n, h));
     if (h * (v.row(i) + dv.row(i)).dot(n) < h * w - gap - kCrossing) {
       s.held.push_back({int32_t(i), n, w - gap / h});
       s.is_held[std::size_t(i)] = 1;
