@@ -111,3 +111,43 @@ def test_the_docs_have_examples_and_few_skips():
     skipped = sum(len(blocks(p)[1]) for p in FILES)
     assert ran >= 15, f"only {ran} ```python blocks found in README.md and docs/"
     assert skipped <= 3, f"{skipped} examples are marked skip: run them or say why in the docs"
+
+
+def command_lines() -> list[tuple[str, int, str]]:
+    """(file, line, command) of every `flagsim ...` line in the docs' shell blocks (continuation
+    lines joined; usage templates with [optional] parts left out)."""
+    out = []
+    for path in FILES:
+        text = path.read_text()
+        for m in re.finditer(r"^```(?:sh|bash|console)\n(.*?)^```", text, re.S | re.M):
+            first = text.count("\n", 0, m.start()) + 2
+            lines = m.group(1).split("\n")
+            k = 0
+            while k < len(lines):
+                start, line = k, lines[k]
+                while line.endswith("\\") and k + 1 < len(lines):
+                    k += 1
+                    line = line[:-1] + " " + lines[k]
+                k += 1
+                if line.startswith("flagsim ") and "[--" not in line:
+                    out.append((path.name, first + start, line))
+    return out
+
+
+def test_every_documented_command_line_parses():
+    """Each `flagsim COMMAND ...` shown in README.md and docs/ is accepted by that command's
+    parser as written: an option renamed or removed fails here, not in a user's shell."""
+    import shlex
+
+    from flagsim import cli
+
+    lines = command_lines()
+    assert len(lines) >= 20, f"only {len(lines)} command lines found in the docs' shell blocks"
+    for name, line, command in lines:
+        argv = shlex.split(command, comments=True)[1:]
+        assert argv[0] in cli.COMMANDS, f"{name}:{line}: unknown command in {command!r}"
+        _, parser = cli.command_parser(argv[0])
+        try:
+            parser.parse_args(argv[1:])
+        except SystemExit as e:
+            pytest.fail(f"{name}:{line}: {command!r} does not parse (exit {e.code})")
