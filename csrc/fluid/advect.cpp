@@ -433,26 +433,37 @@ void PaddedComponent<T>::resize(const Shape3& s) {
 #ifdef FLAGSIM_HAVE_VECTORS
 namespace {
 
-// One padded plane of PaddedComponent::fill: rows b in [-G, n1 + G) of plane s_plane (n1 x n2,
-// C order, n2 >= G) into d, p2 = n2 + 2 G apart, each row's interior by vectors of S (the last
-// one overlapping), its ghosts by scalars. Written out because GCC turns a copy loop, however
-// written, into a memmove call per row (at 16^3, with the call's set-up, ~50 instructions for 16
-// values); the pragma keeps these loops as loops.
+/// n values from s to d by vectors of S, the last one overlapping (n >= the lanes of S).
+template <class S, class T>
+FLAGSIM_INLINE void copy_by_vectors(const T* s, std::size_t n, T* d) {
+  constexpr std::size_t W = sizeof(S) / sizeof(T);
+  std::size_t k = 0;
+  for (; k + W <= n; k += W) store_lanes<S>(d + k, load_lanes<S, T>(s + k));
+  if (k < n) store_lanes<S>(d + n - W, load_lanes<S, T>(s + n - W));
+}
+
+// One padded plane of PaddedComponent::fill: rows b in [0, n1) of plane s_plane (n1 x n2, C
+// order, n1 >= G, n2 >= G) into d (the padded plane's row -G), p2 = n2 + 2 G apart, each row's
+// interior by vectors of S, its ghosts by scalars; then the ghost rows, which wrap along j, as
+// two blocks of G padded rows copied from the plane's own rows n1 - G.. and 0... Written out
+// because GCC turns a copy loop, however written, into a memmove call per row (at 16^3, with the
+// call's set-up, ~50 instructions for 16 values); the pragma keeps these loops as loops.
 template <class S, class T>
 FLAGSIM_INLINE void fill_plane_rows(const T* s_plane, int n1, int n2, int p2, T* d) {
   constexpr int G = PaddedComponent<T>::kGhost;
-  constexpr int W = int(sizeof(S) / sizeof(T));
-  for (int b = -G; b < n1 + G; ++b, d += p2) {
-    const T* s = s_plane + std::size_t(b < 0 ? b + n1 : b >= n1 ? b - n1 : b) * n2;
+  T* const top = d;
+  d += std::size_t(G) * p2;
+  for (int b = 0; b < n1; ++b, d += p2) {
+    const T* s = s_plane + std::size_t(b) * n2;
     for (int g = 0; g < G; ++g) {
       d[g] = s[n2 - G + g];
       d[G + n2 + g] = s[g];
     }
-    T* out = d + G;
-    int k = 0;
-    for (; k + W <= n2; k += W) store_lanes<S>(out + k, load_lanes<S, T>(s + k));
-    if (k < n2) store_lanes<S>(out + n2 - W, load_lanes<S, T>(s + n2 - W));
+    copy_by_vectors<S>(s, std::size_t(n2), d + G);
   }
+  const std::size_t block = std::size_t(G) * p2;
+  copy_by_vectors<S>(top + std::size_t(n1) * p2, block, top);              // rows -G.. <- n1 - G..
+  copy_by_vectors<S>(top + block, block, top + std::size_t(n1 + G) * p2);  // rows n1.. <- 0..
 }
 
 #pragma GCC push_options
@@ -485,18 +496,32 @@ void PaddedComponent<T>::fill(const T* src) {
   const int vb = vector_bytes();
   const bool rows_by_vectors = n1 >= G && n2 >= G && n2 * int(sizeof(T)) >= (vb == 32 ? 32 : 16);
 #endif
-  parallel_for_if(Index(data.size()) > kCopyParallelGrain, n0 + 2 * G, [&](Index plane) {
-    const int a = int(plane) - G;
-    const T* s_plane = src + std::size_t(wrap(a, n0)) * n1 * n2;
-    T* d = data.data() + index(a, -G, -G);
+  const bool parallel = Index(data.size()) > kCopyParallelGrain;
 #ifdef FLAGSIM_HAVE_VECTORS
-    if (rows_by_vectors) {
+  if (rows_by_vectors && n0 >= G) {
+    // The n0 planes from src, then the ghost planes (which wrap along i) as copies of padded
+    // planes: one contiguous block each.
+    parallel_for_if(parallel, n0, [&](Index a) {
+      const T* s_plane = src + std::size_t(a) * n1 * n2;
+      T* d = data.data() + index(int(a), -G, -G);
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
       if (vb == 32) return fill_plane_wide(s_plane, n1, n2, p2, d);
 #endif
-      return fill_plane_narrow(s_plane, n1, n2, p2, d);
-    }
+      fill_plane_narrow(s_plane, n1, n2, p2, d);
+    });
+    const std::size_t plane_size = std::size_t(p1) * p2;
+    parallel_for_if(parallel, 2 * G, [&](Index g) {
+      const int a = g < G ? int(g) - G : n0 + int(g) - G;  // -G.. -1, n0.. n0 + G - 1
+      const T* s = data.data() + index(a < 0 ? a + n0 : a - n0, -G, -G);
+      std::copy(s, s + plane_size, data.data() + index(a, -G, -G));
+    });
+    return;
+  }
 #endif
+  parallel_for_if(parallel, n0 + 2 * G, [&](Index plane) {
+    const int a = int(plane) - G;
+    const T* s_plane = src + std::size_t(wrap(a, n0)) * n1 * n2;
+    T* d = data.data() + index(a, -G, -G);
     for (int b = -G; b < n1 + G; ++b, d += p2) {
       const T* s = s_plane + std::size_t(wrap(b, n1)) * n2;
       if (n2 >= G) {
