@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <type_traits>
 
 namespace flagsim {
 
@@ -649,6 +650,29 @@ inline void padded_velocity(const std::array<PaddedComponent<T>, 3>& u, std::siz
   }
 }
 
+/// A vector of Bytes bytes of the unsigned integer B.
+template <class B, std::size_t Bytes>
+struct BitsOf {
+  typedef B U __attribute__((vector_size(Bytes)));
+};
+
+/// |x| per lane (the sign bit cleared: one and, where a select from x and -x takes four), for T
+/// or a vector of T.
+template <class S>
+FLAGSIM_INLINE S abs_lanes(S x) {
+  if constexpr (std::is_floating_point<S>::value) {
+    return std::fabs(x);
+  } else {
+    using E = std::remove_reference_t<decltype(x[0])>;
+    using B = std::conditional_t<sizeof(E) == 8, std::uint64_t, std::uint32_t>;
+    typename BitsOf<B, sizeof(S)>::U bits;
+    std::memcpy(&bits, &x, sizeof x);
+    bits &= ~(B(1) << (8 * sizeof(E) - 1));
+    std::memcpy(&x, &bits, sizeof x);
+    return x;
+  }
+}
+
 /// Semi-Lagrangian sample at node k of one row when the departure is within one cell of the node
 /// on every axis (|d| < 1): the departure point lies in the cell on the upwind side of the node,
 /// so each axis interpolates between the node and its upwind neighbour, node + |d| (upwind - node),
@@ -662,9 +686,8 @@ template <class S, class T>
 FLAGSIM_INLINE S upwind_sample(const T* const rows[9], int k, S d0, S d1, S d2) {
   const S zero = S{};                                            // 0 in every lane
   const auto lo0 = d0 > zero, lo1 = d1 > zero, lo2 = d2 > zero;  // upwind is the lower neighbour
-  const S w0 = lo0 ? d0 : (d0 < zero ? -d0 : zero);              // |d|, 0 for NaN
-  const S w1 = lo1 ? d1 : (d1 < zero ? -d1 : zero);
-  const S w2 = lo2 ? d2 : (d2 < zero ? -d2 : zero);
+  // |d| (+0 for either zero; NaN for NaN, a lane the caller redoes: padded_sl)
+  const S w0 = abs_lanes(d0), w1 = abs_lanes(d1), w2 = abs_lanes(d2);
   // Row r at the node (mid) and at its upwind neighbour along z (up).
   auto at = [&](const T* row, S& mid, S& up) {
     row += k;
@@ -870,8 +893,8 @@ FLAGSIM_INLINE bool far_sample(const SlRow<T>& w, int k, V u0, V u1, V u2, V& ou
   reach += double(G);
   for (int h = 0; h < H; ++h) {
     const D d0 = part(u0, h), d1 = part(u1, h), d2 = part(u2, h);
-    const auto ok = (d0 < reach) & (-d0 < reach) & (d1 < reach) & (-d1 < reach) & (d2 < reach) &
-                    (-d2 < reach);  // false for NaN
+    const auto ok = (abs_lanes(d0) < reach) & (abs_lanes(d1) < reach) &
+                    (abs_lanes(d2) < reach);  // false for NaN
     if (!all_lanes(ok)) return false;
     const D lane = iota + double(k + h * DW);  // the lanes' k, exactly
     // back = x - d, g = back - offset (node units), as trace() and PaddedRow::corner.
@@ -950,8 +973,7 @@ FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
       V u0, u1, u2;
       node_velocity<C>(w, k, u0, u1, u2);
       const V d0 = w.st * u0, d1 = w.st * u1, d2 = w.st * u2;
-      const auto in =
-          (d0 < one) & (-d0 < one) & (d1 < one) & (-d1 < one) & (d2 < one) & (-d2 < one);
+      const auto in = (abs_lanes(d0) < one) & (abs_lanes(d1) < one) & (abs_lanes(d2) < one);
       bool all_in, any_in;
       all_any_lanes(in, all_in, any_in);
       V far;
