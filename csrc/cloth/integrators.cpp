@@ -87,8 +87,8 @@ void hold_contacts(const ClothTopology& topo, const ForceSet& fs, const MatX3& f
   }
 }
 
-// Contacts of fs.contacts not held yet that the answer v + dv leaves more than kCrossing behind
-// their plane at the piece's end: held from now on, ending the piece on the plane (approach
+// Contacts of fs.contacts not held yet that the answer v + dv (and the drift) leaves more than
+// kCrossing behind their plane at the piece's end: held from now on, ending the piece on the plane (approach
 // w - gap / h, gap >= 0 at the start). Returns how many were added.
 constexpr double kCrossing = 1e-6;  // m
 constexpr int kContactRounds = 3;
@@ -101,7 +101,9 @@ std::size_t hold_crossing(const ClothTopology& topo, const ForceSet& fs, const M
     const Vec3 n = row(normal, i);
     if (topo.inv_mass[i] == 0.0 || n.isZero() || s.is_held[std::size_t(i)]) continue;
     const double w = plane_speed(fs, i), gap = std::max(0.0, start_gap(fs, x, i, n, h));
-    if (h * (v.row(i) + dv.row(i)).dot(n) < h * w - gap - kCrossing) {
+    // The end velocity and the drift (eq. 5 "displace") carry the vertex over the piece.
+    const double drift = fs.drift ? fs.drift->row(i).dot(n) : 0.0;
+    if (h * ((v.row(i) + dv.row(i)).dot(n) + drift) < h * w - gap - kCrossing) {
       s.held.push_back({int32_t(i), n, w - gap / h, w});
       s.is_held[std::size_t(i)] = 1;
     }
