@@ -88,8 +88,8 @@ void hold_contacts(const ClothTopology& topo, const ForceSet& fs, const MatX3& f
 }
 
 // Contacts of fs.contacts not held yet that the answer v + dv (and the drift) leaves more than
-// kCrossing behind their plane at the piece's end: held from now on, ending the piece on the plane (approach
-// w - gap / h, gap >= 0 at the start). Returns how many were added.
+// kCrossing behind their plane at the piece's end: held from now on, ending the piece on the
+// plane (approach w - gap / h, gap >= 0 at the start). Returns how many were added.
 constexpr double kCrossing = 1e-6;  // m
 constexpr int kContactRounds = 3;
 std::size_t hold_crossing(const ClothTopology& topo, const ForceSet& fs, const MatX3& x,
