@@ -122,8 +122,9 @@ def test_a_moving_box_lifts_the_hanging_flag(method):
     s.air.model = "uniform"
     s.air.wind = [(0.0, (1.0, 0.0, 0.0))]
     s.integrator.method = method
-    lift = flagsim.MotionSchedule()
-    lift.keys = [(0.0, (0, 0, 0), (0, 0, 0)), (0.5, (0, 0.35, 0), (0, 0, 0))]
+    lift = flagsim.MotionSchedule(
+        keys=[(0.0, (0, 0, 0), (0, 0, 0)), (0.5, (0, 0.35, 0), (0, 0, 0))]
+    )
     s.solids = [
         flagsim.SolidParams(
             shape="box",

@@ -113,6 +113,25 @@ def test_pin_pose_moves_pins_and_pole_together():
     assert (r[free] >= pole.radius * (1 - 1e-9)).all()
 
 
+def test_motion_schedule_from_keywords_is_the_one_set_field_by_field():
+    keys = [(0.0, (0, 0, 0), (0, 0, 0)), (1.0, (0.0, 0.5, 0.0), (0, 0, 90))]
+    a = flagsim.MotionSchedule(keys=keys, pivot=(1.0, 0.0, 0.0), repeat=True)
+    b = flagsim.MotionSchedule()
+    b.keys, b.pivot, b.repeat = keys, (1.0, 0.0, 0.0), True
+    points = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 3.0]])
+    for t in (0.25, 1.5):  # 1.5: repeated, at 0.5
+        np.testing.assert_array_equal(a.apply(t, points), b.apply(t, points))
+    # half a turn's 90 degrees about z through the pivot, half of the 0.5 m lift
+    np.testing.assert_allclose(
+        a.apply(0.5, points[:1]), [[1 - np.sqrt(0.5), -np.sqrt(0.5) + 0.25, 0.0]], atol=1e-12
+    )
+    assert flagsim.MotionSchedule().keys == []
+    with pytest.raises(ValueError, match="unknown key 'keyz' for MotionSchedule"):
+        flagsim.MotionSchedule(keyz=keys)
+    with pytest.raises(ValueError, match=r"motion.keys\[1\].time"):
+        flagsim.MotionSchedule(keys=keys[::-1])
+
+
 def test_bad_pin_input_names_the_parameter():
     s = small_flag()
     with pytest.raises(ValueError, match=r"motion.keys\[1\].time"):
