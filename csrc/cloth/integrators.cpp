@@ -214,7 +214,7 @@ double drift_work(const ClothTopology& topo, const ForceSet& fs, const MatX3& r,
 // The preconditioner a solve runs: multigrid when asked for ("auto": on grids of at least
 // kAutoMultigridVertices vertices, where it measured faster; docs/design.md) and when the topology
 // is a grid it can coarsen, else block Jacobi when asked for, else SSOR.
-constexpr Index kAutoMultigridVertices = 200;
+constexpr Index kAutoMultigridVertices = 500;
 Preconditioner preconditioner_for(const ClothTopology& topo, const IntegratorParams& ip,
                                   const IntegratorScratch& s) {
   switch (ip.preconditioner) {

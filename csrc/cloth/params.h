@@ -92,7 +92,7 @@ struct IntegratorParams {
                                ///< the paper flag by 4e-8 m after 1 s vs 1e-10: far below
                                ///< backward Euler's own error of ~3 mm; docs/design.md)
   /// implicit CG: jacobi (3x3 block Jacobi) | multigrid (aggregation K-cycle, grid flags) |
-  /// ssor (symmetric block Gauss-Seidel in Eisenstat's form) | auto (multigrid from 200 masses
+  /// ssor (symmetric block Gauss-Seidel in Eisenstat's form) | auto (multigrid from 500 masses
   /// up, ssor below; docs/design.md)
   Preconditioner preconditioner = Preconditioner::kAuto;
   int cg_max_iterations = 1000;      ///< implicit: per solve; on failure the step is halved
