@@ -139,7 +139,7 @@ void bind_cloth(py::module_& m) {
   def_field(in, "cg_tolerance", &IntegratorParams::cg_tolerance, "integrator",
             "implicit: CG relative residual");
   def_field(in, "preconditioner", &IntegratorParams::preconditioner, "integrator",
-            "implicit: CG preconditioner, 'auto' | 'jacobi' | 'multigrid' (grid flags)");
+            "implicit: CG preconditioner, 'auto' | 'jacobi' | 'multigrid' (grid flags) | 'ssor'");
   def_field(in, "cg_max_iterations", &IntegratorParams::cg_max_iterations, "integrator",
             "implicit: CG iterations per solve before halving the step");
   def_field(in, "max_halvings", &IntegratorParams::max_halvings, "integrator",

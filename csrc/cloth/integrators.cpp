@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
 
 #include "common/parallel.h"
 
@@ -11,7 +12,8 @@ namespace flagsim {
 
 IntegratorScratch::IntegratorScratch(const ClothTopology& topo) {
   const Index n = topo.num_vertices();
-  for (MatX3* m : {&f, &fd, &x0, &v0, &dv, &r, &z, &p, &q, &b, &tmp, &dv_prev, &impulse0})
+  for (MatX3* m :
+       {&f, &fd, &x0, &v0, &dv, &r, &z, &p, &q, &b, &tmp, &t, &u, &Dw, &dv_prev, &impulse0})
     m->setZero(n, 3);
   held.reserve(std::size_t(n));
   is_held.assign(std::size_t(n), 0);
@@ -211,14 +213,23 @@ double drift_work(const ClothTopology& topo, const ForceSet& fs, const MatX3& r,
   return h * w;
 }
 
-// Multigrid when asked for ("auto": on grids of at least kAutoMultigridVertices vertices, where it
-// measured faster; docs/design.md) and when the topology is a grid it can coarsen.
-constexpr Index kAutoMultigridVertices = 200;
-bool use_multigrid(const ClothTopology& topo, const IntegratorParams& ip,
-                   const IntegratorScratch& s) {
-  if (s.mg.levels.empty() || ip.preconditioner == Preconditioner::kJacobi) return false;
-  return ip.preconditioner == Preconditioner::kMultigrid ||
-         topo.num_vertices() >= kAutoMultigridVertices;
+// The preconditioner a solve runs: multigrid when asked for ("auto": on grids of at least
+// kAutoMultigridVertices vertices, where it measured faster; docs/design.md) and when the topology
+// is a grid it can coarsen, else block Jacobi when asked for, else SSOR.
+constexpr Index kAutoMultigridVertices = 500;
+Preconditioner preconditioner_for(const ClothTopology& topo, const IntegratorParams& ip,
+                                  const IntegratorScratch& s) {
+  switch (ip.preconditioner) {
+    case Preconditioner::kJacobi: return Preconditioner::kJacobi;
+    case Preconditioner::kSsor: return Preconditioner::kSsor;
+    case Preconditioner::kMultigrid:
+      return s.mg.levels.empty() ? Preconditioner::kJacobi : Preconditioner::kMultigrid;
+    case Preconditioner::kAuto:
+      return !s.mg.levels.empty() && topo.num_vertices() >= kAutoMultigridVertices
+                 ? Preconditioner::kMultigrid
+                 : Preconditioner::kSsor;
+  }
+  throw std::logic_error("preconditioner_for: unknown preconditioner");
 }
 
 // Explicit substeps hold no contact inside their update: a vertex a substep carries through its
@@ -381,6 +392,58 @@ double precondition(const ClothTopology& topo, IntegratorScratch& s, bool multig
   return rz;
 }
 
+// z = D r (D A's diagonal blocks; zero on pinned rows). Returns r . z.
+double times_diagonal(const ClothTopology& topo, const ClothSystem& A, const MatX3& r, MatX3& z) {
+  double rz = 0;
+  for (Index i = 0; i < topo.num_vertices(); ++i) {
+    if (topo.inv_mass[i] == 0.0) {
+      z.row(i).setZero();
+      continue;
+    }
+    const Vec3 ri = r.row(i);
+    const Vec3 zi = A.diag[size_t(i)] * ri;
+    z.row(i) = zi.transpose();
+    rz += ri.dot(zi);
+  }
+  return rz;
+}
+
+// CG preconditioned by symmetric block Gauss-Seidel, M = (D + L) D^-1 (D + U) (A = L + D + U),
+// in Eisenstat's form: CG on (D + L)^-1 A (D + U)^-1 y = (D + L)^-1 b preconditioned by D, whose
+// iterates map to those of CG on A preconditioned by M (residual r^ = (D + L)^-1 r, z = D r^, so
+// r^ . z = r . M^-1 r; dv = (D + U)^-1 y moves along t = (D + U)^-1 p), and whose product needs
+// no product with A (eisenstat_product). Converged when r . M^-1 r <= tol^2 b . M^-1 b, the
+// relative residual in M^-1's norm. From dv with residual r = b - A dv (s.r, turned into r^);
+// no held contacts (the filter S is not in the triangular factors). False when it did not converge.
+bool ssor_cg(const ClothTopology& topo, const ClothSystem& A, const IntegratorParams& ip,
+             IntegratorScratch& s, IntegratorStats& stats) {
+  lower_block_solve(topo, A, s.b, s.z);  // c = (D + L)^-1 b: b . M^-1 b = c . D c
+  const double tol2 = ip.cg_tolerance * ip.cg_tolerance * times_diagonal(topo, A, s.z, s.z);
+  lower_block_solve(topo, A, s.r, s.r);  // in place: row i reads the rows j < i already solved
+  double rz = times_diagonal(topo, A, s.r, s.z);
+  bool converged = rz <= tol2;
+  int it = 0;
+  if (!converged) s.p = s.z;
+  for (; !converged && it < ip.cg_max_iterations; ++it) {
+    const double pw = eisenstat_product(topo, A, s.p, s.t, s.u, s.q, s.Dw);
+    if (!(pw > 0)) break;  // not SPD along p (or NaN): give up, the caller halves h
+    const double alpha = rz / pw;
+    s.dv += alpha * s.t;
+    s.r -= alpha * s.q;
+    s.z -= alpha * s.Dw;  // z = D r^ by the same recurrence
+    const double rz_new = dot(s.r, s.z);
+    if (rz_new <= tol2) {
+      converged = true;
+      ++it;
+      break;
+    }
+    s.p = s.z + (rz_new / rz) * s.p;
+    rz = rz_new;
+  }
+  stats.cg_iterations += it;
+  return converged;
+}
+
 // fd (N x 3): the drag at the start of a piece becomes the drag the implicit solve applied,
 // fd + (d fd / d v) dv. A holds M + h D_drag (A.D) and h Jw / 9 (A.J), see
 // assemble_implicit_system, so D_drag = (A.D - m I) / h.
@@ -426,7 +489,8 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     filter_held(s.held.data() + first, s.held.size() - first, s.b);
   };
   book_held(0);
-  const bool multigrid = use_multigrid(topo, ip, s);
+  const Preconditioner pc = preconditioner_for(topo, ip, s);
+  const bool multigrid = pc == Preconditioner::kMultigrid;
   if (multigrid) multigrid_setup(topo, A, s.mg);
 
   // PCG warm start: the point of the line through the last two steps' dv, dv_1 + theta (dv_1 -
@@ -457,6 +521,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
       prescribe_held(s.held, v, s.dv);
       return true;
     }
+    if (pc == Preconditioner::kSsor && s.held.empty()) return ssor_cg(topo, A, ip, s, stats);
     const double tol2 = (ip.cg_tolerance * bnorm) * (ip.cg_tolerance * bnorm);
     int it = 0;
     bool converged = s.r.squaredNorm() <= tol2;

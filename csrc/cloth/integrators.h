@@ -1,6 +1,7 @@
 // Time integration of the cloth: symplectic Euler with adaptive substepping, and linearised
-// backward Euler (Baraff-Witkin 1998 §4-5) solved by CG preconditioned by block Jacobi or an
-// aggregation multigrid cycle (flexible CG then; cloth/multigrid.h).
+// backward Euler (Baraff-Witkin 1998 §4-5) solved by CG preconditioned by block Jacobi, symmetric
+// block Gauss-Seidel in Eisenstat's form, or an aggregation multigrid cycle (flexible CG then;
+// cloth/multigrid.h).
 #pragma once
 #include <vector>
 
@@ -144,6 +145,7 @@ struct IntegratorStats {
 /// Scratch for both integrators, sized once for a topology (no allocation inside a step).
 struct IntegratorScratch {
   MatX3 f, fd, x0, v0, dv, r, z, p, q, b, tmp;  // fd: the drag part of f
+  MatX3 t, u, Dw;  ///< implicit, ssor: eisenstat_product's t, scratch and D w
   MatX3 impulse0;  ///< implicit: ForceSet::drag_impulse at the start of a halving level
   MatX3 dv_prev;   ///< implicit: the solve's dv one step before dv (for the warm start)
   std::vector<RestingContact> held;  ///< implicit: the contacts the current solve holds

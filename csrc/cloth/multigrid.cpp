@@ -170,6 +170,99 @@ struct FineUpperHalf {
   }
 };
 
+// -sum_{j on one side of i} A_ij x_j for a block substitution over the free vertex i: kLower (j <
+// i, forward) or kUpper (j > i, backward). The neighbour nearest i on that side, the one the
+// substitution has just set, is added last, in scalars, so that row i waits on that one block
+// product and not on the whole row (the rows form one dependency chain).
+template <class L, Side side>
+FLAGSIM_INLINE Vec3 minus_offdiagonal_nearest_last(const ClothTopology& topo, const ClothSystem& A,
+                                                   const MatX3& x, Index i) {
+  static_assert(side != Side::kAll, "a substitution reads one side");
+  const NeighbourBlocks& n = A.off;
+  const bool lower = side == Side::kLower;
+  int32_t begin = lower ? topo.adj_offset[size_t(i)] : n.lower_end[size_t(i)];
+  int32_t end = lower ? n.lower_end[size_t(i)] : topo.adj_offset[size_t(i) + 1];
+  if (begin == end) return minus_offdiagonal<L, side>(topo, A, x, i);  // triangles only
+  const int32_t nearest = lower ? end - 1 : begin;
+  if (lower)
+    --end;
+  else
+    ++begin;
+  Vec3 acc = spring_blocks_times<L>(n, x.data(), begin, end);
+  if (!A.J.empty()) {
+    for (int32_t k = topo.tri_adj_offset[i]; k < topo.tri_adj_offset[i + 1]; ++k) {
+      const int32_t t = topo.tri_adj[k];
+      Vec3 sum = Vec3::Zero();
+      for (int q = 0; q < 3; ++q)
+        if (lower ? topo.triangles(t, q) < i : topo.triangles(t, q) > i)
+          sum += x.row(topo.triangles(t, q));
+      acc.noalias() -= A.J[t] * sum;
+    }
+  }
+  double sx = 0, sy = 0, sz = 0;
+  add_spring_blocks(n, x.data(), size_t(nearest), sx, sy, sz);
+  return acc + Vec3(sx, sy, sz);
+}
+
+// x = (D + L)^-1 b: block forward substitution with A's lower triangle L and diagonal blocks D
+// (the forward Gauss-Seidel sweep from x = 0); zero on pinned rows.
+struct FineLowerSolve {
+  template <class L>
+  FLAGSIM_INLINE static void run(const ClothTopology& topo, const ClothSystem& A, const MatX3& b,
+                                 MatX3& x) {
+    for (Index i = 0; i < topo.num_vertices(); ++i) {
+      if (!free_vertex(topo, i)) {
+        x.row(i).setZero();
+        continue;
+      }
+      const Vec3 acc =
+          Vec3(b.row(i)) + minus_offdiagonal_nearest_last<L, Side::kLower>(topo, A, x, i);
+      x.row(i) = (A.Pinv[size_t(i)] * acc).transpose();
+    }
+  }
+};
+
+// Eisenstat (1981): with A = (D + L) + (D + U) - D,
+//   (D + L)^-1 A (D + U)^-1 p = t + (D + L)^-1 (p - D t),  t = (D + U)^-1 p,
+// one backward and one forward substitution, no product with A. Row i of the backward pass solves
+// D_i t_i = p_i - sum_{j>i} A_ij t_j, so u_i = p_i - D_i t_i is that sum, no product with D. The
+// forward pass replaces u by s = (D + L)^-1 u in place (row i reads the rows j < i it has already
+// replaced) and writes w = t + s and D w = D t + D s = p + (its row's -sum_{j<i} A_ij s_j), D_i s_i
+// being the row's right-hand side; pw = p . w, summed in vertex order.
+struct FineEisenstat {
+  template <class L>
+  FLAGSIM_INLINE static void run(const ClothTopology& topo, const ClothSystem& A, const MatX3& p,
+                                 MatX3& t, MatX3& u, MatX3& w, MatX3& Dw, double& pw) {
+    const Index N = topo.num_vertices();
+    for (Index i = N - 1; i >= 0; --i) {
+      if (!free_vertex(topo, i)) {
+        t.row(i).setZero();
+        u.row(i).setZero();
+        continue;
+      }
+      const Vec3 upper = minus_offdiagonal_nearest_last<L, Side::kUpper>(topo, A, t, i);
+      t.row(i) = (A.Pinv[size_t(i)] * (Vec3(p.row(i)) + upper)).transpose();
+      u.row(i) = -upper.transpose();  // p_i - D_i t_i, D_i t_i being the row's p_i + upper
+    }
+    double sum = 0;
+    for (Index i = 0; i < N; ++i) {
+      if (!free_vertex(topo, i)) {
+        w.row(i).setZero();
+        Dw.row(i).setZero();
+        continue;
+      }
+      const Vec3 lower = minus_offdiagonal_nearest_last<L, Side::kLower>(topo, A, u, i);
+      const Vec3 si = A.Pinv[size_t(i)] * (Vec3(u.row(i)) + lower);
+      u.row(i) = si.transpose();
+      const Vec3 pi = p.row(i), wi = Vec3(t.row(i)) + si;
+      w.row(i) = wi.transpose();
+      Dw.row(i) = (pi + lower).transpose();
+      sum += pi.dot(wi);
+    }
+    pw = sum;
+  }
+};
+
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
 template <class Pass, class... Args>
 FLAGSIM_TARGET_AVX void run_wide(Args&... args) {
@@ -550,6 +643,17 @@ void apply_system(const ClothTopology& topo, const ClothSystem& A, const MatX3& 
   parallel_for_if(N >= kParallelGrain, chunks, [&](Index c) {
     run_on_widest_lanes<FineProduct>(topo, A, p, out, c * kChunk, std::min(N, (c + 1) * kChunk));
   });
+}
+
+void lower_block_solve(const ClothTopology& topo, const ClothSystem& A, const MatX3& b, MatX3& x) {
+  run_on_widest_lanes<FineLowerSolve>(topo, A, b, x);
+}
+
+double eisenstat_product(const ClothTopology& topo, const ClothSystem& A, const MatX3& p, MatX3& t,
+                         MatX3& u, MatX3& w, MatX3& Dw) {
+  double pw = 0;
+  run_on_widest_lanes<FineEisenstat>(topo, A, p, t, u, w, Dw, pw);
+  return pw;
 }
 
 bool multigrid_applies(const ClothTopology& topo) {

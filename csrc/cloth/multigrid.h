@@ -40,6 +40,17 @@ struct ClothSystem {
 /// out = A p (N x 3); rows of pinned vertices are zero, p's pinned rows must be zero.
 void apply_system(const ClothTopology& topo, const ClothSystem& A, const MatX3& p, MatX3& out);
 
+/// Symmetric block Gauss-Seidel (SSOR, omega 1) in Eisenstat's form, with A = L + D + U (D the
+/// 3x3 diagonal blocks ClothSystem::diag, L = U^T the strict lower block triangle in vertex order).
+/// x = (D + L)^-1 b (N x 3); b's pinned rows must be zero, x's come out zero.
+void lower_block_solve(const ClothTopology& topo, const ClothSystem& A, const MatX3& b, MatX3& x);
+
+/// w = (D + L)^-1 A (D + U)^-1 p as t + (D + L)^-1 (p - D t) with t = (D + U)^-1 p (Eisenstat
+/// 1981: one backward and one forward block substitution, no product with A), and D w; returns
+/// p . w. p (N x 3, zero pinned rows); t, w, Dw (N x 3) out, zero pinned rows; u (N x 3) scratch.
+double eisenstat_product(const ClothTopology& topo, const ClothSystem& A, const MatX3& p, MatX3& t,
+                         MatX3& u, MatX3& w, MatX3& Dw);
+
 /// sum_ik a_ik b_ik: the inner product of two N x 3 fields (the CG and K-cycle dot products).
 inline double dot(const MatX3& a, const MatX3& b) { return (a.array() * b.array()).sum(); }
 

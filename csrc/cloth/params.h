@@ -30,10 +30,10 @@ struct EnumNames<Method> {
   static constexpr std::array<const char*, 2> names{"explicit", "implicit"};
 };
 
-enum class Preconditioner { kAuto, kJacobi, kMultigrid };
+enum class Preconditioner { kAuto, kJacobi, kMultigrid, kSsor };
 template <>
 struct EnumNames<Preconditioner> {
-  static constexpr std::array<const char*, 3> names{"auto", "jacobi", "multigrid"};
+  static constexpr std::array<const char*, 4> names{"auto", "jacobi", "multigrid", "ssor"};
 };
 
 /// A rows x cols grid of masses over a width x height rectangle (paper: 8 x 11 masses).
@@ -92,7 +92,8 @@ struct IntegratorParams {
                                ///< the paper flag by 4e-8 m after 1 s vs 1e-10: far below
                                ///< backward Euler's own error of ~3 mm; docs/design.md)
   /// implicit CG: jacobi (3x3 block Jacobi) | multigrid (aggregation K-cycle, grid flags) |
-  /// auto (multigrid from 200 masses up; docs/design.md)
+  /// ssor (symmetric block Gauss-Seidel in Eisenstat's form) | auto (multigrid from 500 masses
+  /// up, ssor below; docs/design.md)
   Preconditioner preconditioner = Preconditioner::kAuto;
   int cg_max_iterations = 1000;      ///< implicit: per solve; on failure the step is halved
   int max_halvings = 10;             ///< implicit: step halvings before DivergenceError("cg")

@@ -48,7 +48,8 @@ BAD_VALUES = [
         "integrator",
         "preconditioner",
         "ilu",
-        r'integrator.preconditioner should be one of "auto", "jacobi", "multigrid", got "ilu"',
+        r'integrator.preconditioner should be one of "auto", "jacobi", "multigrid", "ssor", '
+        r'got "ilu"',
     ),
     ("integrator", "max_strain", -1.0, r"integrator.max_strain should be finite and > 0"),
     ("air", "model", "wind", r'air.model should be one of "none", "uniform", "grid", got "wind"'),
