@@ -81,7 +81,7 @@ void hold_contacts(const ClothTopology& topo, const ForceSet& fs, const MatX3& f
     if (topo.inv_mass[i] == 0.0 || n.isZero()) continue;
     const double w = plane_speed(fs, i);
     if (start_gap(fs, x, i, n, h) <= 0 && f.row(i).dot(n) < 0 && v.row(i).dot(n) <= w + kLeaving) {
-      s.held.push_back({int32_t(i), n, w});
+      s.held.push_back({int32_t(i), n, w, w});
       s.is_held[std::size_t(i)] = 1;
     }
   }
@@ -102,7 +102,7 @@ std::size_t hold_crossing(const ClothTopology& topo, const ForceSet& fs, const M
     if (topo.inv_mass[i] == 0.0 || n.isZero() || s.is_held[std::size_t(i)]) continue;
     const double w = plane_speed(fs, i), gap = std::max(0.0, start_gap(fs, x, i, n, h));
     if (h * (v.row(i) + dv.row(i)).dot(n) < h * w - gap - kCrossing) {
-      s.held.push_back({int32_t(i), n, w - gap / h});
+      s.held.push_back({int32_t(i), n, w - gap / h, w});
       s.is_held[std::size_t(i)] = 1;
     }
   }
@@ -220,20 +220,28 @@ bool use_multigrid(const ClothTopology& topo, const IntegratorParams& ip,
 }
 
 // Explicit substeps hold no contact inside their update: a vertex a substep carries through its
-// contact plane (ForceSet::contacts; where it is at the piece's end) is put back on it and loses
-// its velocity into it beyond the plane's own. Substeps are short, so each such move is small; at
-// the end of the step the pole and solids stages would otherwise push back a whole step's worth
-// at once, against the springs.
-void keep_out_of_planes(const ForceSet& fs, MatX3& x, MatX3& v) {
+// contact plane (ForceSet::contacts, where it is at the substep's end, `left` s before the
+// piece's) is put back on it and loses its velocity into it beyond the plane's own. Substeps are
+// short, so each such move is small; at the end of the step the pole and solids stages would
+// otherwise push back a whole step's worth at once, against the springs. The planes' impulse
+// goes to work.contact_impulse, a moving plane's work (impulse . w n) to work.pins.
+void keep_out_of_planes(const ClothTopology& topo, const ForceSet& fs, double left, MatX3& x,
+                        MatX3& v, StepWork& work) {
   if (!fs.contacts) return;
   const MatX3& normal = *fs.contacts;
   for (Index i = 0; i < normal.rows(); ++i) {
     const Vec3 n = row(normal, i);
-    const double gap = x.row(i).dot(n) - (*fs.contact_offset)[i];
-    if (!(gap < 0) || n.isZero()) continue;
+    const double w = plane_speed(fs, i);
+    const double gap = x.row(i).dot(n) - ((*fs.contact_offset)[i] - w * left);
+    if (!(gap < 0) || n.isZero() || topo.inv_mass[i] == 0.0) continue;
     x.row(i) -= gap * n.transpose();
-    const double vn = v.row(i).dot(n), w = plane_speed(fs, i);
-    if (vn < w) v.row(i) += (w - vn) * n.transpose();
+    const double vn = v.row(i).dot(n);
+    if (vn < w) {
+      v.row(i) += (w - vn) * n.transpose();
+      const double jn = topo.mass[i] * (w - vn);
+      work.contact_impulse += jn * n;
+      work.pins += jn * w;
+    }
   }
 }
 
@@ -270,7 +278,7 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
       if (fs.drift) work.drift += drift_work(topo, fs, *fs.drift, s.f, s.v0, s.fd, hs);
       book_force_work(topo, fs, s.v0, v, hs, s, work);  // forces at the substep's start
     }
-    keep_out_of_planes(fs, x, v);
+    keep_out_of_planes(topo, fs, h - done <= hs ? 0.0 : h - (done + hs), x, v, work);
     if (ip.strain_limit > 0) {
       StageClock::Scope timer(t, Stage::kStrainLimit);
       work.strain_limit +=
@@ -407,10 +415,11 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   // Held contacts: dv = S dv + z (prescribe_held), r = S (b - A dv), and every product and
   // preconditioned residual filtered by S (Baraff-Witkin §5.3).
   hold_contacts(topo, fs, s.f, x, v, h, s);
-  const auto book_held = [&](std::size_t first) {  // the solids' impulse is A dv - b along n
+  const auto book_held = [&](std::size_t first) {  // the planes' impulse is A dv - b along n
     for (std::size_t k = first; k < s.held.size(); ++k) {
-      const RestingContact& c = s.held[k];
-      work.contact_impulse -= s.b.row(c.vertex).dot(c.normal) * c.normal;  // b unfiltered
+      RestingContact& c = s.held[k];
+      c.bn = s.b.row(c.vertex).dot(c.normal);  // b unfiltered
+      work.contact_impulse -= c.bn * c.normal;
     }
     filter_held(s.held.data() + first, s.held.size() - first, s.b);
   };
@@ -493,10 +502,15 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     filter_held(s.held, s.r);
     if (!solve()) return IntegrateStatus::kCgFailed;
   }
-  if (!s.held.empty()) {  // the rest of the solids' impulses: A dv along the normals
+  if (!s.held.empty()) {  // the rest of the planes' impulses: A dv along the normals
     apply_system(topo, A, s.dv, s.q);
-    for (const RestingContact& c : s.held)
-      work.contact_impulse += s.q.row(c.vertex).dot(c.normal) * c.normal;
+    for (const RestingContact& c : s.held) {
+      const double qn = s.q.row(c.vertex).dot(c.normal);
+      work.contact_impulse += qn * c.normal;
+      // A moving plane's work: its impulse times its own speed along n (a still one does none;
+      // the speculative part, -gap / h, stays the integrator's: <= 0 for a push).
+      work.pins += (qn - c.bn) * c.w;
+    }
   }
   parallel_for(N, [&](Index i) {
     v.row(i) += s.dv.row(i);

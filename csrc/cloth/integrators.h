@@ -13,13 +13,16 @@
 
 namespace flagsim {
 
-/// A free vertex held on a solid by the implicit solve: the solid's outward unit normal at it,
-/// and the velocity along it the vertex ends the piece with (0 on the surface; -gap / h when it
-/// starts gap short of the surface, so that it ends there: a speculative contact).
+/// A free vertex held on a solid (or the pole) by the implicit solve: the surface's outward unit
+/// normal at it, and the velocity along it the vertex ends the piece with: the plane's own speed
+/// w (ForceSet::contact_speed; 0 at rest), less gap / h when it starts gap short of the plane,
+/// so that it ends there (a speculative contact).
 struct RestingContact {
   int32_t vertex = -1;
   Vec3 normal = Vec3::Zero();
-  double approach = 0;  ///< m/s, <= 0
+  double approach = 0;  ///< m/s, <= w
+  double w = 0;         ///< m/s, the plane's speed along the normal
+  double bn = 0;        ///< N s, the right-hand side along the normal when it was held
 };
 
 /// Which force stages a scene built, with their parameters. A stage left out costs nothing.
@@ -54,22 +57,25 @@ struct ForceSet {
   /// coupling's implicit air response, 1 / (1 + kappa_i); docs/coupling.md). A triangle's
   /// Jacobian block ("triangle" drag) takes the mean of its vertices' factors (kept symmetric).
   const VecX* drag_scale = nullptr;
-  /// Contact planes of the free vertices near a solid (or the pole) at rest, or none: per vertex
-  /// the outward unit normal n of the surface (a zero row: no contact) and an offset o, so that
-  /// x . n >= o keeps the vertex out (o is the surface, a little outside it: gap = x . n - o <= 0
-  /// means touching). Implicit: each touching one whose forces at the piece's start push it in
-  /// (f . n < 0) and whose velocity does not leave it (v . n <= 1e-9 m/s) ends the piece with no
-  /// velocity along n, its other two directions solved as usual (Baraff-Witkin 1998 §5.3, the
+  /// Contact planes of the free vertices near a solid or the pole, or none: per vertex the
+  /// outward unit normal n of the surface (a zero row: no contact) and an offset o at the piece's
+  /// end, so that x . n >= o keeps the vertex out (o is the surface, a little outside it: gap =
+  /// x . n - o <= 0 means touching); a moving surface's plane moves along n at contact_speed w.
+  /// Implicit: each touching one whose forces at the piece's start push it in (f . n < 0) and
+  /// whose velocity does not leave it (v . n <= w + 1e-9 m/s) ends the piece moving with the
+  /// plane (v . n = w), its other two directions solved as usual (Baraff-Witkin 1998 §5.3, the
   /// filter S = I - n n^T inside CG); any other that the solve's answer carries through its plane
-  /// is held too, ending the piece on the plane (speed gap / h along -n), and the solve is
-  /// finished with it. Without this the springs pull a draped flag into its solid, or a flag
-  /// wrapped round its pole into the pole, in every solve and the projection pushes it back:
-  /// energy the check cannot explain. Strain limiting keeps these vertices on their side of the
-  /// plane too (limit_strain's `surface`).
+  /// is held too, ending the piece on the plane (speed w - gap / h along n), and the solve is
+  /// finished with it. The plane's impulse goes to StepWork::contact_impulse, the work of a moving
+  /// one (impulse . w n) to StepWork::pins. Without this the springs pull a draped flag into its
+  /// solid, or a flag wrapped round its pole into the pole, in every solve and the projection
+  /// pushes it back: energy the check cannot explain. Strain limiting keeps these vertices on their
+  /// side of the plane too (limit_strain's `surface`).
   const MatX3* contacts = nullptr;
   const VecX* contact_offset = nullptr;  ///< (N) m, the planes' offsets o at the piece's end
   /// (N) m/s or none (still): each plane's speed w along its normal over the piece (a moving
-  /// pole), so that it is at o - w h at the piece's start; a held vertex ends moving with it.
+  /// pole or solid), so that it is at o - w h at the piece's start; a held vertex ends moving
+  /// with it.
   const VecX* contact_speed = nullptr;
 };
 
@@ -106,11 +112,11 @@ struct StepWork {
   double external = 0;      ///< ForceSet::external
   double drift = 0;         ///< ForceSet::drift against springs and gravity
   double damping = 0;       ///< spring damping, eq. 4 (<= 0)
-  double pins = 0;          ///< pins that move
+  double pins = 0;          ///< pins that move, and moving contact planes
   double strain_limit = 0;  ///< energy change made by strain limiting inside the step
   double remainder = 0;     ///< the integrator's own (numerical) energy change
-  /// N s, not energy: the impulse the resting contacts' solids gave the flag (ForceSet::contacts),
-  /// so that the pins' impulse leaves it out.
+  /// N s, not energy: the impulse the contact planes (ForceSet::contacts: the solids' and the
+  /// pole's) gave the flag, so that the pins' impulse leaves it out.
   Vec3 contact_impulse = Vec3::Zero();
   /// The energy the booked stages account for (everything but the remainder), J.
   double booked() const { return drag + external + drift + damping + pins + strain_limit; }

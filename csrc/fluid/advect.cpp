@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <type_traits>
 
 namespace flagsim {
 
@@ -433,26 +434,37 @@ void PaddedComponent<T>::resize(const Shape3& s) {
 #ifdef FLAGSIM_HAVE_VECTORS
 namespace {
 
-// One padded plane of PaddedComponent::fill: rows b in [-G, n1 + G) of plane s_plane (n1 x n2,
-// C order, n2 >= G) into d, p2 = n2 + 2 G apart, each row's interior by vectors of S (the last
-// one overlapping), its ghosts by scalars. Written out because GCC turns a copy loop, however
-// written, into a memmove call per row (at 16^3, with the call's set-up, ~50 instructions for 16
-// values); the pragma keeps these loops as loops.
+/// n values from s to d by vectors of S, the last one overlapping (n >= the lanes of S).
+template <class S, class T>
+FLAGSIM_INLINE void copy_by_vectors(const T* s, std::size_t n, T* d) {
+  constexpr std::size_t W = sizeof(S) / sizeof(T);
+  std::size_t k = 0;
+  for (; k + W <= n; k += W) store_lanes<S>(d + k, load_lanes<S, T>(s + k));
+  if (k < n) store_lanes<S>(d + n - W, load_lanes<S, T>(s + n - W));
+}
+
+// One padded plane of PaddedComponent::fill: rows b in [0, n1) of plane s_plane (n1 x n2, C
+// order, n1 >= G, n2 >= G) into d (the padded plane's row -G), p2 = n2 + 2 G apart, each row's
+// interior by vectors of S, its ghosts by scalars; then the ghost rows, which wrap along j, as
+// two blocks of G padded rows copied from the plane's own rows n1 - G.. and 0... Written out
+// because GCC turns a copy loop, however written, into a memmove call per row (at 16^3, with the
+// call's set-up, ~50 instructions for 16 values); the pragma keeps these loops as loops.
 template <class S, class T>
 FLAGSIM_INLINE void fill_plane_rows(const T* s_plane, int n1, int n2, int p2, T* d) {
   constexpr int G = PaddedComponent<T>::kGhost;
-  constexpr int W = int(sizeof(S) / sizeof(T));
-  for (int b = -G; b < n1 + G; ++b, d += p2) {
-    const T* s = s_plane + std::size_t(b < 0 ? b + n1 : b >= n1 ? b - n1 : b) * n2;
+  T* const top = d;
+  d += std::size_t(G) * p2;
+  for (int b = 0; b < n1; ++b, d += p2) {
+    const T* s = s_plane + std::size_t(b) * n2;
     for (int g = 0; g < G; ++g) {
       d[g] = s[n2 - G + g];
       d[G + n2 + g] = s[g];
     }
-    T* out = d + G;
-    int k = 0;
-    for (; k + W <= n2; k += W) store_lanes<S>(out + k, load_lanes<S, T>(s + k));
-    if (k < n2) store_lanes<S>(out + n2 - W, load_lanes<S, T>(s + n2 - W));
+    copy_by_vectors<S>(s, std::size_t(n2), d + G);
   }
+  const std::size_t block = std::size_t(G) * p2;
+  copy_by_vectors<S>(top + std::size_t(n1) * p2, block, top);              // rows -G.. <- n1 - G..
+  copy_by_vectors<S>(top + block, block, top + std::size_t(n1 + G) * p2);  // rows n1.. <- 0..
 }
 
 #pragma GCC push_options
@@ -485,18 +497,32 @@ void PaddedComponent<T>::fill(const T* src) {
   const int vb = vector_bytes();
   const bool rows_by_vectors = n1 >= G && n2 >= G && n2 * int(sizeof(T)) >= (vb == 32 ? 32 : 16);
 #endif
-  parallel_for_if(Index(data.size()) > kCopyParallelGrain, n0 + 2 * G, [&](Index plane) {
-    const int a = int(plane) - G;
-    const T* s_plane = src + std::size_t(wrap(a, n0)) * n1 * n2;
-    T* d = data.data() + index(a, -G, -G);
+  const bool parallel = Index(data.size()) > kCopyParallelGrain;
 #ifdef FLAGSIM_HAVE_VECTORS
-    if (rows_by_vectors) {
+  if (rows_by_vectors && n0 >= G) {
+    // The n0 planes from src, then the ghost planes (which wrap along i) as copies of padded
+    // planes: one contiguous block each.
+    parallel_for_if(parallel, n0, [&](Index a) {
+      const T* s_plane = src + std::size_t(a) * n1 * n2;
+      T* d = data.data() + index(int(a), -G, -G);
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
       if (vb == 32) return fill_plane_wide(s_plane, n1, n2, p2, d);
 #endif
-      return fill_plane_narrow(s_plane, n1, n2, p2, d);
-    }
+      fill_plane_narrow(s_plane, n1, n2, p2, d);
+    });
+    const std::size_t plane_size = std::size_t(p1) * p2;
+    parallel_for_if(parallel, 2 * G, [&](Index g) {
+      const int a = g < G ? int(g) - G : n0 + int(g) - G;  // -G.. -1, n0.. n0 + G - 1
+      const T* s = data.data() + index(a < 0 ? a + n0 : a - n0, -G, -G);
+      std::copy(s, s + plane_size, data.data() + index(a, -G, -G));
+    });
+    return;
+  }
 #endif
+  parallel_for_if(parallel, n0 + 2 * G, [&](Index plane) {
+    const int a = int(plane) - G;
+    const T* s_plane = src + std::size_t(wrap(a, n0)) * n1 * n2;
+    T* d = data.data() + index(a, -G, -G);
     for (int b = -G; b < n1 + G; ++b, d += p2) {
       const T* s = s_plane + std::size_t(wrap(b, n1)) * n2;
       if (n2 >= G) {
@@ -624,6 +650,29 @@ inline void padded_velocity(const std::array<PaddedComponent<T>, 3>& u, std::siz
   }
 }
 
+/// A vector of Bytes bytes of the unsigned integer B.
+template <class B, std::size_t Bytes>
+struct BitsOf {
+  typedef B U __attribute__((vector_size(Bytes)));
+};
+
+/// |x| per lane (the sign bit cleared: one and, where a select from x and -x takes four), for T
+/// or a vector of T.
+template <class S>
+FLAGSIM_INLINE S abs_lanes(S x) {
+  if constexpr (std::is_floating_point<S>::value) {
+    return std::fabs(x);
+  } else {
+    using E = std::remove_reference_t<decltype(x[0])>;
+    using B = std::conditional_t<sizeof(E) == 8, std::uint64_t, std::uint32_t>;
+    typename BitsOf<B, sizeof(S)>::U bits;
+    std::memcpy(&bits, &x, sizeof x);
+    bits &= ~(B(1) << (8 * sizeof(E) - 1));
+    std::memcpy(&x, &bits, sizeof x);
+    return x;
+  }
+}
+
 /// Semi-Lagrangian sample at node k of one row when the departure is within one cell of the node
 /// on every axis (|d| < 1): the departure point lies in the cell on the upwind side of the node,
 /// so each axis interpolates between the node and its upwind neighbour, node + |d| (upwind - node),
@@ -637,9 +686,8 @@ template <class S, class T>
 FLAGSIM_INLINE S upwind_sample(const T* const rows[9], int k, S d0, S d1, S d2) {
   const S zero = S{};                                            // 0 in every lane
   const auto lo0 = d0 > zero, lo1 = d1 > zero, lo2 = d2 > zero;  // upwind is the lower neighbour
-  const S w0 = lo0 ? d0 : (d0 < zero ? -d0 : zero);              // |d|, 0 for NaN
-  const S w1 = lo1 ? d1 : (d1 < zero ? -d1 : zero);
-  const S w2 = lo2 ? d2 : (d2 < zero ? -d2 : zero);
+  // |d| (+0 for either zero; NaN for NaN, a lane the caller redoes: padded_sl)
+  const S w0 = abs_lanes(d0), w1 = abs_lanes(d1), w2 = abs_lanes(d2);
   // Row r at the node (mid) and at its upwind neighbour along z (up).
   auto at = [&](const T* row, S& mid, S& up) {
     row += k;
@@ -845,8 +893,8 @@ FLAGSIM_INLINE bool far_sample(const SlRow<T>& w, int k, V u0, V u1, V u2, V& ou
   reach += double(G);
   for (int h = 0; h < H; ++h) {
     const D d0 = part(u0, h), d1 = part(u1, h), d2 = part(u2, h);
-    const auto ok = (d0 < reach) & (-d0 < reach) & (d1 < reach) & (-d1 < reach) & (d2 < reach) &
-                    (-d2 < reach);  // false for NaN
+    const auto ok = (abs_lanes(d0) < reach) & (abs_lanes(d1) < reach) &
+                    (abs_lanes(d2) < reach);  // false for NaN
     if (!all_lanes(ok)) return false;
     const D lane = iota + double(k + h * DW);  // the lanes' k, exactly
     // back = x - d, g = back - offset (node units), as trace() and PaddedRow::corner.
@@ -925,8 +973,7 @@ FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
       V u0, u1, u2;
       node_velocity<C>(w, k, u0, u1, u2);
       const V d0 = w.st * u0, d1 = w.st * u1, d2 = w.st * u2;
-      const auto in =
-          (d0 < one) & (-d0 < one) & (d1 < one) & (-d1 < one) & (d2 < one) & (-d2 < one);
+      const auto in = (abs_lanes(d0) < one) & (abs_lanes(d1) < one) & (abs_lanes(d2) < one);
       bool all_in, any_in;
       all_any_lanes(in, all_in, any_in);
       V far;

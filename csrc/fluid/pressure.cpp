@@ -5,8 +5,10 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <mutex>
+#include <type_traits>
 #include <vector>
 
 #include "common/errors.h"
@@ -17,41 +19,113 @@
 
 namespace flagsim {
 
+namespace {
+
+/// Vectors of DW doubles and of DW values of T (the divergence's lanes: it computes in double).
+template <class T, int DW>
+struct DivLanes {
+  typedef double D __attribute__((vector_size(8 * DW)));
+  typedef T P __attribute__((vector_size(sizeof(T) * DW)));
+  typedef long long M __attribute__((vector_size(8 * DW)));  // a shuffle mask of D
+};
+
+/// One plane i of divergence: the (i, j) rows of cells, each value
+///   T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[k + 1]) - w0[k])) / h)
+/// (times scale in double, back to T, when scale != 0), on vectors of DW doubles (DW = 1:
+/// scalars). The same operations per lane as the scalar form, so the same bits at every width.
+/// A periodic row's last cell reads face 0 of w: its last vector takes w0[0] into its top lane
+/// by a shuffle, so rows whose length is a multiple of DW need no scalar cell.
+template <int DW, class T>
+FLAGSIM_INLINE void divergence_plane_body(const MacGrid<T>& u, T* div, std::size_t stride,
+                                          double scale, int i) {
+  const GridGeometry& g = u.geo;
+  const int ny = g.ny, nz = g.nz;
+  const bool per = g.periodic;
+  const double inv_h = 1.0 / g.h;
+  const Shape3 su = u.shape[0], sv = u.shape[1], sw = u.shape[2];
+  const int ip = (per && i + 1 == g.nx) ? 0 : i + 1;
+  const T *U = u.comp[0].data(), *V = u.comp[1].data(), *W = u.comp[2].data();
+  auto cell = [&](double du, double dv, double dw) FLAGSIM_INLINE_LAMBDA {
+    const T v = T((du + dv + dw) * inv_h);
+    return scale == 0 ? v : T(scale * v);
+  };
+  for (int j = 0; j < ny; ++j) {
+    const int jp = (per && j + 1 == ny) ? 0 : j + 1;
+    const T *u0 = U + su.index(i, j, 0), *u1 = U + su.index(ip, j, 0);
+    const T *v0 = V + sv.index(i, j, 0), *v1 = V + sv.index(i, jp, 0);
+    const T* w0 = W + sw.index(i, j, 0);
+    T* d = div + (std::size_t(i) * ny + j) * stride;
+    int k = 0;
+#ifdef FLAGSIM_HAVE_VECTORS
+    if constexpr (DW > 1) {
+      using D = typename DivLanes<T, DW>::D;
+      using P = typename DivLanes<T, DW>::P;
+      using M = typename DivLanes<T, DW>::M;
+      auto ld = [](const T* p) FLAGSIM_INLINE_LAMBDA {
+        P x;
+        std::memcpy(&x, p, sizeof x);
+        return __builtin_convertvector(x, D);
+      };
+      auto put = [&](int at, D w1) FLAGSIM_INLINE_LAMBDA {
+        const D w = ld(w0 + at);
+        P v = __builtin_convertvector(
+            (((ld(u1 + at) - ld(u0 + at)) + (ld(v1 + at) - ld(v0 + at))) + (w1 - w)) * inv_h, P);
+        if (scale != 0) v = __builtin_convertvector(scale * __builtin_convertvector(v, D), P);
+        std::memcpy(d + at, &v, sizeof v);
+      };
+      const int vec_end = per ? nz - DW : nz;  // vectors whose w0[k + 1] lie in the row
+      for (; k + DW <= vec_end; k += DW) put(k, ld(w0 + k + 1));
+      if (per && k == nz - DW) {  // w0[k + 1 ..], then w0[0]
+        D top = D{};
+        top += double(w0[0]);
+        M mask;
+        if constexpr (DW == 2)
+          mask = M{1, 2};
+        else
+          mask = M{1, 2, 3, 4};
+        put(k, __builtin_shuffle(ld(w0 + k), top, mask));
+        k = nz;
+      }
+    }
+#endif
+    const int kend = per ? nz - 1 : nz;  // periodic: the last cell's top face is face 0
+    for (; k < kend; ++k)
+      d[k] = cell(double(u1[k]) - u0[k], double(v1[k]) - v0[k], double(w0[k + 1]) - w0[k]);
+    if (per && k == nz - 1)
+      d[k] = cell(double(u1[k]) - u0[k], double(v1[k]) - v0[k], double(w0[0]) - w0[k]);
+  }
+}
+
+template <class T>
+void divergence_plane_narrow(const MacGrid<T>& u, T* div, std::size_t stride, double scale, int i) {
+#ifdef FLAGSIM_HAVE_VECTORS
+  divergence_plane_body<2>(u, div, stride, scale, i);
+#else
+  divergence_plane_body<1>(u, div, stride, scale, i);
+#endif
+}
+
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+template <class T>
+FLAGSIM_TARGET_AVX void divergence_plane_wide(const MacGrid<T>& u, T* div, std::size_t stride,
+                                              double scale, int i) {
+  divergence_plane_body<4>(u, div, stride, scale, i);
+}
+#endif
+
+}  // namespace
+
 template <class T>
 void divergence(const MacGrid<T>& u, T* div, int row_stride, double scale) {
   const GridGeometry& g = u.geo;
-  const int nx = g.nx, ny = g.ny, nz = g.nz;
-  const std::size_t stride = row_stride > 0 ? std::size_t(row_stride) : std::size_t(nz);
-  const bool per = g.periodic;
-  const double inv_h = 1.0 / g.h;
-  const Shape3 su = u.shape[0], sv = u.shape[1], sw = u.shape[2], sc = g.cells();
-  const T *U = u.comp[0].data(), *V = u.comp[1].data(), *W = u.comp[2].data();
-  // One row: out(v) of each cell's T divergence v; the periodic row's last cell reads face 0.
-  auto rows = [&](auto out) {
-    parallel_for_if(Index(sc.size()) > kGridParallelGrain, long(nx) * ny, [&](Index r) {
-      const int i = int(r / ny), j = int(r % ny);
-      const int ip = (per && i + 1 == nx) ? 0 : i + 1;
-      const int jp = (per && j + 1 == ny) ? 0 : j + 1;
-      const T *u0 = U + su.index(i, j, 0), *u1 = U + su.index(ip, j, 0);
-      const T *v0 = V + sv.index(i, j, 0), *v1 = V + sv.index(i, jp, 0);
-      const T* w0 = W + sw.index(i, j, 0);
-      T* d = div + std::size_t(r) * stride;
-      const int kend = per ? nz - 1 : nz;  // periodic: the last cell's top face is face 0
-      for (int k = 0; k < kend; ++k)
-        d[k] = out(
-            T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[k + 1]) - w0[k])) *
-              inv_h));
-      if (per) {
-        const int k = nz - 1;
-        d[k] = out(T(((double(u1[k]) - u0[k]) + (double(v1[k]) - v0[k]) + (double(w0[0]) - w0[k])) *
-                     inv_h));
-      }
-    });
-  };
-  if (scale == 0)
-    rows([](T v) { return v; });
-  else
-    rows([scale](T v) { return T(scale * v); });
+  const std::size_t stride = row_stride > 0 ? std::size_t(row_stride) : std::size_t(g.nz);
+  auto plane_fn = &divergence_plane_narrow<T>;
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+  if (vector_bytes() == 32) plane_fn = &divergence_plane_wide<T>;
+#endif
+  // One task per plane: per row, the call and its set-up cost more than a short row's cells.
+  parallel_for_if(Index(g.cells().size()) > kGridParallelGrain, g.nx,
+                  [&](Index i) { plane_fn(u, div, stride, scale, int(i)); });
 }
 
 Laplace7 pressure_operator(const GridGeometry& geo) {
@@ -130,64 +204,102 @@ void subtract_gradient(const T* phi, MacGrid<T>& u, int row_stride) {
 
 namespace {
 
+/// Shuffle masks (__builtin_shuffle) for vectors of Bytes bytes of T: integers of T's size.
+template <class T, int Bytes>
+struct MaskOf {
+  typedef std::conditional_t<sizeof(T) == 8, long long, int> E;
+  typedef E M __attribute__((vector_size(Bytes)));
+};
+
 /// dst[k] -= (hi[k] - lo[k]) * inv_h for k in [0, n) (subtract_gradient's arithmetic, the same
-/// bits) on lanes L (Lanes16 or Lanes32 of T, or void: scalars); returns false when a new value
-/// is not finite. The test sums v - v per lane: 0 for a finite v, NaN for NaN or infinity, and
+/// bits) on lanes L (Lanes16 or Lanes32 of T, or void: scalars). zeros (per lane) and zero gain
+/// v - v of every new value v: 0 while all are finite, NaN once one is not (NaN or infinity), and
 /// NaN stays NaN (no integer masks: SSE2 has no 64-bit lane compares, and a mask reduction went
-/// scalar).
-template <class L, class T>
-FLAGSIM_INLINE bool gradient_row(T* dst, const T* hi, const T* lo, int n, T inv_h) {
+/// scalar). first_lo: when set, lane 0 of the first vector's lo is *first_lo and its other lanes
+/// lo[0 ..] shifted up one (the w row: face 0 reads the row's last cell).
+template <class L, class T, class Z>
+FLAGSIM_INLINE void gradient_row(T* dst, const T* hi, const T* lo, int n, T inv_h, Z& zeros,
+                                 T& zero, const T* first_lo = nullptr) {
   int k = 0;
-  T zero = 0;
   if constexpr (!std::is_void<L>::value) {
     using V = typename L::V;
     constexpr int W = L::W;
-    V zeros = V{};
+    if (first_lo && n >= W) {
+      using M = typename MaskOf<T, sizeof(V)>::M;
+      V top = V{};
+      top += *first_lo;
+      M mask;  // lane 0 from top, lanes 1.. from lo[0 ..]
+      if constexpr (W == 2)
+        mask = M{0, 2};
+      else if constexpr (W == 4)
+        mask = M{0, 4, 5, 6};
+      else
+        mask = M{0, 8, 9, 10, 11, 12, 13, 14};
+      const V v = load_lanes<V>(dst) -
+                  (load_lanes<V>(hi) - __builtin_shuffle(top, load_lanes<V>(lo), mask)) * inv_h;
+      store_lanes(dst, v);
+      zeros += v - v;
+      k = W;
+      --lo;  // from here on lo[k] is the cell below face k
+      first_lo = nullptr;
+    }
     for (; k + W <= n; k += W) {
       const V v = load_lanes<V>(dst + k) - (load_lanes<V>(hi + k) - load_lanes<V>(lo + k)) * inv_h;
       store_lanes(dst + k, v);
       zeros += v - v;
     }
-    for (int l = 0; l < W; ++l) zero += zeros[l];
+  }
+  if (first_lo) {  // scalar w row: face 0
+    dst[0] -= (hi[0] - *first_lo) * inv_h;
+    zero += dst[0] - dst[0];
+    k = 1;
+    --lo;
   }
   for (; k < n; ++k) {
     dst[k] -= (hi[k] - lo[k]) * inv_h;
     zero += dst[k] - dst[k];
   }
+}
+
+/// The faces of plane i of the periodic grid (all three components, one (i, j) row of cells at a
+/// time) take the gradient of phi (rows `stride` apart) on lanes L: subtract_gradient_periodic's
+/// plane. Returns false when a new value is not finite.
+template <class L, class T>
+FLAGSIM_INLINE bool gradient_periodic_plane(const T* phi, std::size_t stride, int nx, int ny,
+                                            int nz, T inv_h, T* U, T* V, T* W, int i) {
+  using Z = std::conditional_t<std::is_void<L>::value, T, typename L::V>;
+  Z zeros = Z{};
+  T zero = 0;
+  for (int j = 0; j < ny; ++j) {
+    const std::size_t r = std::size_t(i) * ny + j;
+    const std::size_t row = r * nz;
+    const T* hi = phi + r * stride;  // cell (i, j): the faces' upper cell
+    const T* lo_x = phi + (std::size_t(i == 0 ? nx - 1 : i - 1) * ny + j) * stride;
+    const T* lo_y = phi + (std::size_t(i) * ny + (j == 0 ? ny - 1 : j - 1)) * stride;
+    gradient_row<L>(U + row, hi, lo_x, nz, inv_h, zeros, zero);
+    gradient_row<L>(V + row, hi, lo_y, nz, inv_h, zeros, zero);
+    // Face k of w lies between cells k - 1 and k of the row; face 0 wraps to cell nz - 1.
+    gradient_row<L>(W + row, hi, hi, nz, inv_h, zeros, zero, hi + nz - 1);
+  }
+  if constexpr (!std::is_void<L>::value)
+    for (int l = 0; l < L::W; ++l) zero += zeros[l];
   return zero == 0;
 }
 
-/// The faces of the periodic grid's cell row r (all three components) take the gradient of phi
-/// (rows `stride` apart) on lanes L: subtract_gradient_periodic's row.
-template <class L, class T>
-FLAGSIM_INLINE bool gradient_periodic_row(const T* phi, std::size_t stride, int nx, int ny, int nz,
-                                          T inv_h, T* U, T* V, T* W, Index r) {
-  const int i = int(r / ny), j = int(r % ny);
-  const std::size_t row = std::size_t(r) * nz;
-  const T* hi = phi + std::size_t(r) * stride;  // cell (i, j): the faces' upper cell
-  const T* lo_x = phi + (std::size_t(i == 0 ? nx - 1 : i - 1) * ny + j) * stride;
-  const T* lo_y = phi + (std::size_t(i) * ny + (j == 0 ? ny - 1 : j - 1)) * stride;
-  bool ok = gradient_row<L>(U + row, hi, lo_x, nz, inv_h);
-  ok = gradient_row<L>(V + row, hi, lo_y, nz, inv_h) && ok;
-  // Face k of w lies between cells k - 1 and k of the row; face 0 wraps to cell nz - 1.
-  T* w = W + row;
-  w[0] -= (hi[0] - hi[nz - 1]) * inv_h;
-  ok = w[0] - w[0] == 0 && ok;  // false for NaN and infinity
-  return gradient_row<L>(w + 1, hi + 1, hi, nz - 1, inv_h) && ok;
-}
-
 template <class T>
-bool gradient_periodic_row_narrow(const T* phi, std::size_t stride, int nx, int ny, int nz, T inv_h,
-                                  T* U, T* V, T* W, Index r) {
-  return gradient_periodic_row<NarrowLanes<T>>(phi, stride, nx, ny, nz, inv_h, U, V, W, r);
+bool gradient_periodic_plane_narrow(const T* phi, std::size_t stride, int nx, int ny, int nz,
+                                    T inv_h, T* U, T* V, T* W, int i) {
+  return gradient_periodic_plane<NarrowLanes<T>>(phi, stride, nx, ny, nz, inv_h, U, V, W, i);
 }
 
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
-// The same row on 32-byte vectors (AVX without FMA: the same operations per lane, the same bits).
+// The same plane on 32-byte vectors (AVX without FMA: the same operations per lane, the same
+// bits).
 template <class T>
-FLAGSIM_TARGET_AVX bool gradient_periodic_row_wide(const T* phi, std::size_t stride, int nx, int ny,
-                                                   int nz, T inv_h, T* U, T* V, T* W, Index r) {
-  return gradient_periodic_row<Lanes32<T>>(phi, stride, nx, ny, nz, inv_h, U, V, W, r);
+FLAGSIM_TARGET_AVX bool gradient_periodic_plane_wide(const T* phi, std::size_t stride, int nx,
+                                                     int ny, int nz, T inv_h, T* U, T* V, T* W,
+                                                     int i) {
+  return gradient_periodic_plane<Lanes32<T>>(phi, stride, nx, ny, nz, inv_h, U, V, W, i);
 }
 #endif
 
@@ -200,14 +312,15 @@ bool subtract_gradient_periodic(const T* phi, int row_stride, MacGrid<T>& u) {
   const T inv_h = T(1.0 / g.h);
   const std::size_t stride = row_stride > 0 ? std::size_t(row_stride) : std::size_t(nz);
   T *U = u.comp[0].data(), *V = u.comp[1].data(), *W = u.comp[2].data();
-  auto row_fn = &gradient_periodic_row_narrow<T>;
+  auto plane_fn = &gradient_periodic_plane_narrow<T>;
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
-  if (vector_bytes() == 32) row_fn = &gradient_periodic_row_wide<T>;
+  if (vector_bytes() == 32) plane_fn = &gradient_periodic_plane_wide<T>;
 #endif
-  std::atomic<bool> finite{true};  // an AND of per-row answers: the same for any order
-  // One task per (i, j) row, all three components: the potential's rows are read once.
-  parallel_for_if(Index(g.cells().size()) > kGridParallelGrain, long(nx) * ny, [&](Index r) {
-    if (!row_fn(phi, stride, nx, ny, nz, inv_h, U, V, W, r))
+  std::atomic<bool> finite{true};  // an AND of per-plane answers: the same for any order
+  // One task per plane, all three components: the potential's rows are read once, and a short
+  // row's call and set-up are paid once per plane.
+  parallel_for_if(Index(g.cells().size()) > kGridParallelGrain, nx, [&](Index i) {
+    if (!plane_fn(phi, stride, nx, ny, nz, inv_h, U, V, W, int(i)))
       finite.store(false, std::memory_order_relaxed);
   });
   return finite.load();
@@ -422,6 +535,101 @@ T* FftProjector<T>::scratch(int& stride) const {
   return reinterpret_cast<T*>(impl_->hat[0].data());
 }
 
+namespace {
+
+/// Rows of at most this many modes (nz / 2 + 1 for the resolution limit nz <= 4096).
+constexpr int kMaxModes = 2049;
+
+/// One plane of project's spectral solve, its ny rows of nzc modes from `plane`: lap phi = div, so
+/// phi_hat = div_hat / lambda, times scale for the inverse transform: each mode times
+/// T(scale / lambda), lambda = lamx + lamy[j] + lamz[k]; the mean (lambda = 0) has no potential
+/// and becomes 0. The factors of a row take DW double lanes (DW = 1: scalars; the division is the
+/// cost), then the modes are multiplied as pairs of reals: the products std::complex<T> * T
+/// forms, so the same bits at every width.
+template <int DW, class T>
+FLAGSIM_INLINE void potential_plane_body(std::complex<T>* plane, const double* lamy,
+                                         const double* lamz, double lamx, int ny, int nzc,
+                                         double scale) {
+  T f[kMaxModes];
+  for (int j = 0; j < ny; ++j) {
+    const double lxy = lamx + lamy[j];
+    bool mean = false;
+    int k = 0, done = 0;  // modes [0, done) multiplied already
+#ifdef FLAGSIM_HAVE_VECTORS
+    if constexpr (DW > 1) {
+      using D = typename DivLanes<T, DW>::D;
+      using P = typename DivLanes<T, DW>::P;
+      D zeros = D{};
+      if constexpr (std::is_same<T, double>::value) {
+        // double: each factor vector spread over its modes' (re, im) pairs and applied at once
+        using M = typename DivLanes<T, DW>::M;
+        M lower, upper;
+        if constexpr (DW == 2) {
+          lower = M{0, 0};
+          upper = M{1, 1};
+        } else {
+          lower = M{0, 0, 1, 1};
+          upper = M{2, 2, 3, 3};
+        }
+        T* re = reinterpret_cast<T*>(plane + std::size_t(j) * nzc);
+        for (; k + DW <= nzc; k += DW) {
+          const D l = lxy + load_lanes<D>(lamz + k);
+          zeros += l == D{} ? zeros + 1.0 : D{};
+          const D q = scale / l;
+          T* m = re + 2 * k;
+          store_lanes(m, load_lanes<D>(m) * __builtin_shuffle(q, lower));
+          store_lanes(m + DW, load_lanes<D>(m + DW) * __builtin_shuffle(q, upper));
+        }
+        done = k;
+      } else {
+        for (; k + DW <= nzc; k += DW) {
+          const D l = lxy + load_lanes<D>(lamz + k);
+          zeros += l == D{} ? zeros + 1.0 : D{};
+          const P q = __builtin_convertvector(scale / l, P);
+          std::memcpy(f + k, &q, sizeof q);
+        }
+      }
+      for (int lane = 0; lane < DW; ++lane) mean = mean || zeros[lane] != 0;
+    }
+#endif
+    for (; k < nzc; ++k) {
+      const double l = lxy + lamz[k];
+      mean = mean || l == 0;
+      f[k] = T(scale / l);
+    }
+    std::complex<T>* row = plane + std::size_t(j) * nzc;
+    T* re = reinterpret_cast<T*>(row);  // (re, im) pairs (std::complex's array layout)
+    for (int q = done; q < nzc; ++q) {
+      re[2 * q] *= f[q];
+      re[2 * q + 1] *= f[q];
+    }
+    if (mean)  // the mean mode: no potential
+      for (int q = 0; q < nzc; ++q)
+        if (lxy + lamz[q] == 0) row[q] = std::complex<T>(0);
+  }
+}
+
+template <class T>
+void potential_plane_narrow(std::complex<T>* plane, const double* lamy, const double* lamz,
+                            double lamx, int ny, int nzc, double scale) {
+#ifdef FLAGSIM_HAVE_VECTORS
+  potential_plane_body<2>(plane, lamy, lamz, lamx, ny, nzc, scale);
+#else
+  potential_plane_body<1>(plane, lamy, lamz, lamx, ny, nzc, scale);
+#endif
+}
+
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+template <class T>
+FLAGSIM_TARGET_AVX void potential_plane_wide(std::complex<T>* plane, const double* lamy,
+                                             const double* lamz, double lamx, int ny, int nzc,
+                                             double scale) {
+  potential_plane_body<4>(plane, lamy, lamz, lamx, ny, nzc, scale);
+}
+#endif
+
+}  // namespace
+
 template <class T>
 bool FftProjector<T>::project(MacGrid<T>& u) {
   Impl& m = *impl_;
@@ -433,15 +641,13 @@ bool FftProjector<T>::project(MacGrid<T>& u) {
   Impl::F::exec_r2c(m.fwd_in, phi, m.fc(0));
   const double scale = 1.0 / double(m.n_real);
   std::complex<T>* d = m.cplx(0);
-  parallel_for_if(Index(m.n_cplx) > kGridParallelGrain, long(g.nx) * g.ny, [&](Index r) {
-    const int i = int(r / g.ny), j = int(r % g.ny);
-    const double lxy = m.lam[0][i] + m.lam[1][j];
-    std::complex<T>* row = d + std::size_t(r) * m.nzc;
-    for (int k = 0; k < m.nzc; ++k) {
-      const double l = lxy + m.lam[2][k];
-      // lap phi = div: phi_hat = div_hat / lambda; the k = 0 mode (lambda = 0) has no potential.
-      row[k] = l == 0 ? std::complex<T>(0) : std::complex<T>(row[k] * T(scale / l));
-    }
+  auto plane_fn = &potential_plane_narrow<T>;
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+  if (vector_bytes() == 32) plane_fn = &potential_plane_wide<T>;
+#endif
+  parallel_for_if(Index(m.n_cplx) > kGridParallelGrain, g.nx, [&](Index i) {
+    plane_fn(d + std::size_t(i) * g.ny * m.nzc, m.lam[1].data(), m.lam[2].data(), m.lam[0][i], g.ny,
+             m.nzc, scale);
   });
   Impl::F::exec_c2r(m.inv_in, m.fc(0), phi);
   return subtract_gradient_periodic(phi, stride, u);

@@ -184,6 +184,7 @@ void Simulation::setup_pins() {
       cloth_solids_.emplace_back(s, s.thickness, s.friction);
       solid_motions_.push_back(s.motion);
     }
+  solid_piece_.resize(cloth_solids_.size());
 }
 
 void Simulation::build_self_collision() {
@@ -816,7 +817,8 @@ void Simulation::place_pins() {
 // as close as their speed takes them in the piece. The plane is tangent to the surface,
 // (1 + kRestingSlack) x the thickness (the radius) from it. A moving pole's plane is where its
 // surface is at the piece's end, moving along its normal with the surface's speed there
-// (ForceSet::contact_speed). Solids that move are left to the projection alone.
+// (ForceSet::contact_speed); a moving solid's likewise, for the vertices within its thickness (and
+// as close as their speed and the surface's take them in the piece) in its frame at the end.
 void Simulation::find_resting_contacts() {
   if (!forces_.contacts) return;
   StageClock::Scope t(&clock_, built(Stage::kSolids) ? Stage::kSolids : Stage::kPole);
@@ -825,42 +827,64 @@ void Simulation::find_resting_contacts() {
   resting_speed_.setZero();
   const PoleParams& pole = scene_.pole;
   const double pole_plane = (1.0 + kRestingSlack) * pole.radius;
+  for (std::size_t k = 0; k < cloth_solids_.size(); ++k) {
+    const MotionSchedule& keys = solid_motions_[k];
+    if (!keys.empty()) solid_piece_[k] = {keys.at(t_piece_), keys.at(t_piece_ + h_), h_};
+  }
   for (Index i = 0; i < x_.rows(); ++i) {
     if (topo_.inv_mass[i] == 0.0) continue;
     const Vec3 p = row(x_, i);
-    // The pole, in its own frame at the piece's end (at rest: the world's).
-    const Vec3 q = pole_moves_ ? pole_motion_.to.inverse(p) : p;
+    // Of the surfaces near the vertex, the nearest gives its plane (a vertex on a box beside the
+    // pole keeps the box's).
+    double nearest = std::numeric_limits<double>::infinity();
+    const auto offer = [&](double gap, const Vec3& n, double offset, double speed) {
+      if (!(gap < nearest)) return;
+      nearest = gap;
+      resting_.row(i) = n.transpose();
+      resting_offset_[i] = offset;
+      resting_speed_[i] = speed;
+    };
+    // The pole, in its own frame at the piece's start (at rest: the world's).
+    const Vec3 q = pole_moves_ ? pole_motion_.from.inverse(p) : p;
     if (built(Stage::kPole) && q.y() >= pole.base.y() && q.y() <= pole.base.y() + pole.height) {
       const Vec3 radial(q.x() - pole.base.x(), 0.0, q.z() - pole.base.z());
       const double r = radial.norm();
       if (r > 0 && r - pole_plane <= std::max(pole.radius, h_ * row(v_, i).norm())) {
         const Vec3 n = radial / r;
         if (!pole_moves_) {
-          resting_.row(i) = n.transpose();
-          resting_offset_[i] = pole.base.dot(n) + pole_plane;
+          offer(r - pole_plane, n, pole.base.dot(n) + pole_plane, 0.0);
         } else {
           const Vec3 surface(pole.base.x() + n.x() * pole_plane, q.y(),
                              pole.base.z() + n.z() * pole_plane);  // in the pole's frame
           const Vec3 nw = pole_motion_.to.R * n;
-          resting_.row(i) = nw.transpose();
-          resting_offset_[i] = nw.dot(pole_motion_.to.apply(surface));
-          resting_speed_[i] = nw.dot(pole_motion_.velocity_at(surface));
+          offer(r - pole_plane, nw, nw.dot(pole_motion_.to.apply(surface)),
+                nw.dot(pole_motion_.velocity_at(surface)));
         }
-        continue;
       }
     }
     for (std::size_t k = 0; k < cloth_solids_.size(); ++k) {
       const ClothSolid& s = cloth_solids_[k];
-      if (!solid_motions_[k].empty() || (p.array() < s.lo.array()).any() ||
-          (p.array() > s.hi.array()).any())
+      const double reach = (1.0 + kRestingSlack) * s.thickness;
+      if (solid_motions_[k].empty()) {
+        if ((p.array() < s.lo.array()).any() || (p.array() > s.hi.array()).any()) continue;
+        Vec3 n;
+        const double d = solid_distance(s.geometry, p, &n);
+        if (d <= reach) offer(d - reach, n, p.dot(n) - (d - reach), 0.0);
+        continue;
+      }
+      // Moving: in the solid's frame at the piece's start, listed as far as the vertex and the
+      // surface can close in the piece (the solve holds only those it would carry through); the
+      // plane where the surface is at the piece's end, moving with it.
+      const RigidMotion& m = solid_piece_[k];
+      const Vec3 ql = m.from.inverse(p);
+      const double ahead = h_ * (row(v_, i).norm() + m.velocity_at(ql).norm());
+      if ((ql.array() < s.lo.array() - ahead).any() || (ql.array() > s.hi.array() + ahead).any())
         continue;
       Vec3 n;
-      const double d = solid_distance(s.geometry, p, &n),
-                   reach = (1.0 + kRestingSlack) * s.thickness;
-      if (d <= reach) {
-        resting_.row(i) = n.transpose();
-        resting_offset_[i] = p.dot(n) - (d - reach);
-        break;
+      const double d = solid_distance(s.geometry, ql, &n);
+      if (d - reach <= std::max(s.thickness, ahead)) {
+        const Vec3 surface = ql - (d - reach) * n, nw = m.to.R * n;  // on the grown surface
+        offer(d - reach, nw, nw.dot(m.to.apply(surface)), nw.dot(m.velocity_at(surface)));
       }
     }
   }
@@ -874,11 +898,9 @@ void Simulation::stage_solids() {
   {
     StageClock::Scope t(&clock_, Stage::kSolids);
     for (std::size_t k = 0; k < cloth_solids_.size(); ++k) {
-      RigidMotion m;
-      const MotionSchedule& keys = solid_motions_[k];
-      if (!keys.empty()) m = {keys.at(t_piece_), keys.at(t_piece_ + h_), h_};
-      const SolidContacts c = collide_solid(cloth_solids_[k], keys.empty() ? nullptr : &m, x_piece_,
-                                            x_, v_, topo_.inv_mass, topo_.mass);
+      const bool moves = !solid_motions_[k].empty();
+      const SolidContacts c = collide_solid(cloth_solids_[k], moves ? &solid_piece_[k] : nullptr,
+                                            x_piece_, x_, v_, topo_.inv_mass, topo_.mass);
       all.moved += c.moved;
       all.wall_work += c.wall_work;
     }

@@ -317,13 +317,15 @@ class Simulation {
   // The scene's solids the flag collides with (cloth = true), and their motions (empty: at rest).
   std::vector<ClothSolid> cloth_solids_;
   std::vector<MotionSchedule> solid_motions_;
-  // Contact planes of the free vertices near a solid at rest or the pole at the piece's start
+  std::vector<RigidMotion> solid_piece_;  // each moving solid over the piece being stepped
+  // Contact planes of the free vertices near a solid or the pole at the piece's start
   // (ForceSet::contacts, contact_offset, contact_speed; find_resting_contacts): normals (N x 3,
-  // zero rows: none), offsets at the piece's end and speeds along n. A vertex within
+  // zero rows: none), offsets at the piece's end and speeds along n (a moving solid's or pole's
+  // surface). A vertex within
   // (1 + kRestingSlack) x the thickness of a solid (the radius of the pole) touches.
   static constexpr double kRestingSlack = 0.002;
   MatX3 resting_;
-  VecX resting_offset_, resting_speed_;  // (N) m at the piece's end; m/s along n (a moving pole)
+  VecX resting_offset_, resting_speed_;  // (N) m at the piece's end; m/s along n
 
   std::unique_ptr<SelfCollision> self_collision_;
   std::atomic<bool> stepping_{false};          // a step() is running (one thread at a time)
