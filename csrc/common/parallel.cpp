@@ -188,4 +188,13 @@ void SideBySide::run_jobs(Job first, const void* first_arg, Job second, const vo
   set_num_threads(threads);
 }
 
+void wait_until_set(const std::atomic<bool>& flag) {
+  const auto until =
+      std::chrono::steady_clock::now() + std::chrono::microseconds(SideBySide::kSpinMicroseconds);
+  for (int k = 1; !flag.load(std::memory_order_acquire); ++k) {
+    cpu_relax();
+    if (k % 64 == 0 && std::chrono::steady_clock::now() > until) std::this_thread::yield();
+  }
+}
+
 }  // namespace flagsim

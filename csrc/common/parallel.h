@@ -1,6 +1,7 @@
 // Thread-count control for OpenMP loops. Results are deterministic for a given thread count.
 #pragma once
 
+#include <atomic>
 #include <memory>
 
 #include "common/types.h"
@@ -127,6 +128,11 @@ class SideBySide {
   void run_jobs(Job first, const void* first_arg, Job second, const void* second_arg);
   std::unique_ptr<State> s_;
 };
+
+/// Returns once `flag` is true (acquire): spins for up to SideBySide::kSpinMicroseconds, then
+/// yields the core between looks. For waits on another thread's next few hundred microseconds
+/// (the air's step held until the cloth has sampled u^n: Fluid::WriteGate).
+void wait_until_set(const std::atomic<bool>& flag);
 
 /// True when compiled with OpenMP.
 bool has_openmp();

@@ -1173,8 +1173,20 @@ void padded_mc(const PeriodicAdvectScratch<T>& sc, double s, const T* h, T* out)
 template <class T>
 void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, PeriodicAdvectScratch<T>& scratch,
                      MacGrid<T>& hat, double viscous_beta) {
-  const double s = dt / u.geo.h;
+  fill_periodic_source(u, scratch);
+  advect_periodic_source(u, dt, maccormack, scratch, hat, viscous_beta);
+}
+
+template <class T>
+void fill_periodic_source(const MacGrid<T>& u, PeriodicAdvectScratch<T>& scratch) {
   for (int c = 0; c < 3; ++c) scratch.u[c].fill(u.comp[c].data());
+}
+
+template <class T>
+void advect_periodic_source(MacGrid<T>& u, double dt, bool maccormack,
+                            PeriodicAdvectScratch<T>& scratch, MacGrid<T>& hat,
+                            double viscous_beta) {
+  const double s = dt / u.geo.h;
   // Semi-Lagrangian (into hat for MacCormack, else straight into u: only padded copies are read;
   // the viscous term fused in).
   if (!maccormack) {
@@ -1216,19 +1228,22 @@ void sample_weight_squares(const MacGrid<T>& g, const double* points, long m, do
   }
 }
 
-#define FLAGSIM_INSTANTIATE_ADVECT(T)                                                        \
-  template T sample_component<T>(const MacGrid<T>&, int, const double[3]);                   \
-  template long sample_velocity<T>(const MacGrid<T>&, const double*, long, double*);         \
-  template void spread_velocity<T>(const double*, long, const double*, double, MacGrid<T>&); \
-  template void sample_weight_squares<T>(const MacGrid<T>&, const double*, long, double*);   \
-  template void advect_semi_lagrangian<T>(const MacGrid<T>&, double, const SampleBoundary&,  \
-                                          MacGrid<T>&);                                      \
-  template void advect_maccormack<T>(const MacGrid<T>&, double, const SampleBoundary&,       \
-                                     MacGrid<T>&, MacGrid<T>&);                              \
-  template struct PaddedComponent<T>;                                                        \
-  template struct PeriodicAdvectScratch<T>;                                                  \
-  template void advect_periodic<T>(MacGrid<T>&, double, bool, PeriodicAdvectScratch<T>&,     \
-                                   MacGrid<T>&, double);
+#define FLAGSIM_INSTANTIATE_ADVECT(T)                                                           \
+  template T sample_component<T>(const MacGrid<T>&, int, const double[3]);                      \
+  template long sample_velocity<T>(const MacGrid<T>&, const double*, long, double*);            \
+  template void spread_velocity<T>(const double*, long, const double*, double, MacGrid<T>&);    \
+  template void sample_weight_squares<T>(const MacGrid<T>&, const double*, long, double*);      \
+  template void advect_semi_lagrangian<T>(const MacGrid<T>&, double, const SampleBoundary&,     \
+                                          MacGrid<T>&);                                         \
+  template void advect_maccormack<T>(const MacGrid<T>&, double, const SampleBoundary&,          \
+                                     MacGrid<T>&, MacGrid<T>&);                                 \
+  template struct PaddedComponent<T>;                                                           \
+  template struct PeriodicAdvectScratch<T>;                                                     \
+  template void advect_periodic<T>(MacGrid<T>&, double, bool, PeriodicAdvectScratch<T>&,        \
+                                   MacGrid<T>&, double);                                        \
+  template void fill_periodic_source<T>(const MacGrid<T>&, PeriodicAdvectScratch<T>&);          \
+  template void advect_periodic_source<T>(MacGrid<T>&, double, bool, PeriodicAdvectScratch<T>&, \
+                                          MacGrid<T>&, double);
 FLAGSIM_INSTANTIATE_ADVECT(float)
 FLAGSIM_INSTANTIATE_ADVECT(double)
 

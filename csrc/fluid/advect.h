@@ -99,4 +99,14 @@ template <class T>
 void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, PeriodicAdvectScratch<T>& scratch,
                      MacGrid<T>& hat, double viscous_beta = 0);
 
+/// advect_periodic in two parts: the padded copies of u^n (reads u only), then the advection from
+/// them (writes u). Between the two, u^n may still be read elsewhere (the Simulation's pipeline
+/// samples it: Fluid::WriteGate).
+template <class T>
+void fill_periodic_source(const MacGrid<T>& u, PeriodicAdvectScratch<T>& scratch);
+template <class T>
+void advect_periodic_source(MacGrid<T>& u, double dt, bool maccormack,
+                            PeriodicAdvectScratch<T>& scratch, MacGrid<T>& hat,
+                            double viscous_beta = 0);
+
 }  // namespace flagsim

@@ -28,7 +28,8 @@ struct Fluid::Solver {
   virtual ~Solver() = default;
   /// One step; true when the step itself showed the new field finite (the FFT diffusion's
   /// spectral pass, FftProjector::diffuse_and_project), false when all_finite must tell.
-  virtual bool step(double dt, const std::vector<PointImpulses>* impulses) = 0;
+  virtual bool step(double dt, const std::vector<PointImpulses>* impulses,
+                    const Fluid::WriteGate* gate) = 0;
   /// Every velocity value finite.
   virtual bool all_finite() const = 0;
   /// Back to the field and time t0 at the start of the last step (the step keeps its copy).
@@ -233,7 +234,8 @@ struct TypedSolver final : Fluid::Solver {
       std::copy(phi_start.begin(), phi_start.end(), phi.begin());
   }
 
-  bool step(double dt, const std::vector<PointImpulses>* impulses) override {
+  bool step(double dt, const std::vector<PointImpulses>* impulses,
+            const Fluid::WriteGate* gate) override {
     const double t0 = time, t1 = time + dt;
     const FluidParams& p = params;
     if (!phi_start.empty()) std::copy(phi.begin(), phi.end(), phi_start.begin());
@@ -252,10 +254,16 @@ struct TypedSolver final : Fluid::Solver {
     // 1. self-advection of u^n (reads prev, writes u)
     {
       ScopedTimer timer(stats.seconds_advect);
+      const auto pass = [gate]() {  // u^n is copied; from here on u is written
+        if (gate) gate->wait(gate->arg);
+      };
       if (geo.periodic) {
-        advect_periodic(u, dt, maccormack, padded, hat, viscous_explicit ? beta : 0.0);
+        fill_periodic_source(u, padded);
+        pass();
+        advect_periodic_source(u, dt, maccormack, padded, hat, viscous_explicit ? beta : 0.0);
       } else {
         copy_grid(u, prev);
+        pass();
         if (maccormack)
           advect_maccormack(prev, dt, bc, hat, u);
         else
@@ -456,7 +464,7 @@ Fluid& Fluid::operator=(Fluid&&) noexcept = default;
 
 // A step that leaves a non-finite velocity is undone and raises DivergenceError: the air is as
 // it was, as Simulation promises for the cloth (a too-small cell_size or a huge dt gets here).
-void Fluid::step(double dt, const std::vector<PointImpulses>* impulses) {
+void Fluid::step(double dt, const std::vector<PointImpulses>* impulses, const WriteGate* gate) {
   check_positive("dt", dt);
   if (impulses)
     for (const PointImpulses& j : *impulses)
@@ -464,7 +472,7 @@ void Fluid::step(double dt, const std::vector<PointImpulses>* impulses) {
         throw InvalidArgument("impulses should give as many impulses as points");
   const double t0 = s_->time;
   s_->step_start = t0;
-  if (s_->step(dt, impulses) || s_->all_finite()) return;
+  if (s_->step(dt, impulses, gate) || s_->all_finite()) return;
   s_->undo_step(t0);
   std::ostringstream s;
   s << "the air diverged at step " << s_->stats.steps << " (t = " << t0

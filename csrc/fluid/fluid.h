@@ -53,9 +53,18 @@ class Fluid {
   Fluid(const Fluid&) = delete;
   Fluid& operator=(const Fluid&) = delete;
 
+  /// A hold on a step: wait(arg) is called once inside step(), after the step has copied u^n
+  /// for itself and before it first writes the velocity grid, so that another thread may still
+  /// read u^n until wait returns (the Simulation's pipeline samples it at the cloth's masses).
+  struct WriteGate {
+    void (*wait)(const void* arg) = nullptr;
+    const void* arg = nullptr;
+  };
+
   /// Advances the air by dt (s, finite and > 0), with the impulses bodies give it over the step
-  /// (or none). No heap allocation.
-  void step(double dt, const std::vector<PointImpulses>* impulses = nullptr);
+  /// (or none), held at `gate` (or not). No heap allocation.
+  void step(double dt, const std::vector<PointImpulses>* impulses = nullptr,
+            const WriteGate* gate = nullptr);
   /// Takes back the last step, which returned normally: the field and the time as they were
   /// before it (from the copy of u^n the step keeps anyway) and, after keep_warm_start(), the
   /// iterative pressure solve's warm start too, so that taking the step again gives the same

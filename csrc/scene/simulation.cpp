@@ -1,6 +1,7 @@
 #include "scene/simulation.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <exception>
 #include <limits>
@@ -626,21 +627,32 @@ void Simulation::sample_air_ahead() {
 // The pipeline (one-way coupling, or two-way lagged): the air's step u^n -> u^n+1 reads nothing
 // of this step's cloth (lagged: the reaction of the step before, in reaction_ and reaction_at_,
 // which this step's cloth does not write), and the cloth's step reads the air only at u^n. So
-// every flag's first-piece reads of the air are sampled first (sample_air_ahead, the two-way
-// drag factors too); then the air advances on the helper thread while this thread steps each
-// flag's first piece. Each side runs the serial order's operations on the same data,
+// the air advances on the helper thread while this thread samples every flag's first-piece
+// reads of the air (sample_air_ahead, the two-way drag factors too) and then steps each flag's
+// first piece; the air's step waits for those samples before it first writes the grid
+// (Fluid::WriteGate: after it has copied u^n for its advection, which takes longer than the
+// sampling). Each side runs the serial order's operations on the same data,
 // so the bits are the serial order's. When a flag's piece throws or must be redone in pieces,
 // whose later pieces read u^n at positions known only then, the air's step is taken back
 // (Fluid::undo_step) and the step finishes in the serial order from that flag on (the flags
 // after it keep their samples of u^n). True when the air advanced; `done`: the flags whose
 // pieces are done (on a throw, the one that threw restored itself).
 bool Simulation::steps_beside_air(int& done) {
-  for (int k = 0; k < num_flags(); ++k) flag(k).sample_air_ahead();
   Implausible bad;
   std::exception_ptr cloth_error, air_error;
+  std::atomic<bool> sampled{false};  // u^n read: the air may write the grid
+  const Fluid::WriteGate gate{
+      [](const void* f) { wait_until_set(*static_cast<const std::atomic<bool>*>(f)); }, &sampled};
   beside_->run(
       [&]() noexcept {
         try {
+          {
+            struct Open {  // also when sampling throws: the air must not wait for ever
+              std::atomic<bool>& f;
+              ~Open() { f.store(true, std::memory_order_release); }
+            } open{sampled};
+            for (int k = 0; k < num_flags(); ++k) flag(k).sample_air_ahead();
+          }
           for (; done < num_flags(); ++done) {
             Simulation& f = flag(done);
             f.begin_step();
@@ -655,7 +667,7 @@ bool Simulation::steps_beside_air(int& done) {
       [&]() noexcept {
         try {
           StageClock::Scope t(&air_clock_, Stage::kFluid);
-          fluid_->step(scene_.dt, reactions_.empty() ? nullptr : &reactions_);
+          fluid_->step(scene_.dt, reactions_.empty() ? nullptr : &reactions_, &gate);
         } catch (...) {
           air_error = std::current_exception();
         }
