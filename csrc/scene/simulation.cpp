@@ -818,7 +818,8 @@ void Simulation::place_pins() {
 // (1 + kRestingSlack) x the thickness (the radius) from it. A moving pole's plane is where its
 // surface is at the piece's end, moving along its normal with the surface's speed there
 // (ForceSet::contact_speed); a moving solid's likewise, for the vertices within its thickness (and
-// as close as their speed and the surface's take them in the piece) in its frame at the end.
+// as close as their speed and the surface's take them in the piece), each vertex placed in the
+// moving body's frame at the piece's start. A vertex near several surfaces gets the nearest's.
 void Simulation::find_resting_contacts() {
   if (!forces_.contacts) return;
   StageClock::Scope t(&clock_, built(Stage::kSolids) ? Stage::kSolids : Stage::kPole);
