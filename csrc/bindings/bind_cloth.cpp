@@ -4,7 +4,6 @@
 
 #include "bindings/fields.h"
 #include "cloth/params.h"
-#include "common/errors.h"
 
 namespace py = pybind11;
 
@@ -35,17 +34,7 @@ translation (m) and the rotation vector (unit axis x angle, degrees) are interpo
 between keys. Before the first key the first pose holds, after the last the last one (or, with
 repeat, the keys play again with period last time - first time). Empty: no motion.)doc");
   ms.def(py::init([](const py::kwargs& kw) {
-           // Field by field through the validated properties, in the order given.
-           py::object o = py::cast(MotionSchedule());
-           const py::object cls = py::type::of(o);
-           for (const auto& item : kw) {
-             const std::string key = py::str(item.first);
-             if (!py::hasattr(cls, key.c_str()) || key.rfind('_', 0) == 0 || key == "apply" ||
-                 key == "validate")
-               throw InvalidArgument("unknown key '" + key + "' for MotionSchedule");
-             py::setattr(o, item.first, item.second);
-           }
-           return o.cast<MotionSchedule>();
+           return from_fields<MotionSchedule>(kw, "MotionSchedule");
          }),
          "MotionSchedule(**fields), e.g. MotionSchedule(keys=[(0, (0, 0, 0), (0, 0, 0)), (1, (0, "
          "0.5, 0), (0, 0, 90))], pivot=(0, 0, 0), repeat=False); no fields: no motion");

@@ -78,18 +78,7 @@ capsule or closed triangle mesh (the ObstacleParams fields), a solid of the air 
 true (static only), collided with by the flag when cloth is true (keeping `thickness` from its
 surface, Coulomb `friction`), at rest or keyframed (motion, cloth only).)doc");
   solid.def(
-      py::init([](const py::kwargs& kw) {
-        // Field by field through the validated properties, in the order given.
-        py::object o = py::cast(SolidParams());
-        const py::object cls = py::type::of(o);
-        for (const auto& item : kw) {
-          const std::string key = py::str(item.first);
-          if (!py::hasattr(cls, key.c_str()) || key.rfind('_', 0) == 0)
-            throw InvalidArgument("unknown key '" + key + "' for SolidParams");
-          py::setattr(o, item.first, item.second);
-        }
-        return o.cast<SolidParams>();
-      }),
+      py::init([](const py::kwargs& kw) { return from_fields<SolidParams>(kw, "SolidParams"); }),
       "SolidParams(**fields), e.g. SolidParams(shape='sphere', center=(0, 0, 0), radius=0.1)");
   def_field(solid, "air", &SolidParams::air, "solid", "a solid of the air grid (static)");
   def_field(solid, "cloth", &SolidParams::cloth, "solid", "the flag collides with it");

@@ -241,4 +241,23 @@ void def_ref_field(py::class_<S, Bases...>& cls, const char* name, T S::*member,
       py::return_value_policy::reference_internal, doc);
 }
 
+/// T(**fields) for a bound struct: a default T, then each keyword assigned in the order given
+/// through its validated property (def_field), so a bad value raises what assigning it would. A
+/// keyword that names no property of T (a method, a private name, a typo) raises ValueError
+/// "unknown key '<key>' for <type_name>".
+template <class T>
+T from_fields(const py::kwargs& kw, const char* type_name) {
+  py::object o = py::cast(T());
+  const py::object cls = py::type::of(o);
+  const py::object property = py::module_::import("builtins").attr("property");
+  for (const auto& item : kw) {
+    const std::string key = py::str(item.first);
+    if (key.rfind('_', 0) == 0 ||
+        !py::isinstance(py::getattr(cls, key.c_str(), py::none()), property))
+      throw InvalidArgument("unknown key '" + key + "' for " + type_name);
+    py::setattr(o, item.first, item.second);
+  }
+  return o.cast<T>();
+}
+
 }  // namespace flagsim::bindings
