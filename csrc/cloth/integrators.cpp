@@ -60,10 +60,10 @@ inline double plane_speed(const ForceSet& fs, Index i) {
   return fs.contact_speed ? (*fs.contact_speed)[i] : 0.0;
 }
 
-// How far vertex i is out of its contact plane (normal n) at the piece's start, when the plane is
-// at offset - w h, m: <= 0 touching.
-inline double start_gap(const ForceSet& fs, const MatX3& x, Index i, const Vec3& n, double h) {
-  return x.row(i).dot(n) - ((*fs.contact_offset)[i] - plane_speed(fs, i) * h);
+// How far vertex i is out of its contact plane (normal n) as the plane is `left` s before the
+// piece's end, at offset - w left, m: <= 0 touching. At the piece's start, left = h.
+inline double plane_gap(const ForceSet& fs, const MatX3& x, Index i, const Vec3& n, double left) {
+  return x.row(i).dot(n) - ((*fs.contact_offset)[i] - plane_speed(fs, i) * left);
 }
 
 // The contacts the solve holds first: those of fs.contacts that touch (on or inside their plane
@@ -82,7 +82,7 @@ void hold_contacts(const ClothTopology& topo, const ForceSet& fs, const MatX3& f
     const Vec3 n = row(normal, i);
     if (topo.inv_mass[i] == 0.0 || n.isZero()) continue;
     const double w = plane_speed(fs, i);
-    if (start_gap(fs, x, i, n, h) <= 0 && f.row(i).dot(n) < 0 && v.row(i).dot(n) <= w + kLeaving) {
+    if (plane_gap(fs, x, i, n, h) <= 0 && f.row(i).dot(n) < 0 && v.row(i).dot(n) <= w + kLeaving) {
       s.held.push_back({int32_t(i), n, w, w});
       s.is_held[std::size_t(i)] = 1;
     }
@@ -102,7 +102,7 @@ std::size_t hold_crossing(const ClothTopology& topo, const ForceSet& fs, const M
   for (Index i = 0; i < normal.rows(); ++i) {
     const Vec3 n = row(normal, i);
     if (topo.inv_mass[i] == 0.0 || n.isZero() || s.is_held[std::size_t(i)]) continue;
-    const double w = plane_speed(fs, i), gap = std::max(0.0, start_gap(fs, x, i, n, h));
+    const double w = plane_speed(fs, i), gap = std::max(0.0, plane_gap(fs, x, i, n, h));
     // The end velocity and the drift (eq. 5 "displace") carry the vertex over the piece.
     const double drift = fs.drift ? fs.drift->row(i).dot(n) : 0.0;
     if (h * ((v.row(i) + dv.row(i)).dot(n) + drift) < h * w - gap - kCrossing) {
@@ -244,8 +244,7 @@ void keep_out_of_planes(const ClothTopology& topo, const ForceSet& fs, double le
   const MatX3& normal = *fs.contacts;
   for (Index i = 0; i < normal.rows(); ++i) {
     const Vec3 n = row(normal, i);
-    const double w = plane_speed(fs, i);
-    const double gap = x.row(i).dot(n) - ((*fs.contact_offset)[i] - w * left);
+    const double w = plane_speed(fs, i), gap = plane_gap(fs, x, i, n, left);
     if (!(gap < 0) || n.isZero() || topo.inv_mass[i] == 0.0) continue;
     x.row(i) -= gap * n.transpose();
     const double vn = v.row(i).dot(n);
