@@ -741,25 +741,35 @@ struct SlRow {
   double x0, x1;  // the row's nodes along x and y in cell units: i + offset, j + offset
 };
 
-/// beta times the 7-point Laplacian (h^2 units) of a padded component at node k of the row that
-/// starts at own, sx and sy its x and y strides: the explicit viscous term nu dt lap u^n
-/// (add_viscous_term). Summed as differences from the node, z, y, x pairs, so a uniform field
-/// gives exactly 0. S is T or a vector of T: the same operations per lane, the same bits.
+/// beta times the 7-point Laplacian (h^2 units) of a padded component at node k of a row, given
+/// as the row and its four neighbours across y and x (rows[3 (a + 1) + (b + 1)]: x offset a, y
+/// offset b, as upwind_sample's, so the fast path loads each value once for both): the explicit
+/// viscous term nu dt lap u^n (add_viscous_term). Summed as differences from the node, z, y, x
+/// pairs, so a uniform field gives exactly 0. S is T or a vector of T: the same operations per
+/// lane, the same bits.
 template <class S, class T>
-FLAGSIM_INLINE S viscous_term(const T* own, std::ptrdiff_t sx, std::ptrdiff_t sy, int k, T beta) {
-  const T* p = own + k;
+FLAGSIM_INLINE S viscous_term(const T* const rows[9], int k, T beta) {
+  const T* p = rows[4] + k;
   const S c = load_lanes<S>(p);
   const S z = (load_lanes<S>(p - 1) - c) + (load_lanes<S>(p + 1) - c);
-  const S y = (load_lanes<S>(p - sy) - c) + (load_lanes<S>(p + sy) - c);
-  const S x = (load_lanes<S>(p - sx) - c) + (load_lanes<S>(p + sx) - c);
+  const S y = (load_lanes<S>(rows[3] + k) - c) + (load_lanes<S>(rows[5] + k) - c);
+  const S x = (load_lanes<S>(rows[1] + k) - c) + (load_lanes<S>(rows[7] + k) - c);
   return beta * ((z + y) + x);
+}
+
+/// viscous_term of the row that starts at own, sx and sy the component's x and y strides.
+template <class S, class T>
+FLAGSIM_INLINE S viscous_term(const T* own, std::ptrdiff_t sx, std::ptrdiff_t sy, int k, T beta) {
+  const T* const rows[9] = {nullptr, own - sx, nullptr, own - sy, own,
+                            own + sy, nullptr, own + sx, nullptr};
+  return viscous_term<S>(rows, k, beta);
 }
 
 /// The velocity at node k (own value, 4-node means of the other components, as
 /// padded_velocity), per axis, for component C: m/s.
 template <int C, class S, class T>
 FLAGSIM_INLINE void node_velocity(const SlRow<T>& w, int k, S& u0, S& u1, S& u2) {
-  const S vc = load_lanes<S>(w.own + k);
+  const S vc = load_lanes<S>(w.rows9[4] + k);  // w.own + k
   const S v1 =
       T(0.25) * (((load_lanes<S>(w.e1 + k - w.dc) + load_lanes<S>(w.e1 + k + w.d1s - w.dc)) +
                   load_lanes<S>(w.e1 + k)) +
@@ -958,7 +968,7 @@ template <int C, bool D, class L, class T>
 FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
   // D: add the explicit viscous term of u^n to every node's value (add_viscous_term).
   auto viscous = [&](auto value, int k) FLAGSIM_INLINE_LAMBDA {
-    if constexpr (D) value += viscous_term<decltype(value)>(w.own, w.sx, w.sy, k, w.beta);
+    if constexpr (D) value += viscous_term<decltype(value)>(w.rows9, k, w.beta);
     return value;
   };
   bool near = true;
@@ -968,7 +978,6 @@ FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
     using V = typename L::V;
     V one = V{};
     one += T(1);
-    auto inside = V{} == V{};  // all lanes true
     for (; k + L::W <= n2; k += L::W) {
       V u0, u1, u2;
       node_velocity<C>(w, k, u0, u1, u2);
@@ -984,10 +993,10 @@ FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2) {
             viscous(any_in ? (in ? upwind_sample<V, T>(w.rows9, k, d0, d1, d2) : far) : far, k));
         continue;
       }
-      inside &= in;
+      // a lane a cell or more away that far_sample did not take: the caller redoes the row
+      near = near && all_in;
       store_lanes(w.dst + k, viscous(upwind_sample<V, T>(w.rows9, k, d0, d1, d2), k));
     }
-    for (int lane = 0; lane < L::W; ++lane) near = near && inside[lane];
   }
 #endif
   for (; k < n2; ++k) {
