@@ -760,8 +760,8 @@ FLAGSIM_INLINE S viscous_term(const T* const rows[9], int k, T beta) {
 /// viscous_term of the row that starts at own, sx and sy the component's x and y strides.
 template <class S, class T>
 FLAGSIM_INLINE S viscous_term(const T* own, std::ptrdiff_t sx, std::ptrdiff_t sy, int k, T beta) {
-  const T* const rows[9] = {nullptr, own - sx, nullptr, own - sy, own,
-                            own + sy, nullptr, own + sx, nullptr};
+  const T* const rows[9] = {nullptr,  own - sx, nullptr,  own - sy, own,
+                            own + sy, nullptr,  own + sx, nullptr};
   return viscous_term<S>(rows, k, beta);
 }
 
