@@ -89,9 +89,9 @@ INSTANTIATE_TEST_SUITE_P(Advect, PeriodicFastPath,
 // sampler's arithmetic: the generic kernel's bits on every node, at every vector width, on double
 // and float grids (float: the departure point in double, the interpolation in float).
 template <class T>
-void expect_far_departures_give_the_generic_bits() {
-  const GridGeometry g = periodic_geometry(10, 9, 23);  // 23: a scalar tail at every width
-  const double dt = 0.1, s = dt / g.h;                  // cells per step per m/s
+void expect_far_departures_give_the_generic_bits(int nz) {
+  const GridGeometry g = periodic_geometry(10, 9, nz);
+  const double dt = 0.1, s = dt / g.h;  // cells per step per m/s
   MacGrid<T> u0(g);
   const double two_pi = 6.283185307179586;
   for (int c = 0; c < 3; ++c)
@@ -113,16 +113,20 @@ void expect_far_departures_give_the_generic_bits() {
     scratch.resize(g);
     advect_periodic(fast, dt, false, scratch, hat);
     vector_bytes(0);
-    EXPECT_TRUE(same_bits(generic, fast)) << "vector cap " << cap;
+    EXPECT_TRUE(same_bits(generic, fast)) << "vector cap " << cap << " nz " << nz;
   }
 }
 
+// Rows of 23 nodes leave a scalar tail at every width; rows of 16 and 32 take the AVX kernel's
+// unrolled rows (sl_plane_32).
+constexpr int kRowLengths[] = {23, 16, 32};
+
 TEST(Advect, PeriodicFarDeparturesGiveTheGenericKernelsBits) {
-  expect_far_departures_give_the_generic_bits<double>();
+  for (const int nz : kRowLengths) expect_far_departures_give_the_generic_bits<double>(nz);
 }
 
 TEST(Advect, PeriodicFarDeparturesGiveTheGenericKernelsBitsOnAFloatGrid) {
-  expect_far_departures_give_the_generic_bits<float>();
+  for (const int nz : kRowLengths) expect_far_departures_give_the_generic_bits<float>(nz);
 }
 
 // The fast path reproduces a uniform field exactly, whatever the direction of the flow, on grids
@@ -164,11 +168,12 @@ TEST(Advect, PaddedComponentWrapsItsGhosts) {
   EXPECT_EQ(p.data[p.index(4, 3, 2)], 3.0);
 }
 
-// A periodic 6 x 5 x 21 field of normal values of standard deviation `scale` (m/s): rows of 21
-// nodes leave a scalar tail at every vector width.
+// A periodic 6 x 5 x nz field of normal values of standard deviation `scale` (m/s): rows of 21
+// nodes leave a scalar tail at every vector width, rows of 16 and 32 take the AVX kernel's
+// unrolled rows.
 template <class T>
-MacGrid<T> random_width_field(unsigned seed, double scale) {
-  MacGrid<T> u(periodic_geometry(6, 5, 21));
+MacGrid<T> random_width_field(unsigned seed, double scale, int nz = 21) {
+  MacGrid<T> u(periodic_geometry(6, 5, nz));
   std::mt19937 rng(seed);
   std::normal_distribution<double> n(0.0, scale);
   for (auto& comp : u.comp)
@@ -180,8 +185,8 @@ MacGrid<T> random_width_field(unsigned seed, double scale) {
 // operations per lane, so they give the same bits, in double and in float; rows of 21 nodes
 // leave a scalar tail at every width.
 template <class T>
-void expect_widths_agree(double scale) {
-  const MacGrid<T> u0 = random_width_field<T>(17, scale);
+void expect_widths_agree(double scale, int nz) {
+  const MacGrid<T> u0 = random_width_field<T>(17, scale, nz);
   const GridGeometry& g = u0.geo;
   auto run = [&](int cap) {
     vector_bytes(cap);
@@ -196,14 +201,16 @@ void expect_widths_agree(double scale) {
   for (int c = 0; c < 3; ++c)
     ASSERT_EQ(
         std::memcmp(wide.comp[c].data(), narrow.comp[c].data(), wide.comp[c].size() * sizeof(T)), 0)
-        << "component " << c;
+        << "component " << c << " nz " << nz;
 }
 
 TEST(Advect, PeriodicFastPathVectorWidthsGiveTheSameBits) {
   if (vector_bytes() < 32) GTEST_SKIP() << "this CPU has one vector width only (no AVX)";
   for (const double scale : {0.3, 3.0}) {  // 3: many nodes take the general sampler too
-    expect_widths_agree<double>(scale);
-    expect_widths_agree<float>(scale);
+    for (const int nz : {21, 16, 32}) {
+      expect_widths_agree<double>(scale, nz);
+      expect_widths_agree<float>(scale, nz);
+    }
   }
 }
 
@@ -213,8 +220,8 @@ TEST(Advect, PeriodicFastPathVectorWidthsGiveTheSameBits) {
 // semi-Lagrangian pass (fast path, far path, scalar redo at scale 3) or in a pass of its own
 // after MacCormack, at both vector widths, in double and in float.
 template <class T>
-void expect_viscous_term_exact(bool maccormack, double scale) {
-  const MacGrid<T> u0 = random_width_field<T>(23, scale);
+void expect_viscous_term_exact(bool maccormack, double scale, int nz) {
+  const MacGrid<T> u0 = random_width_field<T>(23, scale, nz);
   const GridGeometry& g = u0.geo;
   const double beta = 0.0075;
   auto run = [&](double b, int cap) {
@@ -250,16 +257,17 @@ void expect_viscous_term_exact(bool maccormack, double scale) {
           std::memcmp(got.comp[c].data(), expected.comp[c].data(), got.comp[c].size() * sizeof(T)),
           0)
           << "component " << c << " maccormack " << maccormack << " scale " << scale << " cap "
-          << cap;
+          << cap << " nz " << nz;
   }
 }
 
 TEST(Advect, PeriodicViscousTermIsTheLaplacianOfTheOldField) {
   for (const bool maccormack : {false, true})
-    for (const double scale : {0.3, 3.0}) {
-      expect_viscous_term_exact<double>(maccormack, scale);
-      expect_viscous_term_exact<float>(maccormack, scale);
-    }
+    for (const double scale : {0.3, 3.0})
+      for (const int nz : {21, 16, 32}) {
+        expect_viscous_term_exact<double>(maccormack, scale, nz);
+        expect_viscous_term_exact<float>(maccormack, scale, nz);
+      }
 }
 
 TEST(Advect, PaddedComponentGhostsAreTheWrappedNodes) {
