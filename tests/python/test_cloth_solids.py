@@ -239,6 +239,19 @@ def test_bad_solids_name_the_parameter(tmp_path):
                          "motion": {"keys": [[1, [0, 0, 0], [0, 0, 0]],
                                              [0, [1, 0, 0], [0, 0, 0]]]}}]}
         )  # fmt: skip
+    # The same fields set from Python name the solid (they used to say "obstacle.radius", from
+    # the base class), and a refused value changes nothing.
+    solid = flagsim.SolidParams(shape="sphere", radius=0.1)
+    with pytest.raises(ValueError, match=r"^solid\.radius should be in \(0, "):
+        solid.radius = -1.0
+    with pytest.raises(ValueError, match=r"^solid\.radius should be in \(0, "):
+        flagsim.SolidParams(radius=0.0)
+    with pytest.raises(ValueError, match=r"^solid\.vertices should be"):
+        solid.vertices = np.zeros((4, 2))
+    assert solid.radius == 0.1
+    assert flagsim.ObstacleParams().shape == "box"  # the air's own class keeps its name
+    with pytest.raises(ValueError, match=r"^obstacle\.radius should be in \(0, "):
+        flagsim.ObstacleParams().radius = -1.0
     (tmp_path / "bad.obj").write_text("v 0 0 0\nf 1 x 3\n")
     with pytest.raises(ValueError, match=r"bad.obj:2"):
         flagsim.Scene.from_dict({"solids": [{"mesh": "bad.obj"}]}, directory=str(tmp_path))
