@@ -452,13 +452,22 @@ FLAGSIM_INLINE void copy_by_vectors(const T* s, std::size_t n, T* d) {
 template <class S, class T>
 FLAGSIM_INLINE void fill_plane_rows(const T* s_plane, int n1, int n2, int p2, T* d) {
   constexpr int G = PaddedComponent<T>::kGhost;
+  constexpr int W = int(sizeof(S) / sizeof(T));
   T* const top = d;
   d += std::size_t(G) * p2;
   for (int b = 0; b < n1; ++b, d += p2) {
     const T* s = s_plane + std::size_t(b) * n2;
-    for (int g = 0; g < G; ++g) {
-      d[g] = s[n2 - G + g];
-      d[G + n2 + g] = s[g];
+    if (W > G && b > 0 && b + 1 < n1) {
+      // The ghosts by one vector each side, their other lanes landing on interior nodes that the
+      // copy below overwrites: the right ones from s - (W - G) (the row before's last values),
+      // the left ones from s + n2 - G (into the next row's first): inside the plane.
+      store_lanes<S>(d + n2 + 2 * G - W, load_lanes<S, T>(s + G - W));
+      store_lanes<S>(d, load_lanes<S, T>(s + n2 - G));
+    } else {
+      for (int g = 0; g < G; ++g) {
+        d[g] = s[n2 - G + g];
+        d[G + n2 + g] = s[g];
+      }
     }
     copy_by_vectors<S>(s, std::size_t(n2), d + G);
   }

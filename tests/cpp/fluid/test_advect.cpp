@@ -270,20 +270,36 @@ TEST(Advect, PeriodicViscousTermIsTheLaplacianOfTheOldField) {
       }
 }
 
-TEST(Advect, PaddedComponentGhostsAreTheWrappedNodes) {
-  PaddedComponent<double> p;
-  const int n0 = 4, n1 = 3, n2 = 6;
-  p.resize(Shape3{{n0, n1, n2}});
-  std::vector<double> src(n0 * n1 * n2);
-  for (std::size_t i = 0; i < src.size(); ++i) src[i] = double(i);
-  p.fill(src.data());
-  constexpr int G = PaddedComponent<double>::kGhost;
+// Every padded node is the wrapped source node: rows of 6 (one vector of 16 bytes or less), and
+// planes of 5 rows of 16 or 21 nodes, whose inner rows take their ghosts by vectors, at every
+// vector width, in double and float.
+template <class T>
+void expect_ghosts_are_the_wrapped_nodes(int n0, int n1, int n2) {
+  constexpr int G = PaddedComponent<T>::kGhost;
+  std::vector<T> src(std::size_t(n0) * n1 * n2);
+  for (std::size_t i = 0; i < src.size(); ++i) src[i] = T(i);
   auto wrap = [](int i, int n) { return ((i % n) + n) % n; };
-  for (int i = -G; i < n0 + G; ++i)
-    for (int j = -G; j < n1 + G; ++j)
-      for (int k = -G; k < n2 + G; ++k)
-        ASSERT_EQ(p.data[p.index(i, j, k)],
-                  src[(wrap(i, n0) * n1 + wrap(j, n1)) * n2 + wrap(k, n2)]);
+  for (const int cap : {0, 16}) {
+    vector_bytes(cap);
+    PaddedComponent<T> p;
+    p.resize(Shape3{{n0, n1, n2}});
+    p.fill(src.data());
+    vector_bytes(0);
+    for (int i = -G; i < n0 + G; ++i)
+      for (int j = -G; j < n1 + G; ++j)
+        for (int k = -G; k < n2 + G; ++k)
+          ASSERT_EQ(p.data[p.index(i, j, k)],
+                    src[(std::size_t(wrap(i, n0)) * n1 + wrap(j, n1)) * n2 + wrap(k, n2)])
+              << "node " << i << " " << j << " " << k << " shape " << n0 << " " << n1 << " " << n2
+              << " cap " << cap;
+  }
+}
+
+TEST(Advect, PaddedComponentGhostsAreTheWrappedNodes) {
+  for (const int n2 : {6, 16, 21}) {
+    expect_ghosts_are_the_wrapped_nodes<double>(4, n2 == 6 ? 3 : 5, n2);
+    expect_ghosts_are_the_wrapped_nodes<float>(4, n2 == 6 ? 3 : 5, n2);
+  }
 }
 
 }  // namespace flagsim
