@@ -35,11 +35,11 @@ struct DivLanes {
 /// scalars). The same operations per lane as the scalar form, so the same bits at every width.
 /// A periodic row's last cell reads face 0 of w: its last vector takes w0[0] into its top lane
 /// by a shuffle, so rows whose length is a multiple of DW need no scalar cell.
-template <int DW, class T>
+template <int DW, int NZ, class T>
 FLAGSIM_INLINE void divergence_plane_body(const MacGrid<T>& u, T* div, std::size_t stride,
                                           double scale, int i) {
   const GridGeometry& g = u.geo;
-  const int ny = g.ny, nz = g.nz;
+  const int ny = g.ny, nz = NZ > 0 ? NZ : g.nz;
   const bool per = g.periodic;
   const double inv_h = 1.0 / g.h;
   const Shape3 su = u.shape[0], sv = u.shape[1], sw = u.shape[2];
@@ -74,6 +74,7 @@ FLAGSIM_INLINE void divergence_plane_body(const MacGrid<T>& u, T* div, std::size
         std::memcpy(d + at, &v, sizeof v);
       };
       const int vec_end = per ? nz - DW : nz;  // vectors whose w0[k + 1] lie in the row
+#pragma GCC unroll 8
       for (; k + DW <= vec_end; k += DW) put(k, ld(w0 + k + 1));
       if (per && k == nz - DW) {  // w0[k + 1 ..], then w0[0]
         D top = D{};
@@ -99,9 +100,9 @@ FLAGSIM_INLINE void divergence_plane_body(const MacGrid<T>& u, T* div, std::size
 template <class T>
 void divergence_plane_narrow(const MacGrid<T>& u, T* div, std::size_t stride, double scale, int i) {
 #ifdef FLAGSIM_HAVE_VECTORS
-  divergence_plane_body<2>(u, div, stride, scale, i);
+  divergence_plane_body<2, 0>(u, div, stride, scale, i);
 #else
-  divergence_plane_body<1>(u, div, stride, scale, i);
+  divergence_plane_body<1, 0>(u, div, stride, scale, i);
 #endif
 }
 
@@ -109,7 +110,10 @@ void divergence_plane_narrow(const MacGrid<T>& u, T* div, std::size_t stride, do
 template <class T>
 FLAGSIM_TARGET_AVX void divergence_plane_wide(const MacGrid<T>& u, T* div, std::size_t stride,
                                               double scale, int i) {
-  divergence_plane_body<4>(u, div, stride, scale, i);
+  // rows of 16 and 32 cells (16^3, 32^3): the row length known, its vectors unrolled
+  if (u.geo.nz == 16) return divergence_plane_body<4, 16>(u, div, stride, scale, i);
+  if (u.geo.nz == 32) return divergence_plane_body<4, 32>(u, div, stride, scale, i);
+  divergence_plane_body<4, 0>(u, div, stride, scale, i);
 }
 #endif
 
@@ -217,9 +221,10 @@ struct MaskOf {
 /// NaN stays NaN (no integer masks: SSE2 has no 64-bit lane compares, and a mask reduction went
 /// scalar). first_lo: when set, lane 0 of the first vector's lo is *first_lo and its other lanes
 /// lo[0 ..] shifted up one (the w row: face 0 reads the row's last cell).
-template <class L, class T, class Z>
-FLAGSIM_INLINE void gradient_row(T* dst, const T* hi, const T* lo, int n, T inv_h, Z& zeros,
+template <class L, int N, class T, class Z>
+FLAGSIM_INLINE void gradient_row(T* dst, const T* hi, const T* lo, int n_, T inv_h, Z& zeros,
                                  T& zero, const T* first_lo = nullptr) {
+  const int n = N > 0 ? N : n_;
   int k = 0;
   if constexpr (!std::is_void<L>::value) {
     using V = typename L::V;
@@ -243,6 +248,7 @@ FLAGSIM_INLINE void gradient_row(T* dst, const T* hi, const T* lo, int n, T inv_
       --lo;  // from here on lo[k] is the cell below face k
       first_lo = nullptr;
     }
+#pragma GCC unroll 8
     for (; k + W <= n; k += W) {
       const V v = load_lanes<V>(dst + k) - (load_lanes<V>(hi + k) - load_lanes<V>(lo + k)) * inv_h;
       store_lanes(dst + k, v);
@@ -264,9 +270,10 @@ FLAGSIM_INLINE void gradient_row(T* dst, const T* hi, const T* lo, int n, T inv_
 /// The faces of plane i of the periodic grid (all three components, one (i, j) row of cells at a
 /// time) take the gradient of phi (rows `stride` apart) on lanes L: subtract_gradient_periodic's
 /// plane. Returns false when a new value is not finite.
-template <class L, class T>
+template <class L, int N, class T>
 FLAGSIM_INLINE bool gradient_periodic_plane(const T* phi, std::size_t stride, int nx, int ny,
-                                            int nz, T inv_h, T* U, T* V, T* W, int i) {
+                                            int nz_, T inv_h, T* U, T* V, T* W, int i) {
+  const int nz = N > 0 ? N : nz_;
   using Z = std::conditional_t<std::is_void<L>::value, T, typename L::V>;
   Z zeros = Z{};
   T zero = 0;
@@ -276,10 +283,10 @@ FLAGSIM_INLINE bool gradient_periodic_plane(const T* phi, std::size_t stride, in
     const T* hi = phi + r * stride;  // cell (i, j): the faces' upper cell
     const T* lo_x = phi + (std::size_t(i == 0 ? nx - 1 : i - 1) * ny + j) * stride;
     const T* lo_y = phi + (std::size_t(i) * ny + (j == 0 ? ny - 1 : j - 1)) * stride;
-    gradient_row<L>(U + row, hi, lo_x, nz, inv_h, zeros, zero);
-    gradient_row<L>(V + row, hi, lo_y, nz, inv_h, zeros, zero);
+    gradient_row<L, N>(U + row, hi, lo_x, nz, inv_h, zeros, zero);
+    gradient_row<L, N>(V + row, hi, lo_y, nz, inv_h, zeros, zero);
     // Face k of w lies between cells k - 1 and k of the row; face 0 wraps to cell nz - 1.
-    gradient_row<L>(W + row, hi, hi, nz, inv_h, zeros, zero, hi + nz - 1);
+    gradient_row<L, N>(W + row, hi, hi, nz, inv_h, zeros, zero, hi + nz - 1);
   }
   if constexpr (!std::is_void<L>::value)
     for (int l = 0; l < L::W; ++l) zero += zeros[l];
@@ -289,7 +296,7 @@ FLAGSIM_INLINE bool gradient_periodic_plane(const T* phi, std::size_t stride, in
 template <class T>
 bool gradient_periodic_plane_narrow(const T* phi, std::size_t stride, int nx, int ny, int nz,
                                     T inv_h, T* U, T* V, T* W, int i) {
-  return gradient_periodic_plane<NarrowLanes<T>>(phi, stride, nx, ny, nz, inv_h, U, V, W, i);
+  return gradient_periodic_plane<NarrowLanes<T>, 0>(phi, stride, nx, ny, nz, inv_h, U, V, W, i);
 }
 
 #ifdef FLAGSIM_HAVE_AVX_DISPATCH
@@ -299,7 +306,12 @@ template <class T>
 FLAGSIM_TARGET_AVX bool gradient_periodic_plane_wide(const T* phi, std::size_t stride, int nx,
                                                      int ny, int nz, T inv_h, T* U, T* V, T* W,
                                                      int i) {
-  return gradient_periodic_plane<Lanes32<T>>(phi, stride, nx, ny, nz, inv_h, U, V, W, i);
+  // rows of 16 and 32 cells (16^3, 32^3): the row length known, its vectors unrolled
+  if (nz == 16)
+    return gradient_periodic_plane<Lanes32<T>, 16>(phi, stride, nx, ny, nz, inv_h, U, V, W, i);
+  if (nz == 32)
+    return gradient_periodic_plane<Lanes32<T>, 32>(phi, stride, nx, ny, nz, inv_h, U, V, W, i);
+  return gradient_periodic_plane<Lanes32<T>, 0>(phi, stride, nx, ny, nz, inv_h, U, V, W, i);
 }
 #endif
 

@@ -63,8 +63,9 @@ std::vector<T> divergence_by_cells(const MacGrid<T>& u, std::size_t stride, doub
 template <class T>
 void expect_divergence_bits_at_every_width() {
   for (const bool periodic : {true, false})
-    for (const auto& n : {std::array<int, 3>{5, 6, 7}, std::array<int, 3>{4, 3, 16},
-                          std::array<int, 3>{3, 4, 2}, std::array<int, 3>{2, 5, 12}}) {
+    for (const auto& n :
+         {std::array<int, 3>{5, 6, 7}, std::array<int, 3>{4, 3, 16}, std::array<int, 3>{3, 4, 2},
+          std::array<int, 3>{2, 5, 12}, std::array<int, 3>{3, 2, 32}}) {
       const GridGeometry g = geometry(n[0], n[1], n[2], periodic);
       const MacGrid<T> u = random_field<T>(g, 3);
       for (const int stride : {0, n[2] + 3})
@@ -86,8 +87,9 @@ void expect_divergence_bits_at_every_width() {
 
 template <class T>
 void expect_periodic_gradient_bits_at_every_width() {
-  for (const auto& n : {std::array<int, 3>{5, 6, 7}, std::array<int, 3>{4, 3, 16},
-                        std::array<int, 3>{3, 4, 2}, std::array<int, 3>{2, 5, 9}}) {
+  for (const auto& n :
+       {std::array<int, 3>{5, 6, 7}, std::array<int, 3>{4, 3, 16}, std::array<int, 3>{3, 4, 2},
+        std::array<int, 3>{2, 5, 9}, std::array<int, 3>{3, 2, 32}}) {
     const GridGeometry g = geometry(n[0], n[1], n[2], true);
     const MacGrid<T> u0 = random_field<T>(g, 4);
     for (const int stride : {0, n[2] + 2}) {
@@ -127,7 +129,7 @@ void expect_periodic_gradient_bits_at_every_width() {
 // The divergence kernel (a plane per call, vectors of doubles with the periodic row's last cell
 // by a shuffle) gives the cell-by-cell formula's bits at both vector widths, periodic and
 // bounded, rows padded or not, scaled or not, rows shorter than a vector and not a multiple of
-// one.
+// one, and rows of 16 and 32 (the AVX code's unrolled rows).
 TEST(MacDivergence, GivesTheCellFormulasBitsAtEveryWidth) {
   expect_divergence_bits_at_every_width<double>();
 }
