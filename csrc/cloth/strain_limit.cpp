@@ -19,7 +19,7 @@ struct Surface {
     const Vec3 n = row(*normal, i);
     const double an = a.dot(n);
     if (!(an < 0)) return a;
-    const double gap = x.dot(n) - (*offset)[i];
+    const double gap = offset ? x.dot(n) - (*offset)[i] : x.dot(n);
     const double keep = velocity ? (gap > 0 ? an : 0.0) : std::max(an, std::min(0.0, -gap));
     return a + (keep - an) * n;
   }

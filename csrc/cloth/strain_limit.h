@@ -13,9 +13,9 @@ namespace flagsim {
 /// relative velocity along it that still stretches it (inelastic, momentum-conserving; never adds
 /// kinetic energy).
 /// surface, offset: contact planes or none (ForceSet::contacts, contact_offset): per vertex an
-/// outward unit normal n (zero rows: none) and x . n >= offset keeps it out. A move that would
-/// take such a vertex through its plane is cut at the plane, and one on the plane loses its
-/// component along -n (it slides along the surface, and the surface takes the rest, as a rope
+/// outward unit normal n (zero rows: none) and x . n >= offset keeps it out (no offset: 0). A move
+/// that would take such a vertex through its plane is cut at the plane, and one on the plane loses
+/// its component along -n (it slides along the surface, and the surface takes the rest, as a rope
 /// over a post); so does a velocity change of a vertex on its plane. Pulled straight along a tether
 /// or spring that runs as a chord through the pole, a vertex would go in, the pole would push it
 /// out radially, and each round of the two left the springs more energy (docs/energy.md).
