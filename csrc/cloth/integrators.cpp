@@ -298,7 +298,7 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
       StageClock::Scope timer(t, Stage::kStrainLimit);
       work.strain_limit +=
           limit_strain_work(topo, gravity_of(fs), ip.strain_limit, ip.strain_limit_iterations, x, v,
-                            fs.contacts, fs.contact_offset, &work.pins);
+                            fs.contacts, fs.contact_offset, &work.pins, fs.contact_speed);
     }
     ++n;
     done = (h - done <= hs) ? h : done + hs;
@@ -633,7 +633,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     StageClock::Scope timer(t, Stage::kStrainLimit);
     work.strain_limit +=
         limit_strain_work(topo, gravity_of(fs), ip.strain_limit, ip.strain_limit_iterations, x, v,
-                          fs.contacts, fs.contact_offset, &work.pins);
+                          fs.contacts, fs.contact_offset, &work.pins, fs.contact_speed);
   }
   return IntegrateStatus::kOk;
 }

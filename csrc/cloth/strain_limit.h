@@ -24,10 +24,12 @@ namespace flagsim {
 /// the pin, whose work is that impulse times the pin's velocity (0 for pins at rest). Booked
 /// with the pins, it leaves the rest of the change of E the same in every frame: a flag carried
 /// at U gains U times that impulse on top of what the still one loses (docs/design.md "Moving
-/// pins and Galilean invariance").
+/// pins and Galilean invariance"). speed (N, m/s) or none (still): each plane's speed along its
+/// normal (ForceSet::contact_speed); a moving plane's impulse m dv on a vertex does the work
+/// m dv . n w, added to pin_work too (a box lifting a flag pushes it up against the tethers).
 void limit_strain(const ClothTopology& topo, double limit, int iterations, MatX3& x, MatX3& v,
                   const MatX3* surface = nullptr, const VecX* offset = nullptr,
-                  double* pin_work = nullptr);
+                  double* pin_work = nullptr, const VecX* speed = nullptr);
 
 /// True when limit_strain would move something: a tether or a structural or shear spring longer
 /// than (1 + limit) x its rest length.
@@ -38,6 +40,7 @@ bool strain_limit_violated(const ClothTopology& topo, double limit, const MatX3&
 /// share (limit_strain's pin_work) is added there and left out of the value returned.
 double limit_strain_work(const ClothTopology& topo, const Vec3& g, double limit, int iterations,
                          MatX3& x, MatX3& v, const MatX3* surface = nullptr,
-                         const VecX* offset = nullptr, double* pin_work = nullptr);
+                         const VecX* offset = nullptr, double* pin_work = nullptr,
+                         const VecX* speed = nullptr);
 
 }  // namespace flagsim

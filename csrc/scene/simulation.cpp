@@ -753,7 +753,7 @@ void Simulation::stage_flap() {
 double Simulation::limit_cloth_strain(MatX3& x, MatX3& v) {
   return limit_strain_work(topo_, scene_.gravity, scene_.integrator.strain_limit,
                            scene_.integrator.strain_limit_iterations, x, v, forces_.contacts,
-                           forces_.contact_offset, &ledger_.pins);
+                           forces_.contact_offset, &ledger_.pins, forces_.contact_speed);
 }
 
 // Each projection's entry in the ledger is the change of E it made: the pole's less the strain
