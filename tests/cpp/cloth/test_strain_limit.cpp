@@ -73,9 +73,10 @@ TEST(StrainLimit, HoldsTheLimitAndNeverAddsKineticEnergy) {
     EXPECT_LE(kinetic(f.t, f.v), k0 * (1 + 1e-12)) << name_of(pin);
     for (Index i = 0; i < f.t.num_vertices(); ++i) {  // tethers: the same promise
       const int a = f.t.tether_anchor[i];
-      if (a >= 0)
+      if (a >= 0) {
         EXPECT_LE((f.x.row(i) - f.x.row(a)).norm(),
                   (1 + limit + kStrainLimitSlack) * f.t.tether_length[i]);
+      }
     }
   }
 }
@@ -114,7 +115,9 @@ TEST(StrainLimit, EndTethersCatchASwingAboutTheNearestPins) {
   limit_strain(t, limit, 0, x, v);
   for (Index i = 0; i < t.num_vertices(); ++i) {
     const auto holds = [&](int a, double rest) {
-      if (a >= 0) EXPECT_LE((x.row(i) - x.row(a)).norm(), (1 + limit) * rest * (1 + 1e-12)) << i;
+      if (a >= 0) {
+        EXPECT_LE((x.row(i) - x.row(a)).norm(), (1 + limit) * rest * (1 + 1e-12)) << i;
+      }
     };
     holds(t.tether_anchor[i], t.tether_length[i]);
     holds(t.tether_end_anchor[2 * i], t.tether_end_length[2 * i]);
@@ -201,8 +204,9 @@ TEST(StrainLimit, VerticesOnAContactPlaneSlideAlongItAndStayOut) {
   for (Index i = 0; i < N; ++i) {
     if (f.t.inv_mass[i] == 0) continue;
     EXPECT_GE(f.x(i, 2), offset[i] - 1e-15) << i;  // never through its plane
-    if (i % 2 == 0 && v0(i, 2) >= 0)               // started on it, not moving into it: none given
+    if (i % 2 == 0 && v0(i, 2) >= 0) {             // started on it, not moving into it: none given
       EXPECT_GE(f.v(i, 2), 0.0) << i;
+    }
   }
 }
 
