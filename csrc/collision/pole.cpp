@@ -138,6 +138,7 @@ double collide_vertex(const PoleParams& pole, const RigidMotion* motion, const M
                       MatX3& v, const VecX& inv_mass, Index i) {
   if (inv_mass[i] == 0) return -1;
   if (!motion) {
+    if (far_from_pole(pole, row(x0, i), row(x, i))) return -1;  // before copying the rows
     Vec3 p = x.row(i).transpose(), vi = v.row(i).transpose();
     const double moved = collide_point(pole, row(x0, i), p, vi);
     if (moved < 0) return -1;
