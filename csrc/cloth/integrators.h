@@ -3,6 +3,7 @@
 // block Gauss-Seidel in Eisenstat's form, or an aggregation multigrid cycle (flexible CG then;
 // cloth/multigrid.h).
 #pragma once
+#include <limits>
 #include <vector>
 
 #include "cloth/forces.h"
@@ -152,6 +153,9 @@ struct IntegratorScratch {
   std::vector<uint8_t> is_held;      ///< implicit: per vertex, 1 when in `held`
   ClothSystem sys;                   ///< the implicit system of the current step
   Multigrid mg;  ///< levels built when the topology is a grid (multigrid_applies)
+  /// E = total_energy of (x, v) as integrate() is next called, when the caller knows it (J;
+  /// NaN: not known). integrate() reads it once, in place of computing E, and resets it to NaN.
+  double energy_known = std::numeric_limits<double>::quiet_NaN();
   explicit IntegratorScratch(const ClothTopology& topo);
 };
 

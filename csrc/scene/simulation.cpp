@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstring>
 #include <exception>
 #include <limits>
 #include <sstream>
@@ -109,6 +110,10 @@ Simulation::Simulation(const Scene& scene, Simulation* host)
   }
   if (built(Stage::kSelfCollision)) build_self_collision();
   n_.resize(N, 3);
+  x_of_n_.resize(N, 3);
+  // Not any state's bits (positions are finite), so no energy is known before the first booking.
+  x_of_e_.setConstant(N, 3, std::numeric_limits<double>::quiet_NaN());
+  v_of_e_.setConstant(N, 3, std::numeric_limits<double>::quiet_NaN());
   update_normals();
   setup_flapping();
   setup_energy();
@@ -320,7 +325,18 @@ void Simulation::check_inside_grid() const {
 // before's.
 bool Simulation::pipelined() const { return beside_ != nullptr; }
 
-void Simulation::update_normals() { compute_vertex_normals(topo_, x_, n_); }
+void Simulation::update_normals() {
+  compute_vertex_normals(topo_, x_, n_);
+  x_of_n_ = x_;
+}
+
+// Bits, not values: the normals are a function of x_'s bits, so equal bits give the same n_.
+// x_ may be written from outside between steps (Python's positions view), hence the comparison
+// rather than a flag.
+void Simulation::normals_for_x() {
+  if (std::memcmp(x_of_n_.data(), x_.data(), sizeof(double) * std::size_t(x_.size())) != 0)
+    update_normals();
+}
 
 // The stages any flag runs (a flag that starts moving its pins adds "pins" to its host's list).
 void Simulation::name_stages() {
@@ -743,7 +759,7 @@ void Simulation::stage_flap() {
   if (!built(Stage::kFlap)) return;
   StageClock::Scope t(&clock_, Stage::kFlap);
   if (!pole_air_sampled_) u_p_ = sample_pole_air_speed();  // else sample_air_ahead did
-  compute_vertex_normals(topo_, x_, n_);
+  normals_for_x();
   if (scene_.flapping.mode == FlapMode::kDisplace)
     flap_.drift(topo_, n_, u_p_, t_piece_ + h_, h_, flap_drift_);
   else
@@ -930,6 +946,19 @@ void Simulation::book_energy_change(double& entry, double booked_elsewhere) {
   const double e = energy_now();
   entry += e - energy_run_ - booked_elsewhere;
   energy_run_ = e;
+  x_of_e_ = x_;
+  v_of_e_ = v_;
+}
+
+// energy_run_ when (x_, v_) hold the bits it was computed from (and the integrator's gravity is
+// the scene's): total_energy is a function of those bits, so the integrator need not sum it again.
+void Simulation::offer_known_energy() {
+  const auto same = [](const MatX3& a, const MatX3& b) {
+    return a.size() == b.size() &&
+           std::memcmp(a.data(), b.data(), sizeof(double) * std::size_t(a.size())) == 0;
+  };
+  if (forces_.gravity && forces_.g == scene_.gravity && same(x_, x_of_e_) && same(v_, v_of_e_))
+    scratch_.energy_known = energy_run_;
 }
 
 // "visual": the exported geometry is the positions displaced by eq. 5; physics is untouched.
@@ -1022,6 +1051,7 @@ void Simulation::stage_integrate() {
   {
     // The force kernels, strain limiting and energy bookkeeping it calls time themselves.
     StageClock::Scope t(&clock_, Stage::kIntegrate);
+    offer_known_energy();
     status =
         integrate(topo_, forces_, scene_.integrator, h_, u_, x_, v_, scratch_, stats_, &clock_);
   }
@@ -1060,6 +1090,7 @@ void Simulation::book_integrator_work() {
   ledger_.strain_limit += w.strain_limit;
   ledger_.integrator += w.remainder;
   energy_run_ = stats_.energy_after;
+  x_of_e_(0, 0) = std::numeric_limits<double>::quiet_NaN();  // not the state E was taken at
 }
 
 void Simulation::integrate_failed(IntegrateStatus status) {

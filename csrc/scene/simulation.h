@@ -173,6 +173,9 @@ class Simulation {
 
   /// Recompute normals after positions were edited from outside.
   void update_normals();
+  /// n_ = the vertex normals of x_; a no-op when x_ holds the same bits as when n_ was last
+  /// computed (a step's first piece starts from the positions the step before ended at).
+  void normals_for_x();
 
   /// True when a step takes the air's step together with the cloth's first piece (air.pipeline,
   /// a grid, and air.coupling "one_way" or "two_way_lagged"): side by side on two threads when
@@ -255,6 +258,7 @@ class Simulation {
   double limit_cloth_strain(MatX3& x, MatX3& v);
   void book_integrator_work();
   void book_energy_change(double& entry, double booked_elsewhere);
+  void offer_known_energy();  // scratch_.energy_known = energy_run_ where it is still E(x_, v_)
   [[noreturn]] void integrate_failed(IntegrateStatus status);
   void check_finite();
   Implausible check_strain();
@@ -268,7 +272,11 @@ class Simulation {
   ForceSet forces_;
   IntegratorScratch scratch_;
   IntegratorStats stats_;
-  MatX3 x_, v_, n_, u_;         // (N x 3) positions, velocities, normals, air at masses
+  MatX3 x_, v_, n_, u_;  // (N x 3) positions, velocities, normals, air at masses
+  MatX3 x_of_n_;         // (N x 3) the positions n_ was computed from (normals_for_x)
+  // The state energy_run_ was last computed at (N x 3 each; book_energy_change): the next
+  // step's integrate() starts from those bits unless something moved them in between.
+  MatX3 x_of_e_, v_of_e_;
   MatX3 x_start_, v_start_;     // (N x 3) state at the start of the step (rollback)
   MatX3 x_piece_;               // (N x 3) positions at the start of the piece (swept collisions)
   double h_ = 0, t_piece_ = 0;  // s, length and start time of the piece being stepped

@@ -70,6 +70,32 @@ TEST(Pole, CapsPinsAndOutsidePathsAreRespected) {
   EXPECT_EQ(x.row(2), before.row(2));
 }
 
+// Paths beside the pole's bounding box are left alone without the entry test; paths that reach
+// into the box are tested in full: one that cuts the cylinder's rim diagonally (its end in the
+// box's corner, outside the cylinder) is stopped, one that only skims the box's corner past the
+// cylinder and one just outside the box are not.
+TEST(Pole, PathsNearTheBoundingBoxAreTestedInFull) {
+  const PoleParams p = pole();
+  const double R = p.radius;
+  MatX3 x0(4, 3), x(4, 3), v = MatX3::Zero(4, 3);
+  x0 << -0.2, 0.0, -0.2,   // diagonally through the rim, ends in the box's corner outside
+      -0.2, 0.0, 0.9 * R,  // along x, 0.9 R to the side: through the cylinder near its edge
+      0.9 * R, 0.0, -0.2,  // along z at x = 0.9 R, stops short of the cylinder in the corner
+      -0.2, 0.0, 1.001 * R + 1e-6;  // along x just outside the grown box
+  x << 0.9 * R, 0.0, 0.9 * R,       // (0.9 R, 0.9 R): 1.27 R from the axis, outside the cylinder
+      0.2, 0.0, 0.9 * R,            //
+      0.9 * R, 0.0, -0.7 * R,       // radius 1.14 R
+      0.2, 0.0, 1.001 * R + 1e-6;
+  v.col(0).setConstant(1.0);
+  const MatX3 before = x;
+  EXPECT_EQ(collide_pole(p, x0, x, v, VecX::Ones(4)), 2);
+  EXPECT_NE(x.row(0), before.row(0));  // stopped where it entered the side
+  EXPECT_NE(x.row(1), before.row(1));
+  EXPECT_EQ(x.row(2), before.row(2));
+  EXPECT_EQ(x.row(3), before.row(3));
+  for (Index i = 0; i < 4; ++i) EXPECT_FALSE(inside_pole(p, x.row(i).transpose())) << i;
+}
+
 TEST(Pole, NoVertexInsideAfterRandomFastMotion) {
   const PoleParams p = pole();
   std::mt19937 rng(8);
