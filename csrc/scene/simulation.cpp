@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstring>
 #include <exception>
 #include <limits>
 #include <sstream>
@@ -320,7 +321,20 @@ void Simulation::check_inside_grid() const {
 // before's.
 bool Simulation::pipelined() const { return beside_ != nullptr; }
 
-void Simulation::update_normals() { compute_vertex_normals(topo_, x_, n_); }
+void Simulation::update_normals() {
+  compute_vertex_normals(topo_, x_, n_);
+  x_normals_ = x_;
+}
+
+// n_ of x_, computed only when x_ differs in any bit from the positions n_ was computed of: the
+// step's end computed them, and a step's first piece starts where the last step ended unless
+// the flag was written or rolled back since.
+void Simulation::update_normals_if_moved() {
+  const auto bytes = std::size_t(x_.size()) * sizeof(double);
+  if (x_normals_.rows() == x_.rows() && std::memcmp(x_normals_.data(), x_.data(), bytes) == 0)
+    return;
+  update_normals();
+}
 
 // The stages any flag runs (a flag that starts moving its pins adds "pins" to its host's list).
 void Simulation::name_stages() {
@@ -743,7 +757,7 @@ void Simulation::stage_flap() {
   if (!built(Stage::kFlap)) return;
   StageClock::Scope t(&clock_, Stage::kFlap);
   if (!pole_air_sampled_) u_p_ = sample_pole_air_speed();  // else sample_air_ahead did
-  compute_vertex_normals(topo_, x_, n_);
+  update_normals_if_moved();
   if (scene_.flapping.mode == FlapMode::kDisplace)
     flap_.drift(topo_, n_, u_p_, t_piece_ + h_, h_, flap_drift_);
   else

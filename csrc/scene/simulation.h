@@ -202,7 +202,8 @@ class Simulation {
   void step_pieces();
   void hand_reactions();  // every flag's stage_coupling: its drag's reaction for the air
   void finish_step();
-  void undo_step();     // back to the start of the step, normals too
+  void undo_step();                // back to the start of the step, normals too
+  void update_normals_if_moved();  // update_normals unless n_ is of x_ already
   struct Implausible {  // a piece that failed a plausibility test; empty cause: it passed
     std::string cause;
     long vertex = -1;
@@ -268,6 +269,7 @@ class Simulation {
   IntegratorScratch scratch_;
   IntegratorStats stats_;
   MatX3 x_, v_, n_, u_;         // (N x 3) positions, velocities, normals, air at masses
+  MatX3 x_normals_;             // (N x 3) the positions n_ was computed of
   MatX3 x_start_, v_start_;     // (N x 3) state at the start of the step (rollback)
   MatX3 x_piece_;               // (N x 3) positions at the start of the piece (swept collisions)
   double h_ = 0, t_piece_ = 0;  // s, length and start time of the piece being stepped
