@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <array>
 #include <limits>
-#include <tuple>
 #include <utility>
 
 #include "common/parallel.h"
@@ -236,10 +235,27 @@ double stable_step_estimate(const ClothTopology& topo, const DragParams& drag, d
   return 2.0 / (gam + std::sqrt(gam * gam + lam));
 }
 
-ClothEnergy cloth_energy(const ClothTopology& topo, const Vec3& g, const MatX3& x, const MatX3& v) {
+namespace {
+// The largest strain so far and its first spring (-1: none above 0). A NaN strain wins over any
+// number (its first spring).
+struct StrainMax {
+  double m = 0;
+  Index w = -1;
+  void take(double e, Index s) {
+    if (!(e <= m) && !std::isnan(m)) {
+      m = e;
+      w = s;
+    }
+  }
+};
+
+// cloth_energy, and into *strain (when not null) max_strain of the same lengths.
+ClothEnergy energy_pass(const ClothTopology& topo, const Vec3& g, const MatX3& x, const MatX3& v,
+                        StrainMax* strain) {
   const Index n = topo.num_vertices(), S = topo.num_springs();
   const Chunks cv = chunks_of(n), cs = chunks_of(S);
-  std::array<ClothEnergy, 2 * kMaxReduceChunks> part;  // vertex chunks, then spring chunks
+  std::array<ClothEnergy, 2 * kMaxReduceChunks> part;   // vertex chunks, then spring chunks
+  std::array<StrainMax, kMaxReduceChunks> part_strain;  // spring chunks
   run_chunks(n + S >= kParallelGrain, cv.count + cs.count, [&](Index c) {
     ClothEnergy e;
     if (c < cv.count) {
@@ -249,10 +265,14 @@ ClothEnergy cloth_energy(const ClothTopology& topo, const Vec3& g, const MatX3& 
       }
     } else {
       const Index s0 = (c - cv.count) * cs.size;
+      StrainMax sm;
       for (Index s = s0, end = std::min(S, s0 + cs.size); s < end; ++s) {
+        const double L = topo.rest_length[s];
         const double l = (x.row(topo.springs(s, 1)) - x.row(topo.springs(s, 0))).norm();
-        e.spring += 0.5 * topo.stiffness[s] * (l - topo.rest_length[s]) * (l - topo.rest_length[s]);
+        e.spring += 0.5 * topo.stiffness[s] * (l - L) * (l - L);
+        if (strain && L > 0) sm.take((l - L) / L, s);
       }
+      part_strain[std::size_t(c - cv.count)] = sm;
     }
     part[std::size_t(c)] = e;
   });
@@ -262,43 +282,55 @@ ClothEnergy cloth_energy(const ClothTopology& topo, const Vec3& g, const MatX3& 
     e.gravity += part[std::size_t(c)].gravity;
   }
   for (Index c = cv.count; c < cv.count + cs.count; ++c) e.spring += part[std::size_t(c)].spring;
+  if (strain) {
+    *strain = {};
+    for (Index c = 0; c < cs.count; ++c) {
+      const StrainMax& p = part_strain[std::size_t(c)];
+      if (p.w >= 0) strain->take(p.m, p.w);
+    }
+  }
+  return e;
+}
+}  // namespace
+
+ClothEnergy cloth_energy(const ClothTopology& topo, const Vec3& g, const MatX3& x, const MatX3& v) {
+  return energy_pass(topo, g, x, v, nullptr);
+}
+
+ClothEnergy cloth_energy_and_max_strain(const ClothTopology& topo, const Vec3& g, const MatX3& x,
+                                        const MatX3& v, double& strain, Index* worst) {
+  StrainMax sm;
+  const ClothEnergy e = energy_pass(topo, g, x, v, &sm);
+  strain = sm.m;
+  if (worst) *worst = sm.w;
   return e;
 }
 
 double total_energy(const ClothTopology& topo, const Vec3& g, const MatX3& x, const MatX3& v) {
-  const ClothEnergy e = cloth_energy(topo, g, x, v);
-  return e.kinetic + e.gravity + e.spring;
+  return cloth_energy(topo, g, x, v).total();
 }
 
 double max_strain(const ClothTopology& topo, const MatX3& x, Index* worst) {
   const Index S = topo.num_springs();
   const Chunks cs = chunks_of(S);
-  // Each chunk's largest strain and its first spring (-1: none above 0), then the first chunk
-  // with the largest: the first spring with the largest strain, as one loop finds it. A NaN
-  // strain wins over any number (first NaN).
-  std::array<std::pair<double, Index>, kMaxReduceChunks> part;
-  auto above = [](double e, double m) { return !(e <= m) && !std::isnan(m); };
+  // Each chunk's largest strain and its first spring, then the first chunk with the largest: the
+  // first spring with the largest strain, as one loop finds it.
+  std::array<StrainMax, kMaxReduceChunks> part;
   run_chunks(S >= kParallelGrain, cs.count, [&](Index c) {
-    double m = 0;
-    Index w = -1;
+    StrainMax sm;
     for (Index s = c * cs.size, end = std::min(S, s + cs.size); s < end; ++s) {
       const double L = topo.rest_length[s];
       if (L <= 0) continue;
-      const double e = ((x.row(topo.springs(s, 1)) - x.row(topo.springs(s, 0))).norm() - L) / L;
-      if (above(e, m)) {
-        m = e;
-        w = s;
-      }
+      const double l = (x.row(topo.springs(s, 1)) - x.row(topo.springs(s, 0))).norm();
+      sm.take((l - L) / L, s);
     }
-    part[std::size_t(c)] = {m, w};
+    part[std::size_t(c)] = sm;
   });
-  double m = 0;
-  Index w = -1;
+  StrainMax sm;
   for (Index c = 0; c < cs.count; ++c)
-    if (part[std::size_t(c)].second >= 0 && above(part[std::size_t(c)].first, m))
-      std::tie(m, w) = part[std::size_t(c)];
-  if (worst) *worst = w;
-  return m;
+    if (part[std::size_t(c)].w >= 0) sm.take(part[std::size_t(c)].m, part[std::size_t(c)].w);
+  if (worst) *worst = sm.w;
+  return sm.m;
 }
 
 }  // namespace flagsim

@@ -241,5 +241,25 @@ TEST(Energy, MaxStrainFindsTheFirstLargestAsOneLoopOnAnyThreadCount) {
   EXPECT_EQ(worst, first);
 }
 
+TEST(Energy, OnePassGivesTheBitsOfEnergyAndMaxStrainApart) {
+  const FineFlag f = fine_flag();
+  const Vec3 g(0, -9.81, 0);
+  for (int threads : {1, 2}) {
+    const int before = num_threads();
+    set_num_threads(threads);
+    double strain = -1;
+    Index worst = -2, worst_apart = -3;
+    const ClothEnergy e = cloth_energy_and_max_strain(f.t, g, f.x, f.v, strain, &worst);
+    const ClothEnergy apart = cloth_energy(f.t, g, f.x, f.v);
+    EXPECT_EQ(e.kinetic, apart.kinetic);
+    EXPECT_EQ(e.gravity, apart.gravity);
+    EXPECT_EQ(e.spring, apart.spring);
+    EXPECT_EQ(strain, max_strain(f.t, f.x, &worst_apart));
+    EXPECT_EQ(worst, worst_apart);
+    EXPECT_EQ(e.total(), total_energy(f.t, g, f.x, f.v));
+    set_num_threads(before);
+  }
+}
+
 }  // namespace
 }  // namespace flagsim
