@@ -280,6 +280,46 @@ void bind_fan(py::module_& m) {
       .def("validate", &FanParams::validate, py::arg("prefix") = "");
 }
 
+/// The ObstacleParams fields (shape, center, half_size, radius, axis, length, vertices, faces,
+/// slip) as validated properties of S (ObstacleParams or a struct deriving from it): errors name
+/// "<section>.<field>" and a new value is checked by S's own validate.
+template <class S, class... Bases>
+void def_obstacle_fields_of(py::class_<S, Bases...>& cls, const std::string& section) {
+  def_field<S, ObstacleShape>(cls, "shape", &ObstacleParams::shape, section,
+                              "'box' | 'sphere' | 'cylinder' | 'capsule' | 'mesh'");
+  def_field<S, Vec3>(cls, "center", &ObstacleParams::center, section, "m");
+  def_field<S, Vec3>(cls, "half_size", &ObstacleParams::half_size, section, "m, box half extents");
+  def_field<S, double>(cls, "radius", &ObstacleParams::radius, section,
+                       "m, sphere or cylinder radius");
+  def_field<S, Vec3>(cls, "axis", &ObstacleParams::axis, section,
+                     "cylinder axis, normalised on use");
+  def_field<S, double>(cls, "length", &ObstacleParams::length, section,
+                       "m, cylinder length between its caps, capsule segment");
+  cls.def_property(
+      "vertices", [](const S& o) { return MatX3(o.vertices); },
+      [section](S& o, const py::object& value) {
+        S copy = o;
+        copy.vertices = mesh_array<double>(section + ".vertices", value);
+        copy.validate(section);
+        o = copy;
+      },
+      "(M, 3) m, the mesh's points (shape 'mesh'); a copy: assign to change");
+  cls.def_property(
+      "faces", [](const S& o) { return MatX3i(o.faces); },
+      [section](S& o, const py::object& value) {
+        S copy = o;
+        copy.faces = mesh_array<int32_t>(section + ".faces", value);
+        copy.validate(section);
+        o = copy;
+      },
+      "(F, 3) indices into vertices, one closed triangle mesh (shape 'mesh'); a copy");
+  def_field<S, Slip>(cls, "slip", &ObstacleParams::slip, section, "'no_slip' | 'free_slip'");
+}
+
+void def_obstacle_fields(py::class_<SolidParams, ObstacleParams>& cls, const std::string& section) {
+  def_obstacle_fields_of(cls, section);
+}
+
 void bind_obstacle(py::module_& m) {
   py::class_<ObstacleParams> obs(
       m, "ObstacleParams",
@@ -304,36 +344,7 @@ void bind_obstacle(py::module_& m) {
           py::arg("half_size") = py::make_tuple(0.1, 0.1, 0.1), py::arg("radius") = 0.1,
           py::arg("axis") = py::make_tuple(0.0, 0.0, 1.0), py::arg("length") = 1.0,
           py::arg("slip") = "no_slip");
-  def_field<ObstacleParams, ObstacleShape>(obs, "shape", &ObstacleParams::shape, "obstacle",
-                                           "'box' | 'sphere' | 'cylinder' | 'capsule' | 'mesh'");
-  def_field<ObstacleParams, Vec3>(obs, "center", &ObstacleParams::center, "obstacle", "m");
-  def_field<ObstacleParams, Vec3>(obs, "half_size", &ObstacleParams::half_size, "obstacle",
-                                  "m, box half extents");
-  def_field<ObstacleParams, double>(obs, "radius", &ObstacleParams::radius, "obstacle",
-                                    "m, sphere or cylinder radius");
-  def_field<ObstacleParams, Vec3>(obs, "axis", &ObstacleParams::axis, "obstacle",
-                                  "cylinder axis, normalised on use");
-  def_field<ObstacleParams, double>(obs, "length", &ObstacleParams::length, "obstacle",
-                                    "m, cylinder length between its caps, capsule segment");
-  obs.def_property(
-      "vertices", [](const ObstacleParams& o) { return MatX3(o.vertices); },
-      [](ObstacleParams& o, const py::object& value) {
-        ObstacleParams copy = o;
-        copy.vertices = mesh_array<double>("obstacle.vertices", value);
-        copy.validate("obstacle");
-        o = copy;
-      },
-      "(M, 3) m, the mesh's points (shape 'mesh'); a copy: assign to change");
-  obs.def_property(
-      "faces", [](const ObstacleParams& o) { return MatX3i(o.faces); },
-      [](ObstacleParams& o, const py::object& value) {
-        ObstacleParams copy = o;
-        copy.faces = mesh_array<int32_t>("obstacle.faces", value);
-        copy.validate("obstacle");
-        o = copy;
-      },
-      "(F, 3) indices into vertices, one closed triangle mesh (shape 'mesh'); a copy");
-  def_field(obs, "slip", &ObstacleParams::slip, "obstacle", "'no_slip' | 'free_slip'");
+  def_obstacle_fields_of(obs, "obstacle");
   obs.def("validate", &ObstacleParams::validate, py::arg("prefix") = "")
       .def(
           "contains",

@@ -80,6 +80,7 @@ surface, Coulomb `friction`), at rest or keyframed (motion, cloth only).)doc");
   solid.def(
       py::init([](const py::kwargs& kw) { return from_fields<SolidParams>(kw, "SolidParams"); }),
       "SolidParams(**fields), e.g. SolidParams(shape='sphere', center=(0, 0, 0), radius=0.1)");
+  def_obstacle_fields(solid, "solid");
   def_field(solid, "air", &SolidParams::air, "solid", "a solid of the air grid (static)");
   def_field(solid, "cloth", &SolidParams::cloth, "solid", "the flag collides with it");
   def_field(solid, "thickness", &SolidParams::thickness, "solid",

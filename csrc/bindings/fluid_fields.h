@@ -9,8 +9,14 @@
 
 namespace flagsim {
 struct AirParams;
-}
+struct ObstacleParams;
+struct SolidParams;
+}  // namespace flagsim
 
 namespace flagsim::bindings {
 void def_fluid_fields(pybind11::class_<AirParams>& cls, const std::string& section);
+/// The ObstacleParams fields on SolidParams, so that their errors name "<section>.<field>" and a
+/// new value is checked by SolidParams::validate (the inherited ones say "obstacle").
+void def_obstacle_fields(pybind11::class_<SolidParams, ObstacleParams>& cls,
+                         const std::string& section);
 }  // namespace flagsim::bindings

@@ -165,7 +165,10 @@ double damping_work(const ClothTopology& topo, const MatX3& a, const MatX3& b, d
 }
 
 // Work of the pins on pinned vertices that move with velocity v over h: they hold the vertex
-// against the force f on it, so they do -f . h v, J. Zero for pins at rest.
+// against the force f on it, so they do -f . h v, J. Zero for pins at rest. f must be the force
+// the integrator applied (explicit: at the substep's start; implicit: pinned_forces_applied),
+// the one whose reaction the free vertices felt: then the remainder is the same in a frame that
+// moves with the pins (docs/design.md "Moving pins and Galilean invariance").
 double pin_work(const ClothTopology& topo, const MatX3& f, const MatX3& v, double h) {
   double w = 0;
   for (Index i = 0; i < topo.num_vertices(); ++i)
@@ -295,7 +298,7 @@ IntegrateStatus explicit_step(const ClothTopology& topo, const ForceSet& fs,
       StageClock::Scope timer(t, Stage::kStrainLimit);
       work.strain_limit +=
           limit_strain_work(topo, gravity_of(fs), ip.strain_limit, ip.strain_limit_iterations, x, v,
-                            fs.contacts, fs.contact_offset);
+                            fs.contacts, fs.contact_offset, &work.pins, fs.contact_speed);
     }
     ++n;
     done = (h - done <= hs) ? h : done + hs;
@@ -446,8 +449,10 @@ bool ssor_cg(const ClothTopology& topo, const ClothSystem& A, const IntegratorPa
 // fd (N x 3): the drag at the start of a piece becomes the drag the implicit solve applied,
 // fd + (d fd / d v) dv. A holds M + h D_drag (A.D) and h Jw / 9 (A.J), see
 // assemble_implicit_system, so D_drag = (A.D - m I) / h.
+// The drag change on a pinned row (its dv is 0: only "triangle" drag's blocks reach it) goes into
+// pinned_f's row too (pinned_forces_applied).
 void implicit_drag_applied(const ClothTopology& topo, const ClothSystem& A, double h,
-                           const MatX3& dv, MatX3& fd) {
+                           const MatX3& dv, MatX3& fd, MatX3& pinned_f) {
   for (Index i = 0; i < topo.num_vertices(); ++i) {
     const Vec3 dvi = dv.row(i);
     Vec3 df = -(A.D[i] * dvi - topo.mass[i] * dvi) / h;
@@ -459,6 +464,24 @@ void implicit_drag_applied(const ClothTopology& topo, const ClothSystem& A, doub
         df -= A.J[tr] * sum / h;
       }
     fd.row(i) += df.transpose();
+    if (topo.inv_mass[i] == 0.0) pinned_f.row(i) += df.transpose();
+  }
+}
+
+// The force the solve applied to each pinned vertex, Baraff-Witkin eq. 16's f0 + K dx + D dv
+// there (dx = h v' with the pin's own dv = 0), into f's pinned rows, which hold f0 + h K w from
+// when b was formed: what reaches it through its springs, (h K_s + k_d I) dv_j = B_s dv_j / h.
+// (The drag's change: implicit_drag_applied.) The free vertices felt its reaction, so the pins'
+// work is this force times their velocity; f0 alone left U . h (K dx + D dv) in the remainder of
+// a flag whose pins move at U (docs/design.md "Moving pins and Galilean invariance").
+void pinned_forces_applied(const ClothTopology& topo, const ClothSystem& A, double h,
+                           const MatX3& dv, MatX3& f) {
+  for (Index i = 0; i < topo.num_vertices(); ++i) {
+    if (topo.inv_mass[i] != 0.0) continue;
+    Vec3 sum = Vec3::Zero();
+    for (int32_t k = topo.adj_offset[i]; k < topo.adj_offset[i + 1]; ++k)
+      sum += A.B[topo.adj_spring[k]].apply(Vec3(dv.row(topo.adj_other[k])));
+    f.row(i) += (sum / h).transpose();
   }
 }
 
@@ -473,8 +496,11 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
   compute_forces(topo, fs, x, v, u, s.f, s.fd, t);
   if (fs.drift) s.p = v + *fs.drift;  // the positions move with v + drift: K sees both
   assemble_implicit_system(topo, fs, h, x, v, u, A, s.tmp, fs.drift ? &s.p : nullptr);
-  // b = h (f0 + h K v0)
+  // b = h (f0 + h K v0); f's pinned rows become f0 + h K v0 too, the start of the force the
+  // solve applies to them (pinned_forces_applied adds the rest once dv is known).
   s.b = h * (s.f + h * s.tmp);
+  for (Index i = 0; i < N; ++i)
+    if (topo.inv_mass[i] == 0.0) s.f.row(i) += h * s.tmp.row(i);
   filter_pinned(topo, s.b);
   // Held contacts: dv = S dv + z (prescribe_held), r = S (b - A dv), and every product and
   // preconditioned residual filtered by S (Baraff-Witkin §5.3).
@@ -595,7 +621,8 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     // The linearised end-of-step forces over the displacement h v'; damping is linear in v, so
     // the applied damping is exactly k_d (v'_j - v'_i).
     StageClock::Scope timer(t, Stage::kCheck);
-    if (fs.drag) implicit_drag_applied(topo, A, h, s.dv, s.fd);
+    if (fs.drag) implicit_drag_applied(topo, A, h, s.dv, s.fd, s.f);
+    pinned_forces_applied(topo, A, h, s.dv, s.f);
     if (fs.drift) {
       for (Index i = 0; i < N; ++i) s.q.row(i) = (topo.mass[i] / h) * s.dv.row(i);  // applied f
       work.drift += drift_work(topo, fs, *drift, s.q, v, s.fd, h);
@@ -606,7 +633,7 @@ IntegrateStatus implicit_once(const ClothTopology& topo, const ForceSet& fs,
     StageClock::Scope timer(t, Stage::kStrainLimit);
     work.strain_limit +=
         limit_strain_work(topo, gravity_of(fs), ip.strain_limit, ip.strain_limit_iterations, x, v,
-                          fs.contacts, fs.contact_offset);
+                          fs.contacts, fs.contact_offset, &work.pins, fs.contact_speed);
   }
   return IntegrateStatus::kOk;
 }

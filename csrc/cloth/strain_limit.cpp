@@ -19,7 +19,7 @@ struct Surface {
     const Vec3 n = row(*normal, i);
     const double an = a.dot(n);
     if (!(an < 0)) return a;
-    const double gap = x.dot(n) - (*offset)[i];
+    const double gap = offset ? x.dot(n) - (*offset)[i] : x.dot(n);
     const double keep = velocity ? (gap > 0 ? an : 0.0) : std::max(an, std::min(0.0, -gap));
     return a + (keep - an) * n;
   }
@@ -28,8 +28,20 @@ struct Surface {
 }  // namespace
 
 void limit_strain(const ClothTopology& topo, double limit, int iterations, MatX3& x, MatX3& v,
-                  const MatX3* surface, const VecX* offset) {
+                  const MatX3* surface, const VecX* offset, double* pin_work, const VecX* speed) {
   const Surface along{surface, offset};
+  // The work of pin a's impulse m_i dv_i on vertex i (a pin moves with v_a; its own v is kept).
+  double pins = 0;
+  const auto from_pin = [&](Index i, Index a, const Vec3& dv) {
+    if (topo.inv_mass[a] == 0.0) pins += topo.mass[i] * dv.dot(Vec3(v.row(a)));
+  };
+  // A velocity change a of vertex i as its plane lets it (along); the plane's impulse m (dv - a)
+  // does the work m (dv - a) . n w when it moves (speed w along n), booked with the pins'.
+  const auto change = [&](Index i, const Vec3& a) {
+    const Vec3 dv = along(i, row(x, i), a, true);
+    if (surface && speed) pins += topo.mass[i] * (dv - a).dot(Vec3(surface->row(i))) * (*speed)[i];
+    return dv;
+  };
   // Velocities: the limited pair loses the relative velocity along it that still stretches it
   // (an inelastic, momentum-conserving impulse, as Bridson, Fedkiw, Anderson 2002 §7 limit
   // strain rates), so a correction never adds kinetic energy. Turning the correction itself into
@@ -48,7 +60,11 @@ void limit_strain(const ClothTopology& topo, double limit, int iterations, MatX3
     x.row(i) += along(i, row(x, i), d * (lmax / l - 1.0)).transpose();
     const Vec3 n = d / l;
     const double vr = (v.row(i) - v.row(a)).dot(n.transpose());  // the pin does not move for it
-    if (vr > 0) v.row(i) += along(i, row(x, i), -vr * n, true).transpose();
+    if (vr > 0) {
+      const Vec3 dv = change(i, -vr * n);
+      v.row(i) += dv.transpose();
+      from_pin(i, a, dv);
+    }
   };
   const Index N = topo.num_vertices();
   for (Index i = 0; i < N; ++i) {
@@ -75,12 +91,16 @@ void limit_strain(const ClothTopology& topo, double limit, int iterations, MatX3
       const double vr = (v.row(b) - v.row(a)).dot(n.transpose());
       if (vr > 0) {
         const Vec3 j = (vr / (wa + wb)) * n;  // impulse per unit inverse mass
-        v.row(a) += along(a, row(x, a), wa * j, true).transpose();
-        v.row(b) += along(b, row(x, b), -wb * j, true).transpose();
+        const Vec3 dva = change(a, wa * j), dvb = change(b, -wb * j);
+        v.row(a) += dva.transpose();
+        v.row(b) += dvb.transpose();
+        from_pin(a, b, dva);
+        from_pin(b, a, dvb);
       }
     }
     if (!violated) break;
   }
+  if (pin_work) *pin_work += pins;
 }
 
 bool strain_limit_violated(const ClothTopology& topo, double limit, const MatX3& x) {
@@ -102,11 +122,14 @@ bool strain_limit_violated(const ClothTopology& topo, double limit, const MatX3&
 }
 
 double limit_strain_work(const ClothTopology& topo, const Vec3& g, double limit, int iterations,
-                         MatX3& x, MatX3& v, const MatX3* surface, const VecX* offset) {
+                         MatX3& x, MatX3& v, const MatX3* surface, const VecX* offset,
+                         double* pin_work, const VecX* speed) {
   if (!strain_limit_violated(topo, limit, x)) return 0.0;
   const double before = total_energy(topo, g, x, v);
-  limit_strain(topo, limit, iterations, x, v, surface, offset);
-  return total_energy(topo, g, x, v) - before;
+  double pins = 0;
+  limit_strain(topo, limit, iterations, x, v, surface, offset, &pins, speed);
+  if (pin_work) *pin_work += pins;
+  return total_energy(topo, g, x, v) - before - (pin_work ? pins : 0.0);
 }
 
 }  // namespace flagsim

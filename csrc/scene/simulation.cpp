@@ -767,7 +767,7 @@ void Simulation::stage_flap() {
 double Simulation::limit_cloth_strain(MatX3& x, MatX3& v) {
   return limit_strain_work(topo_, scene_.gravity, scene_.integrator.strain_limit,
                            scene_.integrator.strain_limit_iterations, x, v, forces_.contacts,
-                           forces_.contact_offset);
+                           forces_.contact_offset, &ledger_.pins, forces_.contact_speed);
 }
 
 // Each projection's entry in the ledger is the change of E it made: the pole's less the strain
@@ -777,7 +777,7 @@ double Simulation::limit_cloth_strain(MatX3& x, MatX3& v) {
 void Simulation::stage_pole() {
   constexpr int kPoleStrainRounds = 10;
   if (!built(Stage::kPole)) return;
-  const double strain_before = ledger_.strain_limit;
+  const double strain_before = ledger_.strain_limit, pins_before = ledger_.pins;
   Index moved;
   {
     StageClock::Scope t(&clock_, Stage::kPole);
@@ -794,7 +794,9 @@ void Simulation::stage_pole() {
     moved = collide_pole(scene_.pole, x_piece_, x_, v_, topo_.inv_mass, nullptr,
                          pole_moves_ ? &pole_motion_ : nullptr);
   }
-  if (changed) book_energy_change(ledger_.pole, ledger_.strain_limit - strain_before);
+  if (changed)
+    book_energy_change(ledger_.pole,
+                       ledger_.strain_limit - strain_before + (ledger_.pins - pins_before));
 }
 
 // The pinned vertices' velocity over the piece: the secant of their prescribed path, so that the

@@ -252,7 +252,8 @@ class Simulation {
   void stage_flap_visual();
   // Helpers of the stages.
   double sample_pole_air_speed();
-  double limit_cloth_strain(MatX3& x, MatX3& v);  // returns the change of E it made, J
+  // The change of E it made less the pins' share, J (that share booked to ledger_.pins).
+  double limit_cloth_strain(MatX3& x, MatX3& v);
   void book_integrator_work();
   void book_energy_change(double& entry, double booked_elsewhere);
   void book_energy(double& entry, double booked_elsewhere, double e);

@@ -205,3 +205,18 @@ TEST(StrainLimit, VerticesOnAContactPlaneSlideAlongItAndStayOut) {
       EXPECT_GE(f.v(i, 2), 0.0) << i;
   }
 }
+
+// Planes with no offsets are planes through the origin (x . n >= 0): the same moves, bit for bit,
+// as zero offsets given explicitly (the missing offsets used to be read through a null pointer).
+TEST(StrainLimit, ContactPlanesWithoutOffsetsPassThroughTheOrigin) {
+  Stretched a(Pin::kPole), b(Pin::kPole);
+  const Index N = a.t.num_vertices();
+  MatX3 normal = MatX3::Zero(N, 3);
+  for (Index i = 0; i < N; ++i) normal(i, 2) = a.t.inv_mass[i] > 0 && a.x(i, 2) >= 0 ? 1.0 : 0.0;
+  ASSERT_GT(normal.col(2).sum(), 0.0);
+  const VecX zero = VecX::Zero(N);
+  limit_strain(a.t, 0.1, 200, a.x, a.v, &normal, &zero);
+  limit_strain(b.t, 0.1, 200, b.x, b.v, &normal);
+  EXPECT_TRUE(a.x == b.x && a.v == b.v);
+  EXPECT_LE(worst_ratio(b.t, b.x), 1 + 0.1 + kStrainLimitSlack);
+}
