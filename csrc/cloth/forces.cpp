@@ -3,13 +3,30 @@
 #include <cmath>
 
 #include <algorithm>
+#include <array>
 #include <limits>
+#include <utility>
+
 #include "common/parallel.h"
 
 namespace flagsim {
 
 namespace {
 constexpr double kTinyLength = 1e-12;  // m; below this a spring has no direction
+
+// The energy sums and the largest strain run over fixed chunks of at least kItemsPerReduceChunk
+// vertices or springs (at most kMaxReduceChunks of each), each chunk's partial result combined
+// in chunk order afterwards: the bits depend on the mesh only, never on the thread count or on
+// which thread ran a chunk, and a SideBySide helper with nothing left of its own takes chunks
+// (run_chunks). A mesh of one chunk sums as one loop does.
+constexpr Index kItemsPerReduceChunk = 1024, kMaxReduceChunks = 64;
+struct Chunks {
+  Index size, count;  // items per chunk (the last may hold fewer), chunks
+};
+inline Chunks chunks_of(Index n) {
+  const Index size = std::max(kItemsPerReduceChunk, (n + kMaxReduceChunks - 1) / kMaxReduceChunks);
+  return {size, (n + size - 1) / size};
+}
 
 // Spring force on the first vertex, k (l - L) d/l (eq. 4). A spring of zero rest length is a
 // linear spring k (x_j - x_i), defined even when both ends coincide.
@@ -218,38 +235,102 @@ double stable_step_estimate(const ClothTopology& topo, const DragParams& drag, d
   return 2.0 / (gam + std::sqrt(gam * gam + lam));
 }
 
-ClothEnergy cloth_energy(const ClothTopology& topo, const Vec3& g, const MatX3& x, const MatX3& v) {
-  ClothEnergy e;
-  for (Index i = 0; i < topo.num_vertices(); ++i) {
-    e.kinetic += 0.5 * topo.mass[i] * v.row(i).squaredNorm();
-    e.gravity -= topo.mass[i] * g.dot(Vec3(x.row(i)));
-  }
-  for (Index s = 0; s < topo.num_springs(); ++s) {
-    const double l = (x.row(topo.springs(s, 1)) - x.row(topo.springs(s, 0))).norm();
-    e.spring += 0.5 * topo.stiffness[s] * (l - topo.rest_length[s]) * (l - topo.rest_length[s]);
-  }
-  return e;
-}
-
-double total_energy(const ClothTopology& topo, const Vec3& g, const MatX3& x, const MatX3& v) {
-  const ClothEnergy e = cloth_energy(topo, g, x, v);
-  return e.kinetic + e.gravity + e.spring;
-}
-
-double max_strain(const ClothTopology& topo, const MatX3& x, Index* worst) {
+namespace {
+// The largest strain so far and its first spring (-1: none above 0). A NaN strain wins over any
+// number (its first spring).
+struct StrainMax {
   double m = 0;
   Index w = -1;
-  for (Index s = 0; s < topo.num_springs(); ++s) {
-    const double L = topo.rest_length[s];
-    if (L <= 0) continue;
-    const double e = ((x.row(topo.springs(s, 1)) - x.row(topo.springs(s, 0))).norm() - L) / L;
-    if (!(e <= m)) {  // also catches NaN
+  void take(double e, Index s) {
+    if (!(e <= m) && !std::isnan(m)) {
       m = e;
       w = s;
     }
   }
-  if (worst) *worst = w;
-  return m;
+};
+
+// cloth_energy, and into *strain (when not null) max_strain of the same lengths.
+ClothEnergy energy_pass(const ClothTopology& topo, const Vec3& g, const MatX3& x, const MatX3& v,
+                        StrainMax* strain) {
+  const Index n = topo.num_vertices(), S = topo.num_springs();
+  const Chunks cv = chunks_of(n), cs = chunks_of(S);
+  std::array<ClothEnergy, 2 * kMaxReduceChunks> part;   // vertex chunks, then spring chunks
+  std::array<StrainMax, kMaxReduceChunks> part_strain;  // spring chunks
+  run_chunks(n + S >= kParallelGrain, cv.count + cs.count, [&](Index c) {
+    ClothEnergy e;
+    if (c < cv.count) {
+      for (Index i = c * cv.size, end = std::min(n, i + cv.size); i < end; ++i) {
+        e.kinetic += 0.5 * topo.mass[i] * v.row(i).squaredNorm();
+        e.gravity -= topo.mass[i] * g.dot(Vec3(x.row(i)));
+      }
+    } else {
+      const Index s0 = (c - cv.count) * cs.size;
+      StrainMax sm;
+      for (Index s = s0, end = std::min(S, s0 + cs.size); s < end; ++s) {
+        const double L = topo.rest_length[s];
+        const double l = (x.row(topo.springs(s, 1)) - x.row(topo.springs(s, 0))).norm();
+        e.spring += 0.5 * topo.stiffness[s] * (l - L) * (l - L);
+        if (strain && L > 0) sm.take((l - L) / L, s);
+      }
+      part_strain[std::size_t(c - cv.count)] = sm;
+    }
+    part[std::size_t(c)] = e;
+  });
+  ClothEnergy e;
+  for (Index c = 0; c < cv.count; ++c) {
+    e.kinetic += part[std::size_t(c)].kinetic;
+    e.gravity += part[std::size_t(c)].gravity;
+  }
+  for (Index c = cv.count; c < cv.count + cs.count; ++c) e.spring += part[std::size_t(c)].spring;
+  if (strain) {
+    *strain = {};
+    for (Index c = 0; c < cs.count; ++c) {
+      const StrainMax& p = part_strain[std::size_t(c)];
+      if (p.w >= 0) strain->take(p.m, p.w);
+    }
+  }
+  return e;
+}
+}  // namespace
+
+ClothEnergy cloth_energy(const ClothTopology& topo, const Vec3& g, const MatX3& x, const MatX3& v) {
+  return energy_pass(topo, g, x, v, nullptr);
+}
+
+ClothEnergy cloth_energy_and_max_strain(const ClothTopology& topo, const Vec3& g, const MatX3& x,
+                                        const MatX3& v, double& strain, Index* worst) {
+  StrainMax sm;
+  const ClothEnergy e = energy_pass(topo, g, x, v, &sm);
+  strain = sm.m;
+  if (worst) *worst = sm.w;
+  return e;
+}
+
+double total_energy(const ClothTopology& topo, const Vec3& g, const MatX3& x, const MatX3& v) {
+  return cloth_energy(topo, g, x, v).total();
+}
+
+double max_strain(const ClothTopology& topo, const MatX3& x, Index* worst) {
+  const Index S = topo.num_springs();
+  const Chunks cs = chunks_of(S);
+  // Each chunk's largest strain and its first spring, then the first chunk with the largest: the
+  // first spring with the largest strain, as one loop finds it.
+  std::array<StrainMax, kMaxReduceChunks> part;
+  run_chunks(S >= kParallelGrain, cs.count, [&](Index c) {
+    StrainMax sm;
+    for (Index s = c * cs.size, end = std::min(S, s + cs.size); s < end; ++s) {
+      const double L = topo.rest_length[s];
+      if (L <= 0) continue;
+      const double l = (x.row(topo.springs(s, 1)) - x.row(topo.springs(s, 0))).norm();
+      sm.take((l - L) / L, s);
+    }
+    part[std::size_t(c)] = sm;
+  });
+  StrainMax sm;
+  for (Index c = 0; c < cs.count; ++c)
+    if (part[std::size_t(c)].w >= 0) sm.take(part[std::size_t(c)].m, part[std::size_t(c)].w);
+  if (worst) *worst = sm.w;
+  return sm.m;
 }
 
 }  // namespace flagsim

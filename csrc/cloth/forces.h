@@ -63,16 +63,25 @@ double stable_step_estimate(const ClothTopology& topo, const DragParams& drag, d
                             bool has_drag, const MatX3& x, const MatX3& v, const MatX3& u_air);
 
 struct ClothEnergy {
-  double kinetic = 0;  ///< J
-  double gravity = 0;  ///< J, -sum m g.x
-  double spring = 0;   ///< J, sum 1/2 k (l - L)^2
+  double kinetic = 0;                                          ///< J
+  double gravity = 0;                                          ///< J, -sum m g.x
+  double spring = 0;                                           ///< J, sum 1/2 k (l - L)^2
+  double total() const { return kinetic + gravity + spring; }  ///< J
 };
+/// Each sum runs over fixed chunks of vertices or springs (the mesh sets them, never the thread
+/// count), their partial sums added in chunk order: the same bits on any thread count.
 ClothEnergy cloth_energy(const ClothTopology& topo, const Vec3& g, const MatX3& x, const MatX3& v);
 /// kinetic + gravity + spring of cloth_energy, J: the energy the ledger balances
 /// (scene/simulation.h, EnergyLedger).
 double total_energy(const ClothTopology& topo, const Vec3& g, const MatX3& x, const MatX3& v);
 
-/// Largest spring strain (l - L) / L and the spring index where it occurs (springs with L > 0).
+/// Largest spring strain (l - L) / L and the first spring index where it occurs (springs with
+/// L > 0); 0 (index -1) when none is above 0. A NaN strain is returned as NaN (its first spring).
 double max_strain(const ClothTopology& topo, const MatX3& x, Index* worst_spring = nullptr);
+/// cloth_energy(topo, g, x, v) and, into strain, max_strain(topo, x, worst_spring) of the same
+/// positions in one pass over the springs: the same bits as the two calls.
+ClothEnergy cloth_energy_and_max_strain(const ClothTopology& topo, const Vec3& g, const MatX3& x,
+                                        const MatX3& v, double& strain,
+                                        Index* worst_spring = nullptr);
 
 }  // namespace flagsim

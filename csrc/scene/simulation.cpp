@@ -937,13 +937,17 @@ void Simulation::stage_self_collision() {
                              built(Stage::kPole) && !pole_moves_ ? &scene_.pole : nullptr,
                              built(Stage::kStrainLimit) ? &strain_projector_ : nullptr);
   }
-  book_energy_change(ledger_.self_collision, 0.0);
+  // its change of E: stage_check, with the strain of the same positions
 }
 
 // entry += the change of E since energy_run_, less what other entries booked meanwhile (J).
 void Simulation::book_energy_change(double& entry, double booked_elsewhere) {
   StageClock::Scope t(&clock_, Stage::kCheck);
-  const double e = energy_now();
+  book_energy(entry, booked_elsewhere, energy_now());
+}
+
+// entry += e - energy_run_ - booked_elsewhere, with e = E now (J).
+void Simulation::book_energy(double& entry, double booked_elsewhere, double e) {
   entry += e - energy_run_ - booked_elsewhere;
   energy_run_ = e;
   x_of_e_ = x_;
@@ -1128,7 +1132,16 @@ void Simulation::integrate_failed(IntegrateStatus status) {
 Simulation::Implausible Simulation::stage_check() {
   StageClock::Scope t(&clock_, Stage::kCheck);
   check_finite();
-  Implausible bad = check_strain();
+  double strain;
+  Index worst;
+  if (built(Stage::kSelfCollision)) {  // its change of E, from the lengths the strain reads
+    const ClothEnergy e =
+        cloth_energy_and_max_strain(topo_, scene_.gravity, x_, v_, strain, &worst);
+    book_energy(ledger_.self_collision, 0.0, e.total());
+  } else {
+    strain = flagsim::max_strain(topo_, x_, &worst);
+  }
+  Implausible bad = check_strain(strain, worst);
   if (!bad.cause.empty()) return bad;
   return check_energy();
 }
@@ -1141,9 +1154,7 @@ void Simulation::check_finite() {
 }
 
 // Above integrator.max_strain: DivergenceError; above the strain limit's promise: implausible.
-Simulation::Implausible Simulation::check_strain() {
-  Index worst = -1;
-  const double e = flagsim::max_strain(topo_, x_, &worst);
+Simulation::Implausible Simulation::check_strain(double e, Index worst) {
   // the worst vertex: whichever end of the worst spring moved more in this step
   long vertex = -1;
   if (worst >= 0) {

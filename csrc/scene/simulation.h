@@ -259,9 +259,10 @@ class Simulation {
   void book_integrator_work();
   void book_energy_change(double& entry, double booked_elsewhere);
   void offer_known_energy();  // scratch_.energy_known = energy_run_ where it is still E(x_, v_)
+  void book_energy(double& entry, double booked_elsewhere, double e);
   [[noreturn]] void integrate_failed(IntegrateStatus status);
   void check_finite();
-  Implausible check_strain();
+  Implausible check_strain(double strain, Index worst_spring);  // max_strain of x_
   Implausible check_energy() const;
   double energy_now() const;  // total_energy of (x_, v_)
   Vec3 momentum() const;      // sum of m v over every mass, N s

@@ -1,10 +1,13 @@
 // Forces and their Jacobians against finite differences; topology invariants.
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <limits>
 #include <random>
 
 #include "cloth/forces.h"
 #include "cloth/topology.h"
+#include "common/parallel.h"
 
 namespace flagsim {
 namespace {
@@ -156,6 +159,106 @@ TEST(Forces, TriangleDragIsTwoSidedAndVanishesEdgeOn) {
   u.rowwise() = Vec3(0, 0, -4).transpose();
   add_drag(t, drag, 1.2, t.rest_positions, v, u, g);
   EXPECT_NEAR(g.colwise().sum().z(), -total.z(), 1e-12);
+}
+
+// A 64 x 64 flag (24k springs, many reduction chunks), moved off its rest shape.
+struct FineFlag {
+  ClothTopology t;
+  MatX3 x, v;
+};
+FineFlag fine_flag() {
+  FlagParams p;
+  p.rows = p.cols = 64;
+  FineFlag f{build_flag_topology(p), {}, {}};
+  f.x = f.t.rest_positions + random_rows(f.t.num_vertices(), 0.004, 3);
+  f.v = random_rows(f.t.num_vertices(), 2.0, 4);
+  return f;
+}
+
+// The strain of spring s, as max_strain computes it.
+double strain_of(const ClothTopology& t, const MatX3& x, Index s) {
+  const double L = t.rest_length[s];
+  return ((x.row(t.springs(s, 1)) - x.row(t.springs(s, 0))).norm() - L) / L;
+}
+
+TEST(Energy, ChunkedSumsAreTheSameOnOneAndTwoThreadsAndAgreeWithOneLoop) {
+  const FineFlag f = fine_flag();
+  const Vec3 g(0, -9.81, 0);
+  const int threads = num_threads();
+  set_num_threads(1);
+  const ClothEnergy one = cloth_energy(f.t, g, f.x, f.v);
+  set_num_threads(2);
+  const ClothEnergy two = cloth_energy(f.t, g, f.x, f.v);
+  set_num_threads(threads);
+  EXPECT_EQ(one.kinetic, two.kinetic);
+  EXPECT_EQ(one.gravity, two.gravity);
+  EXPECT_EQ(one.spring, two.spring);
+  ClothEnergy loop;  // one loop in index order: the same sums up to rounding
+  for (Index i = 0; i < f.t.num_vertices(); ++i) {
+    loop.kinetic += 0.5 * f.t.mass[i] * f.v.row(i).squaredNorm();
+    loop.gravity -= f.t.mass[i] * g.dot(Vec3(f.x.row(i)));
+  }
+  for (Index s = 0; s < f.t.num_springs(); ++s) {
+    const double dl = strain_of(f.t, f.x, s) * f.t.rest_length[s];
+    loop.spring += 0.5 * f.t.stiffness[s] * dl * dl;
+  }
+  EXPECT_NEAR(one.kinetic, loop.kinetic, 1e-13 * loop.kinetic);
+  EXPECT_NEAR(one.gravity, loop.gravity, 1e-13 * std::abs(loop.gravity));
+  EXPECT_NEAR(one.spring, loop.spring, 1e-10 * loop.spring);
+}
+
+TEST(Energy, MaxStrainFindsTheFirstLargestAsOneLoopOnAnyThreadCount) {
+  FineFlag f = fine_flag();
+  double m = 0;
+  Index w = -1;
+  for (Index s = 0; s < f.t.num_springs(); ++s) {
+    const double e = strain_of(f.t, f.x, s);
+    if (e > m) {
+      m = e;
+      w = s;
+    }
+  }
+  ASSERT_GT(w, 1024);  // not in the first chunk
+  for (int threads : {1, 2}) {
+    const int before = num_threads();
+    set_num_threads(threads);
+    Index worst = -2;
+    EXPECT_EQ(max_strain(f.t, f.x, &worst), m);
+    EXPECT_EQ(worst, w);
+    // at rest: nothing above 0
+    EXPECT_EQ(max_strain(f.t, f.t.rest_positions, &worst), 0.0);
+    EXPECT_EQ(worst, -1);
+    set_num_threads(before);
+  }
+  // a NaN position: NaN, at the first spring that reads it
+  const Index bad = f.t.num_vertices() - 5;
+  f.x(bad, 1) = std::numeric_limits<double>::quiet_NaN();
+  Index first = -1;
+  for (Index s = 0; s < f.t.num_springs() && first < 0; ++s)
+    if (f.t.springs(s, 0) == bad || f.t.springs(s, 1) == bad) first = s;
+  Index worst = -2;
+  EXPECT_TRUE(std::isnan(max_strain(f.t, f.x, &worst)));
+  EXPECT_EQ(worst, first);
+}
+
+TEST(Energy, OnePassGivesTheBitsOfEnergyAndMaxStrainApart) {
+  const FineFlag f = fine_flag();
+  const Vec3 g(0, -9.81, 0);
+  for (int threads : {1, 2}) {
+    const int before = num_threads();
+    set_num_threads(threads);
+    double strain = -1;
+    Index worst = -2, worst_apart = -3;
+    const ClothEnergy e = cloth_energy_and_max_strain(f.t, g, f.x, f.v, strain, &worst);
+    const ClothEnergy apart = cloth_energy(f.t, g, f.x, f.v);
+    EXPECT_EQ(e.kinetic, apart.kinetic);
+    EXPECT_EQ(e.gravity, apart.gravity);
+    EXPECT_EQ(e.spring, apart.spring);
+    EXPECT_EQ(strain, max_strain(f.t, f.x, &worst_apart));
+    EXPECT_EQ(worst, worst_apart);
+    EXPECT_EQ(e.total(), total_energy(f.t, g, f.x, f.v));
+    set_num_threads(before);
+  }
 }
 
 }  // namespace
