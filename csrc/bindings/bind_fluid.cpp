@@ -123,13 +123,14 @@ template <class T>
 Eigen::Matrix<T, Eigen::Dynamic, 3, Eigen::RowMajor> mesh_array(const std::string& name,
                                                                 const py::object& value) {
   const char* what = std::is_integral_v<T> ? "integers" : "numbers";
-  py::array a;
+  py::array a;  // an empty array by default (py::array() is not null), hence `read`
+  bool read = false;
   try {
     a = py::array::ensure(py::module_::import("numpy").attr("asarray")(value, "float64"));
+    read = bool(a);
   } catch (const py::error_already_set&) {
-    a = py::array();
   }
-  if (!a || (a.ndim() != 2 && !(a.ndim() == 1 && a.shape(0) == 0)) ||
+  if (!read || (a.ndim() != 2 && !(a.ndim() == 1 && a.shape(0) == 0)) ||
       (a.ndim() == 2 && a.shape(1) != 3))
     throw InvalidArgument(name + " should be an array of shape (n, 3) of " + what + ", got " +
                           py::str(py::repr(value)).cast<std::string>());
@@ -280,6 +281,22 @@ void bind_fan(py::module_& m) {
       .def("validate", &FanParams::validate, py::arg("prefix") = "");
 }
 
+/// A mesh array of S (vertices, faces) as a property: the getter returns a copy, the setter
+/// converts with mesh_array (errors name "<section>.<name>") and validates a copy of S first.
+template <class S, class M, class C, class... Bases>
+void def_mesh_field(py::class_<S, Bases...>& cls, const char* name, M C::*member,
+                    const std::string& section, const char* doc) {
+  cls.def_property(
+      name, [member](const S& o) { return M(o.*member); },
+      [member, section, name](S& o, const py::object& value) {
+        S copy = o;
+        copy.*member = mesh_array<typename M::Scalar>(section + "." + name, value);
+        copy.validate(section);
+        o = copy;
+      },
+      doc);
+}
+
 /// The ObstacleParams fields (shape, center, half_size, radius, axis, length, vertices, faces,
 /// slip) as validated properties of S (ObstacleParams or a struct deriving from it): errors name
 /// "<section>.<field>" and a new value is checked by S's own validate.
@@ -295,24 +312,10 @@ void def_obstacle_fields_of(py::class_<S, Bases...>& cls, const std::string& sec
                      "cylinder axis, normalised on use");
   def_field<S, double>(cls, "length", &ObstacleParams::length, section,
                        "m, cylinder length between its caps, capsule segment");
-  cls.def_property(
-      "vertices", [](const S& o) { return MatX3(o.vertices); },
-      [section](S& o, const py::object& value) {
-        S copy = o;
-        copy.vertices = mesh_array<double>(section + ".vertices", value);
-        copy.validate(section);
-        o = copy;
-      },
-      "(M, 3) m, the mesh's points (shape 'mesh'); a copy: assign to change");
-  cls.def_property(
-      "faces", [](const S& o) { return MatX3i(o.faces); },
-      [section](S& o, const py::object& value) {
-        S copy = o;
-        copy.faces = mesh_array<int32_t>(section + ".faces", value);
-        copy.validate(section);
-        o = copy;
-      },
-      "(F, 3) indices into vertices, one closed triangle mesh (shape 'mesh'); a copy");
+  def_mesh_field(cls, "vertices", &ObstacleParams::vertices, section,
+                 "(M, 3) m, the mesh's points (shape 'mesh'); a copy: assign to change");
+  def_mesh_field(cls, "faces", &ObstacleParams::faces, section,
+                 "(F, 3) indices into vertices, one closed triangle mesh (shape 'mesh'); a copy");
   def_field<S, Slip>(cls, "slip", &ObstacleParams::slip, section, "'no_slip' | 'free_slip'");
 }
 

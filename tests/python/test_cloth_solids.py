@@ -252,8 +252,9 @@ def test_bad_solids_name_the_parameter(tmp_path):
         solid.radius = -1.0
     with pytest.raises(ValueError, match=r"^solid\.radius should be in \(0, "):
         flagsim.SolidParams(radius=0.0)
-    with pytest.raises(ValueError, match=r"^solid\.vertices should be"):
-        solid.vertices = np.zeros((4, 2))
+    for bad in (np.zeros((4, 2)), "x", [["a", "b", "c"]]):  # text used to become an empty mesh
+        with pytest.raises(ValueError, match=r"^solid\.vertices should be an array of shape"):
+            solid.vertices = bad
     assert solid.radius == 0.1
     assert flagsim.ObstacleParams().shape == "box"  # the air's own class keeps its name
     with pytest.raises(ValueError, match=r"^obstacle\.radius should be in \(0, "):
