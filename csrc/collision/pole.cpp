@@ -134,8 +134,10 @@ double collide_point(const PoleParams& pole, const Vec3& a, Vec3& p, Vec3& v) {
 
 // collide_pole() for vertex i: the pole at rest, or moving (the vertex's path and velocity taken
 // into the pole's frame, relative to the pole's surface, and back).
+// push: if given, the vertex's velocity change times the moving surface's velocity there is
+// added to it (dv . v_surface, m/s squared: the moving pole's work on it per unit mass).
 double collide_vertex(const PoleParams& pole, const RigidMotion* motion, const MatX3& x0, MatX3& x,
-                      MatX3& v, const VecX& inv_mass, Index i) {
+                      MatX3& v, const VecX& inv_mass, Index i, double* push = nullptr) {
   if (inv_mass[i] == 0) return -1;
   if (!motion) {
     if (far_from_pole(pole, row(x0, i), row(x, i))) return -1;  // before copying the rows
@@ -152,18 +154,32 @@ double collide_vertex(const PoleParams& pole, const RigidMotion* motion, const M
   Vec3 vi = motion->to.R.transpose() * (row(v, i) - surface);
   const double moved = collide_point(pole, a, p, vi);
   if (moved < 0) return -1;
+  const Vec3 surface_now = motion->velocity_at(p), after = motion->to.R * vi + surface_now;
+  if (push) *push += (after - row(v, i)).dot(surface_now);
   x.row(i) = motion->to.apply(p).transpose();
-  v.row(i) = (motion->to.R * vi + motion->velocity_at(p)).transpose();
+  v.row(i) = after.transpose();
   return moved;
 }
 
 }  // namespace
 
 Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
-                   const VecX& inv_mass, double* max_move, const RigidMotion* motion) {
+                   const VecX& inv_mass, double* max_move, const RigidMotion* motion,
+                   const VecX* mass, double* wall_work) {
   Index moved = 0;
   double largest = 0;
   const Index n = x.rows();
+  if (motion && wall_work) {  // serial: the work's sum in vertex order, the same on any team
+    double work = 0;
+    for (Index i = 0; i < n; ++i) {
+      double push = 0;
+      const double d = collide_vertex(pole, motion, x0, x, v, inv_mass, i, &push);
+      if (d >= 0) ++moved, largest = std::max(largest, d), work += (*mass)[i] * push;
+    }
+    *wall_work += work;
+    if (max_move) *max_move = largest;
+    return moved;
+  }
   // Reductions branch in C++: an omp `if` clause would build a one-thread team (a heap
   // allocation) for every small call.
   if (use_team(n >= kParallelGrain)) {

@@ -23,8 +23,11 @@ bool inside_pole(const PoleParams& pole, const Vec3& p, double tolerance = 0.0);
 /// motion->from at x0's time and at motion->to at x's): the test runs in the pole's frame on the
 /// path from.inverse(x0) -> to.inverse(x), and the velocity's component into the surface is
 /// removed relative to the surface's own velocity there. nullptr: the pole at rest.
+/// mass, wall_work: with a moving pole, the pole's work on the vertices it stops, the sum of
+/// m dv . v_surface (J, as collide_solid's), is added to *wall_work (mass required then).
 Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
                    const VecX& inv_mass, double* max_move = nullptr,
-                   const RigidMotion* motion = nullptr);
+                   const RigidMotion* motion = nullptr, const VecX* mass = nullptr,
+                   double* wall_work = nullptr);
 
 }  // namespace flagsim

@@ -784,7 +784,7 @@ void Simulation::stage_pole() {
   {
     StageClock::Scope t(&clock_, Stage::kPole);
     moved = collide_pole(scene_.pole, x_piece_, x_, v_, topo_.inv_mass, nullptr,
-                         pole_moves_ ? &pole_motion_ : nullptr);
+                         pole_moves_ ? &pole_motion_ : nullptr, &topo_.mass, &ledger_.pins);
   }
   const bool changed = moved > 0;  // a vertex left alone keeps its position and velocity
   for (int k = 0; k < kPoleStrainRounds && moved > 0 && built(Stage::kStrainLimit); ++k) {
@@ -794,7 +794,7 @@ void Simulation::stage_pole() {
     }
     StageClock::Scope t(&clock_, Stage::kPole);
     moved = collide_pole(scene_.pole, x_piece_, x_, v_, topo_.inv_mass, nullptr,
-                         pole_moves_ ? &pole_motion_ : nullptr);
+                         pole_moves_ ? &pole_motion_ : nullptr, &topo_.mass, &ledger_.pins);
   }
   if (changed)
     book_energy_change(ledger_.pole,

@@ -112,5 +112,34 @@ TEST(Pole, NoVertexInsideAfterRandomFastMotion) {
   for (Index i = 0; i < n; ++i) EXPECT_FALSE(inside_pole(p, x.row(i).transpose())) << i;
 }
 
+// A pole moving at U into a vertex at rest stops it against its surface: the vertex leaves with
+// the surface's normal velocity U, kinetic energy m U^2 / 2, and the pole did m dv . U = m U^2 of
+// work on it (the rest is the inelastic stop), which collide_pole reports for the ledger's `pins`
+// as collide_solid does for a moving solid.
+TEST(Pole, AMovingPoleReportsItsWorkOnTheVerticesItStops) {
+  const PoleParams p = pole();
+  const double U = 2.0, h = 0.01, m = 0.3;
+  RigidMotion motion;
+  motion.h = h;
+  motion.to.t = Vec3(U * h, 0.0, 0.0);
+  MatX3 x0(2, 3), x(2, 3), v = MatX3::Zero(2, 3);
+  x0 << 0.06, 0.0, 0.0,  // 1 cm ahead of the surface: the pole's 2 cm reach it
+      -0.5, 0.0, 0.0;    // far behind: left alone
+  x = x0;
+  const VecX w = VecX::Constant(2, 1 / m), mass = VecX::Constant(2, m);
+  double work = 0;
+  EXPECT_EQ(collide_pole(p, x0, x, v, w, nullptr, &motion, &mass, &work), 1);
+  EXPECT_NEAR(v(0, 0), U, 1e-12);
+  EXPECT_NEAR(x(0, 0), U * h + p.radius, 1e-3 * p.radius);  // on the surface where it ends
+  EXPECT_NEAR(work, m * U * U, 1e-12);
+  EXPECT_GE(work, 0.5 * m * v.row(0).squaredNorm());
+  // At rest the pole does no work, and asking for it changes nothing.
+  MatX3 xs = x0, vs = MatX3::Zero(2, 3);
+  xs(0, 0) = 0.04;  // inside
+  double none = 0;
+  EXPECT_EQ(collide_pole(p, x0, xs, vs, w, nullptr, nullptr, &mass, &none), 1);
+  EXPECT_EQ(none, 0.0);
+}
+
 }  // namespace
 }  // namespace flagsim
