@@ -29,6 +29,12 @@ double EnergyLedger::unexplained_since(const EnergyLedger& b) const {
 }
 
 namespace {
+// a and b hold the same bits (and shape), so a value computed from one holds for the other.
+bool same_bits(const MatX3& a, const MatX3& b) {
+  return a.rows() == b.rows() &&
+         std::memcmp(a.data(), b.data(), sizeof(double) * std::size_t(a.size())) == 0;
+}
+
 // Valid, and small enough to build in the memory this machine has (checked before any of it is
 // allocated: a flag or grid too large fails here in one line, not in std::bad_alloc).
 Scene validated(const Scene& s) {
@@ -334,8 +340,7 @@ void Simulation::update_normals() {
 // x_ may be written from outside between steps (Python's positions view), hence the comparison
 // rather than a flag.
 void Simulation::normals_for_x() {
-  if (std::memcmp(x_of_n_.data(), x_.data(), sizeof(double) * std::size_t(x_.size())) != 0)
-    update_normals();
+  if (!same_bits(x_of_n_, x_)) update_normals();
 }
 
 // The stages any flag runs (a flag that starts moving its pins adds "pins" to its host's list).
@@ -957,11 +962,8 @@ void Simulation::book_energy(double& entry, double booked_elsewhere, double e) {
 // energy_run_ when (x_, v_) hold the bits it was computed from (and the integrator's gravity is
 // the scene's): total_energy is a function of those bits, so the integrator need not sum it again.
 void Simulation::offer_known_energy() {
-  const auto same = [](const MatX3& a, const MatX3& b) {
-    return a.size() == b.size() &&
-           std::memcmp(a.data(), b.data(), sizeof(double) * std::size_t(a.size())) == 0;
-  };
-  if (forces_.gravity && forces_.g == scene_.gravity && same(x_, x_of_e_) && same(v_, v_of_e_))
+  if (forces_.gravity && forces_.g == scene_.gravity && same_bits(x_, x_of_e_) &&
+      same_bits(v_, v_of_e_))
     scratch_.energy_known = energy_run_;
 }
 
