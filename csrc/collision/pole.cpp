@@ -109,9 +109,8 @@ bool inside_pole(const PoleParams& pole, const Vec3& p, double tolerance) {
 namespace {
 
 // One vertex from a to p (velocity v) against the pole at rest: how far it was moved, or -1 when
-// it was left alone.
+// it was left alone. (Callers skip it when far_from_pole: it would leave such a vertex alone.)
 double collide_point(const PoleParams& pole, const Vec3& a, Vec3& p, Vec3& v) {
-  if (far_from_pole(pole, a, p)) return -1;  // what the tests below would find, sooner
   Vec3 normal;
   const Vec3 end = p;
   const double t = inside_pole(pole, a) ? -1.0 : entry_time(pole, a, p, normal);
@@ -150,6 +149,7 @@ double collide_vertex(const PoleParams& pole, const RigidMotion* motion, const M
   }
   const Vec3 a = motion->from.inverse(row(x0, i));
   Vec3 p = motion->to.inverse(row(x, i));
+  if (far_from_pole(pole, a, p)) return -1;
   const Vec3 surface = motion->velocity_at(p);
   Vec3 vi = motion->to.R.transpose() * (row(v, i) - surface);
   const double moved = collide_point(pole, a, p, vi);
@@ -169,30 +169,23 @@ Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
   Index moved = 0;
   double largest = 0;
   const Index n = x.rows();
-  if (motion && wall_work) {  // serial: the work's sum in vertex order, the same on any team
-    double work = 0;
-    for (Index i = 0; i < n; ++i) {
-      double push = 0;
-      const double d = collide_vertex(pole, motion, x0, x, v, inv_mass, i, &push);
-      if (d >= 0) ++moved, largest = std::max(largest, d), work += (*mass)[i] * push;
-    }
-    *wall_work += work;
-    if (max_move) *max_move = largest;
-    return moved;
-  }
+  const bool book = motion && wall_work;  // serial then: the work summed in vertex order
   // Reductions branch in C++: an omp `if` clause would build a one-thread team (a heap
   // allocation) for every small call.
-  if (use_team(n >= kParallelGrain)) {
+  if (!book && use_team(n >= kParallelGrain)) {
 #pragma omp parallel for schedule(static) reduction(+ : moved) reduction(max : largest)
     for (Index i = 0; i < n; ++i) {
       const double d = collide_vertex(pole, motion, x0, x, v, inv_mass, i);
       if (d >= 0) ++moved, largest = std::max(largest, d);
     }
   } else {
+    double work = 0;
     for (Index i = 0; i < n; ++i) {
-      const double d = collide_vertex(pole, motion, x0, x, v, inv_mass, i);
-      if (d >= 0) ++moved, largest = std::max(largest, d);
+      double push = 0;
+      const double d = collide_vertex(pole, motion, x0, x, v, inv_mass, i, book ? &push : nullptr);
+      if (d >= 0) ++moved, largest = std::max(largest, d), work += book ? (*mass)[i] * push : 0.0;
     }
+    if (book) *wall_work += work;
   }
   if (max_move) *max_move = largest;
   return moved;
