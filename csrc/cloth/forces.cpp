@@ -249,6 +249,34 @@ struct StrainMax {
   }
 };
 
+// Springs [s0, end): the sum of 1/2 k (l - L)^2 in order (when energy) and the largest strain
+// of those with L > 0 (when strain).
+struct SpringSums {
+  double energy = 0;
+  StrainMax strain;
+};
+SpringSums spring_chunk(const ClothTopology& topo, const MatX3& x, Index s0, Index end, bool energy,
+                        bool strain) {
+  SpringSums out;
+  for (Index s = s0; s < end; ++s) {
+    const double L = topo.rest_length[s];
+    if (!energy && !(L > 0)) continue;
+    const double l = (x.row(topo.springs(s, 1)) - x.row(topo.springs(s, 0))).norm();
+    if (energy) out.energy += 0.5 * topo.stiffness[s] * (l - L) * (l - L);
+    if (strain && L > 0) out.strain.take((l - L) / L, s);
+  }
+  return out;
+}
+
+// The chunks' largest strains combined in chunk order: the first spring with the largest strain,
+// as one loop over the springs finds it.
+StrainMax first_largest(const std::array<StrainMax, kMaxReduceChunks>& part, Index count) {
+  StrainMax sm;
+  for (Index c = 0; c < count; ++c)
+    if (part[std::size_t(c)].w >= 0) sm.take(part[std::size_t(c)].m, part[std::size_t(c)].w);
+  return sm;
+}
+
 // cloth_energy, and into *strain (when not null) max_strain of the same lengths.
 ClothEnergy energy_pass(const ClothTopology& topo, const Vec3& g, const MatX3& x, const MatX3& v,
                         StrainMax* strain) {
@@ -265,14 +293,10 @@ ClothEnergy energy_pass(const ClothTopology& topo, const Vec3& g, const MatX3& x
       }
     } else {
       const Index s0 = (c - cv.count) * cs.size;
-      StrainMax sm;
-      for (Index s = s0, end = std::min(S, s0 + cs.size); s < end; ++s) {
-        const double L = topo.rest_length[s];
-        const double l = (x.row(topo.springs(s, 1)) - x.row(topo.springs(s, 0))).norm();
-        e.spring += 0.5 * topo.stiffness[s] * (l - L) * (l - L);
-        if (strain && L > 0) sm.take((l - L) / L, s);
-      }
-      part_strain[std::size_t(c - cv.count)] = sm;
+      const SpringSums sums =
+          spring_chunk(topo, x, s0, std::min(S, s0 + cs.size), true, strain != nullptr);
+      e.spring = sums.energy;
+      part_strain[std::size_t(c - cv.count)] = sums.strain;
     }
     part[std::size_t(c)] = e;
   });
@@ -282,13 +306,7 @@ ClothEnergy energy_pass(const ClothTopology& topo, const Vec3& g, const MatX3& x
     e.gravity += part[std::size_t(c)].gravity;
   }
   for (Index c = cv.count; c < cv.count + cs.count; ++c) e.spring += part[std::size_t(c)].spring;
-  if (strain) {
-    *strain = {};
-    for (Index c = 0; c < cs.count; ++c) {
-      const StrainMax& p = part_strain[std::size_t(c)];
-      if (p.w >= 0) strain->take(p.m, p.w);
-    }
-  }
+  if (strain) *strain = first_largest(part_strain, cs.count);
   return e;
 }
 }  // namespace
@@ -313,22 +331,12 @@ double total_energy(const ClothTopology& topo, const Vec3& g, const MatX3& x, co
 double max_strain(const ClothTopology& topo, const MatX3& x, Index* worst) {
   const Index S = topo.num_springs();
   const Chunks cs = chunks_of(S);
-  // Each chunk's largest strain and its first spring, then the first chunk with the largest: the
-  // first spring with the largest strain, as one loop finds it.
   std::array<StrainMax, kMaxReduceChunks> part;
   run_chunks(S >= kParallelGrain, cs.count, [&](Index c) {
-    StrainMax sm;
-    for (Index s = c * cs.size, end = std::min(S, s + cs.size); s < end; ++s) {
-      const double L = topo.rest_length[s];
-      if (L <= 0) continue;
-      const double l = (x.row(topo.springs(s, 1)) - x.row(topo.springs(s, 0))).norm();
-      sm.take((l - L) / L, s);
-    }
-    part[std::size_t(c)] = sm;
+    const Index s0 = c * cs.size;
+    part[std::size_t(c)] = spring_chunk(topo, x, s0, std::min(S, s0 + cs.size), false, true).strain;
   });
-  StrainMax sm;
-  for (Index c = 0; c < cs.count; ++c)
-    if (part[std::size_t(c)].w >= 0) sm.take(part[std::size_t(c)].m, part[std::size_t(c)].w);
+  const StrainMax sm = first_largest(part, cs.count);
   if (worst) *worst = sm.w;
   return sm.m;
 }
