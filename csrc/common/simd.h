@@ -4,8 +4,10 @@
 // (vector_bytes()). Other compilers get the kernels' scalar loops.
 //
 // A kernel is one template over the lane type, instantiated for scalars, 16-byte vectors and, in
-// a FLAGSIM_TARGET_AVX function, 32-byte vectors. AVX without FMA cannot contract a * b + c, so
-// every width does the same operations per lane and gives the same bits (tests compare widths).
+// a FLAGSIM_TARGET_AVX function, 32-byte vectors; on_widest_lanes below picks the width once and
+// also makes the row length of 16^3 and 32^3 grids a compile-time constant. AVX without FMA cannot
+// contract a * b + c, so every width does the same operations per lane and gives the same bits
+// (tests compare widths).
 #pragma once
 #include <cstring>
 #include <type_traits>
@@ -75,5 +77,79 @@ FLAGSIM_INLINE void store_lanes(T* p, const S& v) {
 /// GCC/Clang), else 16 (0 without generic vectors). force > 0 caps it until called with 0 (tests
 /// compare the widths); the default argument only reads it.
 int vector_bytes(int force = -1);
+
+/// What on_widest_lanes compiles a kernel for: lanes L (Lanes32 or Lanes16 of some type, or void:
+/// the kernel's scalar loops) of W values (1 for void), rows of N values (0: read at run time).
+template <class Lanes, int Row = 0>
+struct CompiledFor {
+  using L = Lanes;
+  static constexpr int N = Row;
+  static constexpr int W = [] {
+    if constexpr (std::is_void<Lanes>::value)
+      return 1;
+    else
+      return Lanes::W;
+  }();
+};
+
+namespace simd_detail {
+template <class K, class F, class R, class... A>
+R run(const void* f, A... a) {
+  return (*static_cast<const F*>(f))(K{}, a...);
+}
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+template <class K, class F, class R, class... A>
+FLAGSIM_TARGET_AVX R run_avx(const void* f, A... a) {
+  return (*static_cast<const F*>(f))(K{}, a...);
+}
+#endif
+}  // namespace simd_detail
+
+template <class Signature>
+struct LaneKernel;
+
+/// A kernel bound to the widest lanes this CPU has (on_widest_lanes): calling it with a... runs
+/// f(CompiledFor<L, N>{}, a...) in a function compiled for those lanes. It holds f's address, as
+/// a function_ref does: f must outlive it.
+template <class R, class... A>
+struct LaneKernel<R(A...)> {
+  R (*fn)(const void*, A...) = nullptr;
+  const void* f = nullptr;
+  FLAGSIM_INLINE R operator()(A... a) const { return fn(f, a...); }
+
+  template <class T, bool kRows, class F>
+  static LaneKernel bind(const F& f, int rows) {
+    LaneKernel k{&simd_detail::run<CompiledFor<NarrowLanes<T>>, F, R, A...>, &f};
+#ifdef FLAGSIM_HAVE_AVX_DISPATCH
+    if (vector_bytes() == 32) {
+      using L = Lanes32<T>;
+      k.fn = &simd_detail::run_avx<CompiledFor<L>, F, R, A...>;
+      if constexpr (kRows) {
+        if (rows == 16) k.fn = &simd_detail::run_avx<CompiledFor<L, 16>, F, R, A...>;
+        if (rows == 32) k.fn = &simd_detail::run_avx<CompiledFor<L, 32>, F, R, A...>;
+      }
+    }
+#else
+    (void)rows;
+#endif
+    return k;
+  }
+};
+
+/// Kernel f with the signature R(A...) after its first argument, bound once to the widest lanes
+/// of T this CPU has: L = Lanes32<T> in a FLAGSIM_TARGET_AVX function where vector_bytes() is 32,
+/// else NarrowLanes<T>. f: a generic lambda marked FLAGSIM_INLINE_LAMBDA (or a functor whose call
+/// operator is always inlined), so that it becomes AVX code by inlining, with all it calls on
+/// vectors FLAGSIM_INLINE. Given rows (the length of f's rows), N is rows where that is 16 or 32
+/// on 32-byte lanes (the 16^3 and 32^3 grids: a row's vectors unrolled, its set-up shorter),
+/// else 0; without, N is 0.
+template <class T, class Signature, class F>
+LaneKernel<Signature> on_widest_lanes(const F& f) {
+  return LaneKernel<Signature>::template bind<T, false>(f, 0);
+}
+template <class T, class Signature, class F>
+LaneKernel<Signature> on_widest_lanes(const F& f, int rows) {
+  return LaneKernel<Signature>::template bind<T, true>(f, rows);
+}
 
 }  // namespace flagsim

@@ -448,7 +448,8 @@ FLAGSIM_INLINE void copy_by_vectors(const T* s, std::size_t n, T* d) {
 // interior by vectors of S, its ghosts by scalars; then the ghost rows, which wrap along j, as
 // two blocks of G padded rows copied from the plane's own rows n1 - G.. and 0... Written out
 // because GCC turns a copy loop, however written, into a memmove call per row (at 16^3, with the
-// call's set-up, ~50 instructions for 16 values); the pragma keeps these loops as loops.
+// call's set-up, ~50 instructions for 16 values); the pragma keeps these loops as loops. It must
+// be on the function they are compiled in: hence two functions here, not on_widest_lanes.
 template <class S, class T>
 FLAGSIM_INLINE void fill_plane_rows(const T* s_plane, int n1, int n2, int p2, T* d) {
   constexpr int G = PaddedComponent<T>::kGhost;
@@ -1029,8 +1030,9 @@ FLAGSIM_INLINE bool sl_row_body(const SlRow<T>& w, int n2_) {
 /// The fast path over the n1 rows of a plane, w set for its row j = 0. Returns false if some
 /// node's departure is a cell or more away (or not finite).
 template <int C, bool D, class L, int N2, class T>
-FLAGSIM_INLINE bool sl_plane_body(SlRow<T> w, int n1, int n2, std::ptrdiff_t sy,
+FLAGSIM_INLINE bool sl_plane_body(SlRow<T> w, int n1, int n2_, std::ptrdiff_t sy,
                                   unsigned char* row_done) {
+  const int n2 = N2 > 0 ? N2 : n2_;
   bool near = true;
   for (int j = 0; j < n1; ++j) {
     w.j = j;
@@ -1045,21 +1047,6 @@ FLAGSIM_INLINE bool sl_plane_body(SlRow<T> w, int n1, int n2, std::ptrdiff_t sy,
   }
   return near;
 }
-
-template <int C, bool D, class T>
-bool sl_plane_16(const SlRow<T>& w, int n1, int n2, std::ptrdiff_t sy, unsigned char* row_done) {
-  return sl_plane_body<C, D, NarrowLanes<T>, 0>(w, n1, n2, sy, row_done);
-}
-
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-template <int C, bool D, class T>
-FLAGSIM_TARGET_AVX bool sl_plane_32(const SlRow<T>& w, int n1, int n2, std::ptrdiff_t sy,
-                                    unsigned char* row_done) {
-  if (n2 == 16) return sl_plane_body<C, D, Lanes32<T>, 16>(w, n1, n2, sy, row_done);
-  if (n2 == 32) return sl_plane_body<C, D, Lanes32<T>, 32>(w, n1, n2, sy, row_done);
-  return sl_plane_body<C, D, Lanes32<T>, 0>(w, n1, n2, sy, row_done);
-}
-#endif
 
 /// The kernels' view of row (i, j) of component C of a periodic grid from its padded copies (see
 /// GenericRow): departures within a cell of the node sample without wrapping.
@@ -1121,11 +1108,12 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, double s, T beta, T* out) {
   const std::ptrdiff_t stride[3] = {sx, sy, 1};
   const T st = T(s);
   const int n1 = p.n[1], n2 = p.n[2];
-  bool (*plane_fn)(const SlRow<T>&, int, int, std::ptrdiff_t, unsigned char*) =
-      &sl_plane_16<C, D, T>;
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-  if (vector_bytes() == 32) plane_fn = &sl_plane_32<C, D, T>;
-#endif
+  const auto plane = [n1, n2, sy](auto c, const SlRow<T>& w, unsigned char* row_done)
+                         FLAGSIM_INLINE_LAMBDA {
+                           using K = decltype(c);
+                           return sl_plane_body<C, D, typename K::L, K::N>(w, n1, n2, sy, row_done);
+                         };
+  const auto plane_fn = on_widest_lanes<T, bool(const SlRow<T>&, unsigned char*)>(plane, n2);
   for_each_plane(Shape3{{p.n[0], n1, n2}}, [&](int i) {
     const std::size_t idx0 = p.index(i, 0, 0);
     SlRow<T> w;
@@ -1147,7 +1135,7 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, double s, T beta, T* out) {
     w.j = 0;
     w.x0 = i + GridGeometry::offset(C, 0);
     unsigned char row_done[kMaxRows];  // rows of at most 4096 nodes (the resolution limit)
-    if (plane_fn(w, n1, n2, sy, row_done)) return;
+    if (plane_fn(w, row_done)) return;
     // Departures of a cell or more (or not finite) that far_sample did not take: those nodes
     // again, by the general sampler, in the rows that have them.
     for (int j = 0; j < n1; ++j) {

@@ -97,39 +97,19 @@ FLAGSIM_INLINE void divergence_plane_body(const MacGrid<T>& u, T* div, std::size
   }
 }
 
-template <class T>
-void divergence_plane_narrow(const MacGrid<T>& u, T* div, std::size_t stride, double scale, int i) {
-#ifdef FLAGSIM_HAVE_VECTORS
-  divergence_plane_body<2, 0>(u, div, stride, scale, i);
-#else
-  divergence_plane_body<1, 0>(u, div, stride, scale, i);
-#endif
-}
-
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-template <class T>
-FLAGSIM_TARGET_AVX void divergence_plane_wide(const MacGrid<T>& u, T* div, std::size_t stride,
-                                              double scale, int i) {
-  // rows of 16 and 32 cells (16^3, 32^3): the row length known, its vectors unrolled
-  if (u.geo.nz == 16) return divergence_plane_body<4, 16>(u, div, stride, scale, i);
-  if (u.geo.nz == 32) return divergence_plane_body<4, 32>(u, div, stride, scale, i);
-  divergence_plane_body<4, 0>(u, div, stride, scale, i);
-}
-#endif
-
 }  // namespace
 
 template <class T>
 void divergence(const MacGrid<T>& u, T* div, int row_stride, double scale) {
   const GridGeometry& g = u.geo;
   const std::size_t stride = row_stride > 0 ? std::size_t(row_stride) : std::size_t(g.nz);
-  auto plane_fn = &divergence_plane_narrow<T>;
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-  if (vector_bytes() == 32) plane_fn = &divergence_plane_wide<T>;
-#endif
+  const auto plane = [&u, div, stride, scale](auto c, int i) FLAGSIM_INLINE_LAMBDA {
+    divergence_plane_body<decltype(c)::W, decltype(c)::N>(u, div, stride, scale, i);
+  };
+  const auto plane_fn = on_widest_lanes<double, void(int)>(plane, g.nz);
   // One task per plane: per row, the call and its set-up cost more than a short row's cells.
   parallel_for_if(Index(g.cells().size()) > kGridParallelGrain, g.nx,
-                  [&](Index i) { plane_fn(u, div, stride, scale, int(i)); });
+                  [&](Index i) { plane_fn(int(i)); });
 }
 
 Laplace7 pressure_operator(const GridGeometry& geo) {
@@ -293,28 +273,6 @@ FLAGSIM_INLINE bool gradient_periodic_plane(const T* phi, std::size_t stride, in
   return zero == 0;
 }
 
-template <class T>
-bool gradient_periodic_plane_narrow(const T* phi, std::size_t stride, int nx, int ny, int nz,
-                                    T inv_h, T* U, T* V, T* W, int i) {
-  return gradient_periodic_plane<NarrowLanes<T>, 0>(phi, stride, nx, ny, nz, inv_h, U, V, W, i);
-}
-
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-// The same plane on 32-byte vectors (AVX without FMA: the same operations per lane, the same
-// bits).
-template <class T>
-FLAGSIM_TARGET_AVX bool gradient_periodic_plane_wide(const T* phi, std::size_t stride, int nx,
-                                                     int ny, int nz, T inv_h, T* U, T* V, T* W,
-                                                     int i) {
-  // rows of 16 and 32 cells (16^3, 32^3): the row length known, its vectors unrolled
-  if (nz == 16)
-    return gradient_periodic_plane<Lanes32<T>, 16>(phi, stride, nx, ny, nz, inv_h, U, V, W, i);
-  if (nz == 32)
-    return gradient_periodic_plane<Lanes32<T>, 32>(phi, stride, nx, ny, nz, inv_h, U, V, W, i);
-  return gradient_periodic_plane<Lanes32<T>, 0>(phi, stride, nx, ny, nz, inv_h, U, V, W, i);
-}
-#endif
-
 }  // namespace
 
 template <class T>
@@ -324,16 +282,16 @@ bool subtract_gradient_periodic(const T* phi, int row_stride, MacGrid<T>& u) {
   const T inv_h = T(1.0 / g.h);
   const std::size_t stride = row_stride > 0 ? std::size_t(row_stride) : std::size_t(nz);
   T *U = u.comp[0].data(), *V = u.comp[1].data(), *W = u.comp[2].data();
-  auto plane_fn = &gradient_periodic_plane_narrow<T>;
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-  if (vector_bytes() == 32) plane_fn = &gradient_periodic_plane_wide<T>;
-#endif
+  const auto plane = [=](auto c, int i) FLAGSIM_INLINE_LAMBDA {  // phi .. W by value
+    using C = decltype(c);
+    return gradient_periodic_plane<typename C::L, C::N>(phi, stride, nx, ny, nz, inv_h, U, V, W, i);
+  };
+  const auto plane_fn = on_widest_lanes<T, bool(int)>(plane, nz);
   std::atomic<bool> finite{true};  // an AND of per-plane answers: the same for any order
   // One task per plane, all three components: the potential's rows are read once, and a short
   // row's call and set-up are paid once per plane.
   parallel_for_if(Index(g.cells().size()) > kGridParallelGrain, nx, [&](Index i) {
-    if (!plane_fn(phi, stride, nx, ny, nz, inv_h, U, V, W, int(i)))
-      finite.store(false, std::memory_order_relaxed);
+    if (!plane_fn(int(i))) finite.store(false, std::memory_order_relaxed);
   });
   return finite.load();
 }
@@ -367,26 +325,13 @@ FLAGSIM_INLINE void shift_mean_serial(T* q, std::size_t n, double target) {
   for (std::size_t i = 0; i < n; ++i) q[i] = T(q[i] + shift);
 }
 
-template <class T>
-void shift_mean_narrow(T* q, std::size_t n, double target) {
-  shift_mean_serial(q, n, target);
-}
-
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-template <class T>
-FLAGSIM_TARGET_AVX void shift_mean_wide(T* q, std::size_t n, double target) {
-  shift_mean_serial(q, n, target);
-}
-#endif
-
 }  // namespace
 
 template <class T>
 void set_mean_flow(const Vec3& target, MacGrid<T>& u) {
-  auto serial = &shift_mean_narrow<T>;
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-  if (vector_bytes() == 32) serial = &shift_mean_wide<T>;
-#endif
+  const auto shift = [](auto, T* q, std::size_t n, double target)
+                         FLAGSIM_INLINE_LAMBDA { shift_mean_serial(q, n, target); };
+  const auto serial = on_widest_lanes<T, void(T*, std::size_t, double)>(shift);
   for (int c = 0; c < 3; ++c) {
     AlignedVector<T>& q = u.comp[c];
     const std::size_t n = q.size();
@@ -621,25 +566,6 @@ FLAGSIM_INLINE void potential_plane_body(std::complex<T>* plane, const double* l
   }
 }
 
-template <class T>
-void potential_plane_narrow(std::complex<T>* plane, const double* lamy, const double* lamz,
-                            double lamx, int ny, int nzc, double scale) {
-#ifdef FLAGSIM_HAVE_VECTORS
-  potential_plane_body<2>(plane, lamy, lamz, lamx, ny, nzc, scale);
-#else
-  potential_plane_body<1>(plane, lamy, lamz, lamx, ny, nzc, scale);
-#endif
-}
-
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-template <class T>
-FLAGSIM_TARGET_AVX void potential_plane_wide(std::complex<T>* plane, const double* lamy,
-                                             const double* lamz, double lamx, int ny, int nzc,
-                                             double scale) {
-  potential_plane_body<4>(plane, lamy, lamz, lamx, ny, nzc, scale);
-}
-#endif
-
 }  // namespace
 
 template <class T>
@@ -653,14 +579,14 @@ bool FftProjector<T>::project(MacGrid<T>& u) {
   Impl::F::exec_r2c(m.fwd_in, phi, m.fc(0));
   const double scale = 1.0 / double(m.n_real);
   std::complex<T>* d = m.cplx(0);
-  auto plane_fn = &potential_plane_narrow<T>;
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-  if (vector_bytes() == 32) plane_fn = &potential_plane_wide<T>;
-#endif
-  parallel_for_if(Index(m.n_cplx) > kGridParallelGrain, g.nx, [&](Index i) {
-    plane_fn(d + std::size_t(i) * g.ny * m.nzc, m.lam[1].data(), m.lam[2].data(), m.lam[0][i], g.ny,
-             m.nzc, scale);
-  });
+  const double *lamx = m.lam[0].data(), *lamy = m.lam[1].data(), *lamz = m.lam[2].data();
+  const int ny = g.ny, nzc = m.nzc;
+  const auto plane = [=](auto c, int i) FLAGSIM_INLINE_LAMBDA {  // d .. scale by value
+    potential_plane_body<decltype(c)::W>(d + std::size_t(i) * ny * nzc, lamy, lamz, lamx[i], ny,
+                                         nzc, scale);
+  };
+  const auto plane_fn = on_widest_lanes<double, void(int)>(plane);
+  parallel_for_if(Index(m.n_cplx) > kGridParallelGrain, g.nx, [&](Index i) { plane_fn(int(i)); });
   Impl::F::exec_c2r(m.inv_in, m.fc(0), phi);
   return subtract_gradient_periodic(phi, stride, u);
 }
@@ -785,21 +711,6 @@ FLAGSIM_INLINE double spectral_plane_body(SpectralRow<T> w, const double* ayr, c
   return squares;
 }
 
-template <class T>
-double spectral_plane_16(const SpectralRow<T>& w, const double* ayr, const double* ayi,
-                         const double* lamy, double lamx, int n1, int nzc) {
-  return spectral_plane_body<NarrowLanes<double>>(w, ayr, ayi, lamy, lamx, n1, nzc);
-}
-
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-template <class T>
-FLAGSIM_TARGET_AVX double spectral_plane_32(const SpectralRow<T>& w, const double* ayr,
-                                            const double* ayi, const double* lamy, double lamx,
-                                            int n1, int nzc) {
-  return spectral_plane_body<Lanes32<double>>(w, ayr, ayi, lamy, lamx, n1, nzc);
-}
-#endif
-
 }  // namespace
 
 template <class T>
@@ -810,12 +721,8 @@ bool FftProjector<T>::diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec
   std::complex<T>* h0 = m.cplx(0);
   std::complex<T>* h1 = m.cplx(1);
   std::complex<T>* h2 = m.cplx(2);
-  auto plane_fn = &spectral_plane_16<T>;
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-  if (vector_bytes() == 32) plane_fn = &spectral_plane_32<T>;
-#endif
   // One call per plane: rows are short.
-  parallel_for_if(Index(m.n_cplx) > kGridParallelGrain, g.nx, [&](Index i) {
+  const auto plane = [&](auto c, int i) FLAGSIM_INLINE_LAMBDA {
     const std::size_t base = std::size_t(i) * g.ny * m.nzc;
     SpectralRow<T> w;
     w.p0 = reinterpret_cast<T*>(h0 + base);
@@ -828,9 +735,11 @@ bool FftProjector<T>::diffuse_and_project(MacGrid<T>& u, double nu_dt, const Vec
     w.axi = m.ai[0][i];
     w.scale = 1.0 / double(m.n_real);
     w.nu_dt = nu_dt;
-    m.plane_squares[std::size_t(i)] =
-        plane_fn(w, m.ar[1].data(), m.ai[1].data(), m.lam[1].data(), m.lam[0][i], g.ny, m.nzc);
-  });
+    m.plane_squares[std::size_t(i)] = spectral_plane_body<typename decltype(c)::L>(
+        w, m.ar[1].data(), m.ai[1].data(), m.lam[1].data(), m.lam[0][i], g.ny, m.nzc);
+  };
+  const auto plane_fn = on_widest_lanes<double, void(int)>(plane);
+  parallel_for_if(Index(m.n_cplx) > kGridParallelGrain, g.nx, [&](Index i) { plane_fn(int(i)); });
   const double bound = finite_plane_bound<T>(m.n_real);
   bool finite = true;
   for (const double squares : m.plane_squares) finite = finite && squares <= bound;
