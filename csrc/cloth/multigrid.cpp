@@ -263,21 +263,14 @@ struct FineEisenstat {
   }
 };
 
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-template <class Pass, class... Args>
-FLAGSIM_TARGET_AVX void run_wide(Args&... args) {
-  Pass::template run<Lanes32<double>>(args...);
-}
-#endif
-
-// Pass::run<L>(args...) on the widest lanes this CPU has: 32-byte vectors in a function compiled
-// for AVX, else NarrowLanes. Every width gives the same bits (spring_blocks_times, BlockSum).
+// Pass::run<L>(args...) on the widest lanes of double this CPU has (on_widest_lanes). Every width
+// gives the same bits (spring_blocks_times, BlockSum).
 template <class Pass, class... Args>
 void run_on_widest_lanes(Args&&... args) {
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-  if (vector_bytes() == 32) return run_wide<Pass>(args...);
-#endif
-  Pass::template run<NarrowLanes<double>>(args...);
+  const auto pass = [](auto c, Args&... a) FLAGSIM_INLINE_LAMBDA {
+    Pass::template run<typename decltype(c)::L>(a...);
+  };
+  on_widest_lanes<double, void(Args & ...)>(pass)(args...);
 }
 
 // A 3-vector running sum s -= a y (a a column-major 3 x 3 block), each row as

@@ -248,13 +248,6 @@ FLAGSIM_INLINE size_t meeting_on(const QueryGroupHits& g, const Vec3& qlo, const
   return n;
 }
 
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-FLAGSIM_TARGET_AVX size_t meeting_wide(const QueryGroupHits& g, const Vec3& qlo, const Vec3& qhi,
-                                       int32_t after, int32_t* out) {
-  return meeting_on<Lanes32<double>>(g, qlo, qhi, after, out);
-}
-#endif
-
 }  // namespace
 
 void QueryGroupHits::reserve(size_t n) {
@@ -298,10 +291,10 @@ void QueryGroupHits::finish() {
 // n. On the widest lanes the CPU has (meeting_on).
 size_t QueryGroupHits::meeting(const Vec3& qlo, const Vec3& qhi, int32_t after) {
   if (items.empty()) return 0;
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-  if (vector_bytes() == 32) return meeting_wide(*this, qlo, qhi, after, kept.data());
-#endif
-  return meeting_on<NarrowLanes<double>>(*this, qlo, qhi, after, kept.data());
+  const auto meet = [&](auto c) FLAGSIM_INLINE_LAMBDA {
+    return meeting_on<typename decltype(c)::L>(*this, qlo, qhi, after, kept.data());
+  };
+  return on_widest_lanes<double, size_t()>(meet)();
 }
 
 // Appends to buffer the pairs of each vertex i in [i0, i1) with the triangles whose boxes the

@@ -1378,36 +1378,19 @@ struct ProlongPlane {
   }
 };
 
-template <class Kernel, class L, class T>
-FLAGSIM_INLINE void run_kernel(const LevelArgs<T>& a, int i) {
-  if (a.L->unit)
-    Kernel::template run<L, true>(a, i);
-  else
-    Kernel::template run<L, false>(a, i);
-}
-
-template <class Kernel, class T>
-void plane_narrow(const LevelArgs<T>& a, int i) {
-  run_kernel<Kernel, NarrowLanes<T>>(a, i);
-}
-
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-template <class Kernel, class T>
-FLAGSIM_TARGET_AVX void plane_wide(const LevelArgs<T>& a, int i) {
-  run_kernel<Kernel, Lanes32<T>>(a, i);
-}
-#endif
-
 template <class T>
-using PlaneFn = void (*)(const LevelArgs<T>&, int);
+using PlaneFn = LaneKernel<void(const LevelArgs<T>&, int)>;
 
 /// Kernel's plane function on the widest vectors this CPU has (the same bits at every width).
 template <class Kernel, class T>
 PlaneFn<T> plane_fn() {
-#ifdef FLAGSIM_HAVE_AVX_DISPATCH
-  if (vector_bytes() == 32) return &plane_wide<Kernel, T>;
-#endif
-  return &plane_narrow<Kernel, T>;
+  static constexpr auto plane = [](auto c, const LevelArgs<T>& a, int i) FLAGSIM_INLINE_LAMBDA {
+    if (a.L->unit)
+      Kernel::template run<typename decltype(c)::L, true>(a, i);
+    else
+      Kernel::template run<typename decltype(c)::L, false>(a, i);
+  };
+  return on_widest_lanes<T, void(const LevelArgs<T>&, int)>(plane);
 }
 
 /// Kernel on every plane of a level, planes split over the threads (each plane's result is
@@ -1423,7 +1406,7 @@ void for_each_plane(const LevelArgs<T>& a, int planes = -1) {
 /// One stage of a fused pass over a level: a plane kernel and its arguments.
 template <class T>
 struct PlaneStage {
-  PlaneFn<T> fn = nullptr;
+  PlaneFn<T> fn;
   LevelArgs<T> a;
 };
 
