@@ -889,8 +889,17 @@ void Simulation::find_resting_contacts() {
     for (std::size_t k = 0; k < cloth_solids_.size(); ++k) {
       const ClothSolid& s = cloth_solids_[k];
       const double reach = (1.0 + kRestingSlack) * s.thickness;
+      // True when q is farther than `listed` from the geometry along some axis: the bounding box
+      // (grown by the thickness) grown to what the distance test below lists. Grown by the
+      // thickness alone, it left out a vertex resting a hair (< 10 um) beyond the thickness, where
+      // the sweep stops them, and the projection put back, every step, what the solve let fall
+      // (docs/solids.md).
+      const auto beyond = [&](const Vec3& q, double listed) {
+        const double more = listed - s.thickness;
+        return (q.array() < s.lo.array() - more).any() || (q.array() > s.hi.array() + more).any();
+      };
       if (solid_motions_[k].empty()) {
-        if ((p.array() < s.lo.array()).any() || (p.array() > s.hi.array()).any()) continue;
+        if (beyond(p, reach)) continue;
         Vec3 n;
         const double d = solid_distance(s.geometry, p, &n);
         if (d <= reach) offer(d - reach, n, p.dot(n) - (d - reach), 0.0);
@@ -902,11 +911,11 @@ void Simulation::find_resting_contacts() {
       const RigidMotion& m = solid_piece_[k];
       const Vec3 ql = m.from.inverse(p);
       const double ahead = h_ * (row(v_, i).norm() + m.velocity_at(ql).norm());
-      if ((ql.array() < s.lo.array() - ahead).any() || (ql.array() > s.hi.array() + ahead).any())
-        continue;
+      const double listed = reach + std::max(s.thickness, ahead);
+      if (beyond(ql, listed)) continue;
       Vec3 n;
       const double d = solid_distance(s.geometry, ql, &n);
-      if (d - reach <= std::max(s.thickness, ahead)) {
+      if (d <= listed) {
         const Vec3 surface = ql - (d - reach) * n, nw = m.to.R * n;  // on the grown surface
         offer(d - reach, nw, nw.dot(m.to.apply(surface)), nw.dot(m.velocity_at(surface)));
       }
