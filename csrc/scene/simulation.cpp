@@ -899,10 +899,13 @@ void Simulation::find_resting_contacts() {
         return (q.array() < s.lo.array() - more).any() || (q.array() > s.hi.array() + more).any();
       };
       if (solid_motions_[k].empty()) {
-        if (beyond(p, reach)) continue;
+        // A vertex the last piece ended on its plane is `reach` from the surface give or take
+        // round-off: listed up to one more slack, or its next piece would decide by a last bit.
+        const double listed = reach + kRestingSlack * s.thickness;
+        if (beyond(p, listed)) continue;
         Vec3 n;
         const double d = solid_distance(s.geometry, p, &n);
-        if (d <= reach) offer(d - reach, n, p.dot(n) - (d - reach), 0.0);
+        if (d <= listed) offer(d - reach, n, p.dot(n) - (d - reach), 0.0);
         continue;
       }
       // Moving: in the solid's frame at the piece's start, listed as far as the vertex and the

@@ -74,7 +74,10 @@ def test_a_flag_draped_over_a_box_rests_without_redoing_steps():
         redone += sim.last_step_stats["energy_halvings"]
     ledger = sim.energy_ledger()
     assert redone == 0
-    assert abs(ledger["solids"]) < 0.05 * ledger["gravity"]
+    # What the projection still does is inelastic (-0.0013 J; -0.0012 J before the vertices on
+    # their planes were listed whatever the round-off): a bound on what it makes, a looser one
+    # on what it takes.
+    assert -0.1 * ledger["gravity"] < ledger["solids"] < 0.05 * ledger["gravity"]
     assert_rests_on_the_box(sim.positions, on_top=50, atol=1e-3)
     weight = sim.node_mass.sum() * 9.81 * sim.time
     assert np.abs(sim.pole_impulse).max() < 1e-4 * weight
@@ -91,6 +94,11 @@ def test_the_box_push_is_not_the_pins_with_the_explicit_integrator_either():
     weight = sim.node_mass.sum() * 9.81 * sim.time
     assert np.abs(sim.pole_impulse).max() < 1e-4 * weight
     assert_rests_on_the_box(sim.positions, on_top=10, atol=2e-3)
+    # The vertices resting on the box are listed every step (test above): the projection booked
+    # +1.09 J when they were not, +0.020 J when round-off dropped those on their plane; -0.002 J
+    # now, as the implicit solve's (gravity did 0.026 J).
+    ledger = sim.energy_ledger()
+    assert abs(ledger["solids"]) < 0.2 * ledger["gravity"]
 
 
 def test_a_pole_inside_a_box_leaves_the_box_contacts_alone():
@@ -165,11 +173,13 @@ def test_a_box_lifting_the_flag_leaves_the_resting_contacts_to_the_solve(speed, 
 def test_the_flag_hanging_onto_a_box_at_rest_is_held_by_the_solve(method):
     # The same culling on a box at rest: its projection booked +1.27 J (implicit, 3 halvings)
     # and +1.34 J (explicit, whose substeps keep vertices out of the same planes) over 3 s,
-    # 20 x the work of gravity; now 0.009 and 0.09 J, no halving.
+    # 20 x the work of gravity. With the box test fixed, explicit still booked 0.09 J: a vertex
+    # a substep put back on its plane (1.002 x the thickness out) was listed again only when
+    # round-off put it on the near side. Now 0.008 J (implicit) and 0.0015 J, no halving.
     sim = flagsim.Simulation(box_under_the_paper_flag(method))
     assert run_counting_halvings(sim, 300) == 0
     ledger = sim.energy_ledger()
-    assert ledger["solids"] < 2 * ledger["gravity"]
+    assert abs(ledger["solids"]) < 0.2 * ledger["gravity"]
 
 
 @pytest.mark.parametrize("speed", [0.7, 1.4])
