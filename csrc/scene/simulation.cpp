@@ -270,8 +270,9 @@ void Simulation::setup_flapping() {
   }
   edge_points_ = FlapStage::pole_edge_points(topo_);  // u_p is sampled there, beside the pole
   edge_air_.resize(topo_.rows, 3);
+  edge_at_.resize(topo_.rows, 3);
   if (built(Stage::kFlapVisual)) {
-    u_p_ = sample_pole_air_speed();
+    u_p_ = sample_pole_air_speed(time_, scene_.dt);
     render_x_.resize(N, 3);
     flap_.displace(x_, n_, u_p_, time_, render_x_);
     render_n_.resize(N, 3);
@@ -398,10 +399,10 @@ Pose Simulation::pin_pose(double t) const {
     case PinDriver::kPose: {
       const double s = std::clamp((t - time_) / scene_.dt, 0.0, 1.0);
       Pose p;
-      p.R = Eigen::Quaterniond(pose_start_.R)
+      p.R = Eigen::Quaterniond(pose_now_.R)
                 .slerp(s, Eigen::Quaterniond(pose_goal_.R))
                 .toRotationMatrix();
-      p.t = (1 - s) * pose_start_.t + s * pose_goal_.t;
+      p.t = (1 - s) * pose_now_.t + s * pose_goal_.t;
       return p;
     }
     default: return pose_now_;
@@ -586,7 +587,6 @@ void Simulation::begin_step() {
   step_pin_impulse_.setZero();
   if (built(Stage::kFlap)) flap_.save_step_start();
   if (built(Stage::kPins)) {
-    pose_start_ = pose_now_;
     for (Index k = 0; k < pin_start_.rows(); ++k) pin_start_.row(k) = x_.row(pin_index_[k]);
   }
 }
@@ -640,7 +640,7 @@ void Simulation::sample_air_ahead() {
   stage_air();
   if (built(Stage::kFlap)) {
     StageClock::Scope t(&clock_, Stage::kFlap);
-    u_p_ = sample_pole_air_speed();
+    u_p_ = sample_pole_air_speed(time_, scene_.dt);  // the step's first piece
   }
   air_sampled_ = pole_air_sampled_ = true;
 }
@@ -752,8 +752,22 @@ void Simulation::restore_step_start() {
   if (built(Stage::kFlap)) flap_.restore_step_start();
 }
 
-double Simulation::sample_pole_air_speed() {
-  air_velocity(edge_points_, edge_air_);
+// u_p of eq. 5 (paper §4): the mean speed of the air across the pole along the flag's pole-side
+// edge, relative to the pole. A pole the pins' pose carries (flag.pin_motion, set_pin_pose) is
+// sampled where the pose puts the edge at t, less the edge's velocity over [t, t + h]: a flag
+// carried along with its air flaps as the still one does (docs/flapping.md). Pins that never
+// moved: the lab's air at the edge's rest positions.
+double Simulation::sample_pole_air_speed(double t, double h) {
+  if (pin_driver_ == PinDriver::kNone) {
+    air_velocity(edge_points_, edge_air_);
+    return edge_air_.rowwise().norm().mean();
+  }
+  const RigidMotion pole{pin_pose(t), pin_pose(t + h), h};
+  for (Index r = 0; r < edge_points_.rows(); ++r)
+    edge_at_.row(r) = pole.from.apply(row(edge_points_, r)).transpose();
+  air_velocity(edge_at_, edge_air_);
+  for (Index r = 0; r < edge_points_.rows(); ++r)
+    edge_air_.row(r) -= pole.velocity_at(row(edge_points_, r)).transpose();
   return edge_air_.rowwise().norm().mean();
 }
 
@@ -763,7 +777,7 @@ double Simulation::sample_pole_air_speed() {
 void Simulation::stage_flap() {
   if (!built(Stage::kFlap)) return;
   StageClock::Scope t(&clock_, Stage::kFlap);
-  if (!pole_air_sampled_) u_p_ = sample_pole_air_speed();  // else sample_air_ahead did
+  if (!pole_air_sampled_) u_p_ = sample_pole_air_speed(t_piece_, h_);  // else sample_air_ahead did
   normals_for_x();
   if (scene_.flapping.mode == FlapMode::kDisplace)
     flap_.drift(topo_, n_, u_p_, t_piece_ + h_, h_, flap_drift_);
@@ -982,7 +996,8 @@ void Simulation::offer_known_energy() {
 // "visual": the exported geometry is the positions displaced by eq. 5; physics is untouched.
 void Simulation::stage_flap_visual() {
   StageClock::Scope t(&clock_, Stage::kFlapVisual);
-  u_p_ = sample_pole_air_speed();
+  u_p_ =
+      sample_pole_air_speed(time_, scene_.dt);  // relative to the pins' motion over the next step
   flap_.displace(x_, n_, u_p_, time_, render_x_);
   compute_vertex_normals(topo_, render_x_, render_n_);
 }

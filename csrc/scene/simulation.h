@@ -253,7 +253,7 @@ class Simulation {
   [[noreturn]] void air_diverged(const DivergenceError& e);  // the cloth restored, e raised
   void stage_flap_visual();
   // Helpers of the stages.
-  double sample_pole_air_speed();
+  double sample_pole_air_speed(double t, double h);  // u_p at t, the pins' motion over [t, t + h]
   // The change of E it made less the pins' share, J (that share booked to ledger_.pins).
   double limit_cloth_strain(MatX3& x, MatX3& v);
   void book_integrator_work();
@@ -298,8 +298,10 @@ class Simulation {
 
   // Flapping (paper eq. 5), set up only when flapping.mode is not "off".
   FlapStage flap_;
-  VecX flap_off_z_;               // (N) zeros: flap_displacement() with flapping off
-  MatX3 edge_points_, edge_air_;  // (P x 3) where u_p is sampled, and the air there
+  VecX flap_off_z_;  // (N) zeros: flap_displacement() with flapping off
+  // (P x 3, P = flag rows) where u_p is sampled (the pole-side edge at rest; edge_at_: where the
+  // pins' pose carries it), and the air there
+  MatX3 edge_points_, edge_at_, edge_air_;
   double u_p_ = 0;
   MatX3 render_x_, render_n_;  // (N x 3) "visual" geometry
 
@@ -321,7 +323,7 @@ class Simulation {
   PinDriver pin_driver_ = PinDriver::kNone;
   std::vector<Index> pin_index_;
   MatX3 pin_rest_, pin_hold_, pin_goal_, pin_at_, pin_start_;  // (P x 3) m
-  Pose pose_now_, pose_goal_, pose_start_;
+  Pose pose_now_, pose_goal_;
   RigidMotion pole_motion_;  // the pole over the piece being stepped
   bool pole_moves_ = false;
   // The scene's solids the flag collides with (cloth = true), and their motions (empty: at rest).
