@@ -437,6 +437,10 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
   sim.def_property_readonly("energy_scale", &Simulation::energy_scale,
                             "J, m |g| H + m U^2 / 2: the scale integrator.energy_tolerance is a "
                             "fraction of (m (1 m/s)^2 / 2 without gravity and wind)");
+  sim.def("holdable_energy", &Simulation::holdable_energy,
+          "J: the bound on the net unexplained energy the check counts (docs/energy.md): the "
+          "kinetic and spring energy and the rise since construction, relative to the pins' "
+          "centre of mass once the pins move");
   sim.def("max_strain", &Simulation::max_strain, "largest spring strain (l - L) / L now");
   sim.def_property_readonly(
       "render_positions",

@@ -12,19 +12,20 @@ void ImpactZones::clear() { std::fill(frozen_.begin(), frozen_.end(), uint8_t{0}
 
 Index ImpactZones::freeze(const int32_t group[4], const MatX3& x0, MatX3& x, MatX3& v,
                           const VecX& inv_mass) {
-  Vec3 momentum = Vec3::Zero();
+  Vec3 momentum = Vec3::Zero(), pin = Vec3::Zero();
   double mass = 0;
   bool pinned = false;
   for (int k = 0; k < 4; ++k) {
     const int32_t i = group[k];
     if (inv_mass[i] == 0) {
+      if (!pinned) pin = row(v, i);
       pinned = true;
       continue;
     }
     momentum += row(v, i) / inv_mass[i];
     mass += 1 / inv_mass[i];
   }
-  const Vec3 common = pinned || !(mass > 0) ? Vec3::Zero() : Vec3(momentum / mass);
+  const Vec3 common = pinned ? pin : !(mass > 0) ? Vec3::Zero() : Vec3(momentum / mass);
   Index added = 0;
   for (int k = 0; k < 4; ++k) {
     const int32_t i = group[k];

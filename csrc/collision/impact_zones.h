@@ -23,8 +23,9 @@ class ImpactZones {
   bool still(int32_t i, const VecX& inv_mass) const { return frozen_[i] || inv_mass[i] == 0; }
 
   /// The free vertices of `group` (4 indices into x0, x, v: N x 3, m and m/s) back to x0, moving
-  /// as one with the group's momentum-weighted mean velocity (0 when the group holds a pinned
-  /// vertex: a zone touching a pin does not move). Returns how many were not frozen before.
+  /// as one with the group's momentum-weighted mean velocity (the velocity of its first pinned
+  /// vertex when it holds one: a zone touching a pin moves with it, and stays still with a pin at
+  /// rest). Returns how many were not frozen before.
   Index freeze(const int32_t group[4], const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass);
 
   /// True when a vertex that is not still lies inside the pole at x.

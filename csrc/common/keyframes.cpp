@@ -104,6 +104,47 @@ Pose MotionSchedule::at(double t) const {
   return pose;
 }
 
+CarriedSpeeds carried_speeds(const WindSchedule& wind, const MotionSchedule& motion,
+                             const Vec3& p) {
+  CarriedSpeeds out;
+  std::vector<double> times{0.0};
+  bool repeats = false;
+  for (const WindKey& k : wind.keys) times.push_back(k.time);
+  const double last_wind = wind.keys.empty() ? 0.0 : wind.keys.back().time;
+  if (!motion.empty()) {
+    const double t0 = motion.keys.front().time, t1 = motion.keys.back().time, period = t1 - t0;
+    if (motion.repeat && period > 0) {
+      repeats = true;
+      const double end = std::max({last_wind, t1, 0.0}) + period;
+      const double first = std::floor((0.0 - t0) / period);
+      const double periods =
+          std::min(std::ceil((end - t0) / period) - first, double(CarriedSpeeds::kMaxPeriods));
+      for (double n = first; n <= first + periods; ++n)
+        for (const MotionKey& k : motion.keys) times.push_back(k.time + n * period);
+    } else {
+      for (const MotionKey& k : motion.keys) times.push_back(k.time);
+    }
+  }
+  std::sort(times.begin(), times.end());
+  times.erase(std::unique(times.begin(), times.end()), times.end());
+  times.erase(times.begin(), std::lower_bound(times.begin(), times.end(), 0.0));
+  const auto at = [&](double t) { return motion.at(t).apply(p); };
+  for (std::size_t k = 0; k + 1 < times.size(); ++k) {
+    const double a = times[k], len = (times[k + 1] - a) / CarriedSpeeds::kParts;
+    for (int j = 0; j < CarriedSpeeds::kParts; ++j) {
+      const double s0 = a + j * len, q0 = s0 + 0.25 * len, q1 = s0 + 0.75 * len;
+      const Vec3 v = (at(q1) - at(q0)) / (q1 - q0);
+      out.own = std::max(out.own, v.norm());
+      out.relative =
+          std::max({out.relative, (wind.at(s0) - v).norm(), (wind.at(s0 + len) - v).norm()});
+    }
+  }
+  // After the last time the wind holds, and so does a motion that does not repeat (one that
+  // does plays the last period again, against the same wind).
+  if (!repeats) out.relative = std::max(out.relative, wind.at(times.back()).norm());
+  return out;
+}
+
 void MotionSchedule::validate(const std::string& name) const {
   check_position(name + ".pivot", pivot);
   for (size_t i = 0; i < keys.size(); ++i) {

@@ -78,4 +78,18 @@ struct MotionSchedule {
   void validate(const std::string& name) const;
 };
 
+/// The largest speeds, m/s, over t >= 0 of a point p (m, in the body at rest) carried by
+/// `motion` through `wind`: `relative` = max |wind(t) - v(t)|, `own` = max |v(t)|, v the point's
+/// velocity. The pieces between the keys of both schedules are cut in kParts, each with the
+/// point's secant velocity (taken between its quarter points, so a repeat's jump back is never
+/// straddled) against the wind at its ends: exact for a translation (|w - v| is convex where w
+/// is linear and v constant); a rotation is sampled at that resolution. A repeating motion is
+/// followed up to one period past the wind's last key (at most kMaxPeriods periods).
+struct CarriedSpeeds {
+  static constexpr int kParts = 8;
+  static constexpr long kMaxPeriods = 1000;
+  double relative = 0, own = 0;
+};
+CarriedSpeeds carried_speeds(const WindSchedule& wind, const MotionSchedule& motion, const Vec3& p);
+
 }  // namespace flagsim

@@ -201,11 +201,18 @@ void Simulation::setup_pins() {
 void Simulation::build_self_collision() {
   self_collision_ =
       std::make_unique<SelfCollision>(topo_.triangles, topo_.num_vertices(), scene_.self_collision);
+  x0_carried_.resize(topo_.num_vertices(), 3);
   // Strain limiting inside the collision sweeps: contacts alone would hold a stretch.
-  // Its energy is booked with the self-collision response's (one evaluation around it).
+  // Its energy is booked with the self-collision response's (one evaluation around it), but for
+  // the work of moving pins and contact planes in it, which is the pins' (sweep_pin_work_), as
+  // in the stage-level strain limiting (limit_cloth_strain).
   strain_projector_ = [this](MatX3& x, MatX3& v) {
+    const bool frame = built(Stage::kPins);
+    if (frame) sweep_strain_momentum_ -= momentum(v);
     limit_strain(topo_, scene_.integrator.strain_limit, scene_.integrator.strain_limit_iterations,
-                 x, v, forces_.contacts, forces_.contact_offset);
+                 x, v, forces_.contacts, forces_.contact_offset, &sweep_pin_work_,
+                 forces_.contact_speed);
+    if (frame) sweep_strain_momentum_ += momentum(v);
   };
 }
 
@@ -229,12 +236,23 @@ void Simulation::check_explicit_step() const {
 }
 
 // The plausibility check's scale m |g| H + m U^2 / 2 (docs/energy.md), and the energy and the
-// piece's start positions at construction.
+// piece's start positions at construction. U is the air's largest speed relative to the pins:
+// keyframed pins carry their frame (the pins' centre of mass) through the wind, so a flag carried
+// with its air is checked as the still one; a fan (fixed in the grid) at most adds the pins'
+// own speed. Pins driven from Python later are not known here: the lab's speeds.
 void Simulation::setup_energy() {
   const FlagParams& f = scene_.flag;
-  double U = scene_.air.model == AirModel::kNone ? 0.0 : scene_.air.wind.max_speed();
+  const bool air = scene_.air.model != AirModel::kNone;
+  double U = 0, carried = 0;
+  if (air && pin_driver_ == PinDriver::kKeyframes) {
+    const CarriedSpeeds c = carried_speeds(scene_.air.wind, f.pin_motion, pins_centre(pin_rest_));
+    U = c.relative;
+    carried = c.own;
+  } else if (air) {
+    U = scene_.air.wind.max_speed();
+  }
   if (scene_.air.model == AirModel::kGrid)
-    for (const FanParams& fan : scene_.air.fans) U = std::max(U, fan.max_speed);
+    for (const FanParams& fan : scene_.air.fans) U = std::max(U, fan.max_speed + carried);
   // Curl noise adds its intensity on top of the mean flow (air.turbulence, either model).
   if (scene_.air.model != AirModel::kNone) {
     double gust = 0;
@@ -248,6 +266,7 @@ void Simulation::setup_energy() {
   forces_.energy_guard = scene_.integrator.energy_tolerance * energy_scale_;
   energy_end_ = energy_now();
   gravity_potential_0_ = energy().gravity;
+  pins_centre_0_ = pins_centre(x_);
   x_piece_ = x_;
 }
 
@@ -461,7 +480,7 @@ void Simulation::build_between_flags() {
       f.v_ = v.middleRows(o, m);
       limit_strain(f.topo_, f.scene_.integrator.strain_limit,
                    f.scene_.integrator.strain_limit_iterations, f.x_, f.v_, f.forces_.contacts,
-                   f.forces_.contact_offset);
+                   f.forces_.contact_offset, &f.sweep_pin_work_, f.forces_.contact_speed);
       x.middleRows(o, m) = f.x_;
       v.middleRows(o, m) = f.v_;
     }
@@ -507,7 +526,10 @@ void Simulation::stage_between_flags() {
     bv_.middleRows(o, m) = f.v_;
   }
   bool strain = false;
-  for (int i = 0; i < num_flags(); ++i) strain = strain || flag(i).built(Stage::kStrainLimit);
+  for (int i = 0; i < num_flags(); ++i) {
+    strain = strain || flag(i).built(Stage::kStrainLimit);
+    flag(i).sweep_pin_work_ = 0;
+  }
   between_stats_ = between_->resolve(bx0_, bx_, bv_, binv_mass_, nullptr,
                                      strain ? &between_projector_ : nullptr);
   for (int i = 0; i < num_flags(); ++i) {
@@ -516,7 +538,8 @@ void Simulation::stage_between_flags() {
     f.x_ = bx_.middleRows(o, m);
     f.v_ = bv_.middleRows(o, m);
     const double e = f.energy_now();
-    f.ledger_.self_collision += e - f.energy_end_;
+    f.ledger_.pins += f.sweep_pin_work_;
+    f.ledger_.self_collision += e - f.energy_end_ - f.sweep_pin_work_;
     f.energy_end_ = e;
   }
 }
@@ -836,8 +859,9 @@ void Simulation::stage_pins() {
   }
   ledger_.pins += kinetic;
   energy_end_ += kinetic;  // not an edit between steps
+  pins_frame_ = {pin_pose(t_piece_), pin_pose(t_piece_ + h_), h_};
   pole_moves_ = scene_.pole.enabled && pin_driver_ != PinDriver::kNone;
-  if (pole_moves_) pole_motion_ = {pin_pose(t_piece_), pin_pose(t_piece_ + h_), h_};
+  if (pole_moves_) pole_motion_ = pins_frame_;
 }
 
 void Simulation::place_pins() {
@@ -964,9 +988,27 @@ void Simulation::stage_self_collision() {
   if (!built(Stage::kSelfCollision)) return;
   {
     StageClock::Scope t(&clock_, Stage::kSelfCollision);
-    self_collision_->resolve(x_piece_, x_, v_, topo_.inv_mass,
+    sweep_pin_work_ = 0;
+    const bool frame = built(Stage::kPins);
+    const Vec3 p0 = frame ? momentum() : Vec3::Zero();
+    sweep_strain_momentum_.setZero();
+    // Moving pins: the response runs in their frame. Its start is the piece's start carried by
+    // the pins' pose to the piece's end (rigidly: as collision-free as the start, the pins where
+    // they are), so a crossing stops short and the fallback freezes relative to the pins, not to
+    // the lab: a flag carried at 5 m/s was sent back 5 cm a step behind its pins.
+    if (frame)
+      for (Index i = 0; i < x_.rows(); ++i)
+        x0_carried_.row(i) =
+            pins_frame_.to.apply(pins_frame_.from.inverse(row(x_piece_, i))).transpose();
+    self_collision_->resolve(frame ? x0_carried_ : x_piece_, x_, v_, topo_.inv_mass,
                              built(Stage::kPole) && !pole_moves_ ? &scene_.pole : nullptr,
                              built(Stage::kStrainLimit) ? &strain_projector_ : nullptr);
+    // The rest of the response does not conserve momentum either: a pinned vertex takes no share
+    // of a contact's impulse (the pin holds it), impulses are averaged per vertex (Jacobi), and
+    // the fallback stops a group with a pin. Its work in the lab is its work in the pins' frame
+    // plus V . dP (V: the pins' velocity), the frame's, booked to the pins (exact for pins that
+    // translate; docs/design.md "Moving pins and Galilean invariance").
+    if (frame) sweep_pin_work_ += pins_centre(v_).dot(momentum() - p0 - sweep_strain_momentum_);
   }
   // its change of E: stage_check, with the strain of the same positions
 }
@@ -1096,9 +1138,11 @@ void Simulation::stage_integrate() {
   step_pin_impulse_ += external - (momentum() - p0);
 }
 
-Vec3 Simulation::momentum() const {
+Vec3 Simulation::momentum() const { return momentum(v_); }
+
+Vec3 Simulation::momentum(const MatX3& v) const {
   Vec3 p = Vec3::Zero();
-  for (Index i = 0; i < v_.rows(); ++i) p += topo_.mass[i] * Vec3(v_.row(i));
+  for (Index i = 0; i < v.rows(); ++i) p += topo_.mass[i] * Vec3(v.row(i));
   return p;
 }
 
@@ -1166,7 +1210,8 @@ Simulation::Implausible Simulation::stage_check() {
   if (built(Stage::kSelfCollision)) {  // its change of E, from the lengths the strain reads
     const ClothEnergy e =
         cloth_energy_and_max_strain(topo_, scene_.gravity, x_, v_, strain, &worst);
-    book_energy(ledger_.self_collision, 0.0, e.total());
+    ledger_.pins += sweep_pin_work_;  // the moving pins' share of its response
+    book_energy(ledger_.self_collision, sweep_pin_work_, e.total());
   } else {
     strain = flagsim::max_strain(topo_, x_, &worst);
   }
@@ -1218,10 +1263,7 @@ Simulation::Implausible Simulation::check_energy() const {
   const double allowed = scene_.integrator.energy_tolerance * energy_scale_;
   const double gain = ledger_.unexplained_since(ledger_start_);
   double held = ledger_.unexplained_net();
-  if (held > allowed) {
-    const ClothEnergy e = energy();
-    held = std::min(held, e.kinetic + e.spring + std::max(e.gravity - gravity_potential_0_, 0.0));
-  }
+  if (held > allowed) held = std::min(held, holdable_energy());
   if (!(gain > allowed) && !(held > allowed)) return {};
   const EnergyLedger& a = ledger_;
   const EnergyLedger& b = ledger_start_;
@@ -1234,6 +1276,38 @@ Simulation::Implausible Simulation::check_energy() const {
     << ledger_.unexplained_net() << " J, of which the flag can still hold " << held
     << " J), more than integrator.energy_tolerance x the energy scale = " << allowed << " J";
   return {"energy", -1, s.str()};
+}
+
+// What the flag can hold of the energy no stage explains, J: its kinetic and spring energy and its
+// rise above where it started. Once its pins have moved, the kinetic energy and the rise are
+// taken relative to the pins (their centre of mass's velocity and rise), so that a flag carried
+// at a constant velocity, or up, holds what the still one holds: the lab's kinetic energy of a
+// flag carried at 5 m/s is mostly the frame's (0.82 J of the paper flag's), not the flag's.
+double Simulation::holdable_energy() const {
+  const ClothEnergy e = energy();
+  if (!built(Stage::kPins))
+    return e.kinetic + e.spring + std::max(e.gravity - gravity_potential_0_, 0.0);
+  const Vec3 V = pins_centre(v_), lift = pins_centre(x_) - pins_centre_0_;
+  double kinetic = 0;
+  for (Index i = 0; i < v_.rows(); ++i)
+    kinetic += 0.5 * topo_.mass[i] * (Vec3(v_.row(i)) - V).squaredNorm();
+  const double rise =
+      e.gravity - gravity_potential_0_ + topo_.mass.sum() * scene_.gravity.dot(lift);
+  return kinetic + e.spring + std::max(rise, 0.0);
+}
+
+// The pinned rows' centre of mass of a (P x 3 when a holds only the pins, else N x 3): the frame
+// of the pins. No pins: zero.
+Vec3 Simulation::pins_centre(const MatX3& a) const {
+  const bool only_pins = a.rows() == Index(pin_index_.size());
+  Vec3 sum = Vec3::Zero();
+  double m = 0;
+  for (Index k = 0; k < Index(pin_index_.size()); ++k) {
+    const double mk = topo_.mass[pin_index_[k]];
+    sum += mk * Vec3(a.row(only_pins ? k : pin_index_[k]));
+    m += mk;
+  }
+  return m > 0 ? Vec3(sum / m) : Vec3::Zero();
 }
 
 void Simulation::diverge(const std::string& cause, long vertex, const std::string& detail) {

@@ -142,6 +142,9 @@ class Simulation {
   /// unexplained energy gain exceeds integrator.energy_tolerance x this raises
   /// DivergenceError(cause "energy").
   double energy_scale() const { return energy_scale_; }
+  /// J: the most unexplained energy the check counts the flag as holding now (docs/energy.md):
+  /// kinetic + spring energy + rise since construction, relative to the pins once they move.
+  double holdable_energy() const;
   /// Largest spring strain (l - L) / L of the current positions.
   double max_strain() const { return flagsim::max_strain(topo_, x_); }
   const IntegratorStats& last_step_stats() const { return stats_; }
@@ -264,8 +267,10 @@ class Simulation {
   void check_finite();
   Implausible check_strain(double strain, Index worst_spring);  // max_strain of x_
   Implausible check_energy() const;
-  double energy_now() const;  // total_energy of (x_, v_)
-  Vec3 momentum() const;      // sum of m v over every mass, N s
+  Vec3 pins_centre(const MatX3& a) const;  // the pinned rows' centre of mass of a
+  double energy_now() const;               // total_energy of (x_, v_)
+  Vec3 momentum() const;                   // sum of m v over every mass, N s
+  Vec3 momentum(const MatX3& v) const;
   [[noreturn]] void diverge(const std::string& cause, long vertex, const std::string& detail);
 
   Scene scene_;
@@ -312,6 +317,11 @@ class Simulation {
   EnergyLedger ledger_, ledger_start_;
   double energy_end_start_ = 0;
   double energy_end_ = 0, energy_run_ = 0, gravity_potential_0_ = 0, energy_scale_ = 0;
+  // J: moving pins' and contact planes' work in the strain limiting inside self-collision's
+  // sweeps (booked to pins, not self_collision), summed over one response
+  double sweep_pin_work_ = 0;
+  Vec3 sweep_strain_momentum_ = Vec3::Zero();  // N s: that strain limiting's momentum change
+  Vec3 pins_centre_0_ = Vec3::Zero();          // m: the pins' centre of mass at construction
   MatX3 flap_drift_;  // (N x 3) m/s, "displace": dz n / h, the integrator's drift
   MatX3 flap_force_;  // (N x 3) N, "force": held over the piece by the integrator
 
@@ -325,6 +335,8 @@ class Simulation {
   MatX3 pin_rest_, pin_hold_, pin_goal_, pin_at_, pin_start_;  // (P x 3) m
   Pose pose_now_, pose_goal_;
   RigidMotion pole_motion_;  // the pole over the piece being stepped
+  RigidMotion pins_frame_;   // the pins' pose over the piece being stepped (moving pins)
+  MatX3 x0_carried_;         // (N x 3) m: the piece's start carried by pins_frame_ (self-collision)
   bool pole_moves_ = false;
   // The scene's solids the flag collides with (cloth = true), and their motions (empty: at rest).
   std::vector<ClothSolid> cloth_solids_;

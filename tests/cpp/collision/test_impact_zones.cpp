@@ -42,16 +42,24 @@ TEST(ImpactZones, FreezingAGroupSendsItBackToX0AndKeepsItsMomentum) {
   EXPECT_FALSE(zones.still(0, c.w));
 }
 
-TEST(ImpactZones, AGroupHoldingAPinnedVertexStops) {
+// The group moves with its pin: at rest with a pin at rest, and with a moving pin's velocity
+// (the pins' frame; the Simulation passes x0 carried by the pins' pose).
+TEST(ImpactZones, AGroupHoldingAPinnedVertexMovesWithThePin) {
   Cloud c;
-  c.w[1] = 0;  // pinned, and (as the caller may have done) displaced
+  c.w[1] = 0;  // pinned, and (as the caller may have done) displaced, moving at (2, 0, 0)
   ImpactZones zones(5);
   const int32_t group[4] = {0, 1, 2, 3};
   EXPECT_EQ(zones.freeze(group, c.x0, c.x, c.v, c.w), 3);
   for (const int32_t i : {0, 2, 3}) {
     EXPECT_EQ(c.x.row(i), c.x0.row(i));
-    EXPECT_EQ(c.v.row(i).norm(), 0);
+    EXPECT_EQ(c.v.row(i), c.v.row(1));
   }
+  Cloud still;
+  still.w[1] = 0;
+  still.v.row(1).setZero();
+  zones.clear();
+  zones.freeze(group, still.x0, still.x, still.v, still.w);
+  for (const int32_t i : {0, 2, 3}) EXPECT_EQ(still.v.row(i).norm(), 0);
   EXPECT_EQ(c.x(1, 2), 1);  // a pinned vertex is never moved
   EXPECT_EQ(c.v(1, 0), 2);
   EXPECT_TRUE(zones.still(1, c.w));  // nor can be
