@@ -32,8 +32,9 @@ constexpr Index kQueryGroup = 8;
 constexpr size_t kExpectedPerItem = 8;
 // The queries and the list's filter run in up to kMaxChunks chunks of at least kGroupsPerChunk
 // query groups each (run_chunks): fine enough that a thread that joins late still takes a fair
-// share, coarse enough that a chunk costs far more than taking it.
-constexpr Index kMaxChunks = 32, kGroupsPerChunk = 16;
+// share (the paper flag's 40 groups make 5 chunks), coarse enough that a chunk costs far more
+// than taking it.
+constexpr Index kMaxChunks = 32, kGroupsPerChunk = 8;
 
 // A pair with no free vertex (all four inverse masses 0) is never a candidate: nothing to move.
 inline bool none_free(const VecX& inv_mass, int32_t a, int32_t b, int32_t c, int32_t d) {

@@ -16,8 +16,10 @@ inline void gather(const MatX3& x, const int32_t idx[4], PairPoints& p) {
 }
 
 // Pair loops whose pairs each write their own slot k share their pairs with the SideBySide helper
-// (for_each_chunk) from this many pairs, in chunks of at least kPairsPerChunk.
-constexpr Index kPairShareGrain = 2048, kPairsPerChunk = 512, kMaxPairChunks = 32;
+// (for_each_chunk) from this many pairs, in chunks of at least kPairsPerChunk: a chunk of 128
+// pairs is ~10-25k instructions (start gaps, detection), far above taking it (an atomic add), and
+// the paper flag's ~530 pairs make 4 chunks that a helper done with its air step can share.
+constexpr Index kPairShareGrain = 256, kPairsPerChunk = 128, kMaxPairChunks = 32;
 
 // body(K{}, pair, k) for every candidate pair k (vertex-triangle pairs, then edge-edge pairs,
 // numbered on), K its contact type: one loop per type, so each body is compiled for its type.
