@@ -137,6 +137,9 @@ thread_local SideBySide::State* t_sharing = nullptr;
 bool detail::share_chunks(Index chunks, ChunkFn fn, const void* body) {
   SideBySide::State* s = t_sharing;
   if (!s || chunks <= 1) return false;
+  // A helper that has not picked its own job up is not running (asleep, or without a core on a
+  // loaded machine): posting would only cost a wake-up, and the caller runs the air after this.
+  if (s->job.load(std::memory_order_acquire) == kPosted) return false;
   SharedChunks c{fn, body, chunks};
   s->shared.store(&c);
   s->shares.fetch_add(1);

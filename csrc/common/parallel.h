@@ -65,7 +65,8 @@ bool share_chunks(Index chunks, ChunkFn fn, const void* body);
 /// body(c) for every chunk c in [0, chunks), each chunk writing only outputs of its own (results
 /// merged in chunk order afterwards), so that which thread runs which chunk cannot change a bit.
 /// Inside a SideBySide::run's first job (the cloth's side of a pipelined step) the helper thread,
-/// once its own job is done, takes chunks too (balance: the air's thread helps the cloth's);
+/// once its own job is done, takes chunks too (balance: the air's thread helps the cloth's), if it
+/// has picked its own job up by then (else it is not running: no wake-up is paid for);
 /// elsewhere a plain loop in chunk order. Chunks must not throw and must not enter OpenMP teams
 /// (num_threads() is 1 on both sides there). No heap allocation.
 template <class Body>
