@@ -140,6 +140,7 @@ bool detail::share_chunks(Index chunks, ChunkFn fn, const void* body) {
   // A helper that has not picked its own job up is not running (asleep, or without a core on a
   // loaded machine): posting would only cost a wake-up, and the caller runs the air after this.
   if (s->job.load(std::memory_order_acquire) == kPosted) return false;
+  if (s->shared.load() != nullptr) return false;  // a chunk of a shared set: its loops run plainly
   SharedChunks c{fn, body, chunks};
   s->shared.store(&c);
   s->shares.fetch_add(1);

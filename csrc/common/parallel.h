@@ -67,8 +67,9 @@ bool share_chunks(Index chunks, ChunkFn fn, const void* body);
 /// Inside a SideBySide::run's first job (the cloth's side of a pipelined step) the helper thread,
 /// once its own job is done, takes chunks too (balance: the air's thread helps the cloth's), if it
 /// has picked its own job up by then (else it is not running: no wake-up is paid for);
-/// elsewhere a plain loop in chunk order. Chunks must not throw and must not enter OpenMP teams
-/// (num_threads() is 1 on both sides there). No heap allocation.
+/// elsewhere a plain loop in chunk order, as is a for_each_chunk inside a chunk (no nesting).
+/// Chunks must not throw and must not enter OpenMP teams (num_threads() is 1 on both sides
+/// there). No heap allocation.
 template <class Body>
 inline void for_each_chunk(Index chunks, const Body& body) {
   const detail::ChunkFn fn = [](const void* b, Index c) { (*static_cast<const Body*>(b))(c); };

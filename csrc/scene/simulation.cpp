@@ -639,7 +639,7 @@ void Simulation::finish_step() {
   }
   ++step_count_;
   time_ = double(step_count_) * scene_.dt;  // no drift from summing dt
-  update_normals();
+  normals_for_x();  // stage_check computed them unless a stage moved x_ after it
   if (built(Stage::kFlapVisual)) stage_flap_visual();
 }
 
@@ -1207,13 +1207,22 @@ Simulation::Implausible Simulation::stage_check() {
   check_finite();
   double strain;
   Index worst;
-  if (built(Stage::kSelfCollision)) {  // its change of E, from the lengths the strain reads
-    const ClothEnergy e =
-        cloth_energy_and_max_strain(topo_, scene_.gravity, x_, v_, strain, &worst);
+  ClothEnergy e;
+  const bool energy = built(Stage::kSelfCollision);  // its change of E, from the same lengths
+  // Beside the strain and energy sums, the normals the step's end needs (finish_step finds them
+  // computed from these bits): in a pipelined step the air's thread, done with its own, takes
+  // one of the two (for_each_chunk), instead of the normals running after the join.
+  for_each_chunk(2, [&](Index c) {
+    if (c == 1)
+      update_normals();
+    else if (energy)
+      e = cloth_energy_and_max_strain(topo_, scene_.gravity, x_, v_, strain, &worst);
+    else
+      strain = flagsim::max_strain(topo_, x_, &worst);
+  });
+  if (energy) {
     ledger_.pins += sweep_pin_work_;  // the moving pins' share of its response
     book_energy(ledger_.self_collision, sweep_pin_work_, e.total());
-  } else {
-    strain = flagsim::max_strain(topo_, x_, &worst);
   }
   Implausible bad = check_strain(strain, worst);
   if (!bad.cause.empty()) return bad;

@@ -137,6 +137,49 @@ TEST(ForEachChunk, InsideSideBySideTheHelperTakesChunksOnceItsJobIsDone) {
   EXPECT_GT(helped, 0) << "the helper never took a chunk in 20 rounds";
 }
 
+// A for_each_chunk inside a shared chunk (the check's energy sums beside the normals) is a plain
+// loop in chunk order on the thread that runs the outer chunk: one chunk set is shared at a time,
+// so an inner set can neither take the outer one's place nor be taken by the helper. The first
+// outer chunk's inner chunks wait 0.2 ms each, long enough for a helper done with its own job and
+// with the other, quick, outer chunk to take one if offered.
+TEST(ForEachChunk, AChunkSetInsideASharedChunkIsAPlainLoop) {
+  if (!has_openmp()) GTEST_SKIP() << "built without OpenMP: one thread only";
+  Threads two(2);
+  SideBySide beside;
+  constexpr Index kOuter = 2, kInner = 8;
+  for (int round = 0; round < 5; ++round) {
+    std::vector<std::thread::id> outer_who(kOuter);
+    std::vector<std::vector<std::thread::id>> inner_who(kOuter);
+    std::vector<std::vector<long>> inner_at(kOuter);  // the inner chunk's place in its loop
+    std::vector<std::atomic<long>> next(kOuter);
+    std::atomic<bool> second_done{false};
+    beside.run(
+        [&]() noexcept {
+          const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2);
+          while (!second_done.load() && std::chrono::steady_clock::now() < until)
+            std::this_thread::yield();
+          for_each_chunk(kOuter, [&](Index c) {
+            outer_who[size_t(c)] = std::this_thread::get_id();
+            inner_who[size_t(c)].assign(kInner, std::thread::id());
+            inner_at[size_t(c)].assign(kInner, -1);
+            for_each_chunk(kInner, [&](Index k) {
+              inner_at[size_t(c)][size_t(k)] = next[size_t(c)].fetch_add(1);
+              inner_who[size_t(c)][size_t(k)] = std::this_thread::get_id();
+              if (c == 0) std::this_thread::sleep_for(std::chrono::microseconds(200));
+            });
+          });
+        },
+        [&]() noexcept { second_done.store(true); });
+    for (Index c = 0; c < kOuter; ++c) {
+      for (Index k = 0; k < kInner; ++k) {
+        EXPECT_EQ(inner_at[size_t(c)][size_t(k)], k) << "outer chunk " << c;
+        EXPECT_EQ(inner_who[size_t(c)][size_t(k)], outer_who[size_t(c)])
+            << "round " << round << ", outer chunk " << c << ", inner chunk " << k;
+      }
+    }
+  }
+}
+
 // Many short rounds with shared chunks in each: nothing runs twice or hangs, whether the helper
 // is still on its own job, helping, or asleep.
 TEST(ForEachChunk, EveryChunkRunsOnceOverManyShortRounds) {
