@@ -245,7 +245,8 @@ void Simulation::setup_energy() {
   const bool air = scene_.air.model != AirModel::kNone;
   double U = 0, carried = 0;
   if (air && pin_driver_ == PinDriver::kKeyframes) {
-    const CarriedSpeeds c = carried_speeds(scene_.air.wind, f.pin_motion, pins_centre(pin_rest_));
+    const CarriedSpeeds c =
+        carried_speeds(scene_.air.wind, f.pin_motion, pins_centre(pin_rest_, true));
     U = c.relative;
     carried = c.own;
   } else if (air) {
@@ -1305,15 +1306,14 @@ double Simulation::holdable_energy() const {
   return kinetic + e.spring + std::max(rise, 0.0);
 }
 
-// The pinned rows' centre of mass of a (P x 3 when a holds only the pins, else N x 3): the frame
+// The pinned rows' centre of mass of a (P x 3 in pin order when pins_only, else N x 3): the frame
 // of the pins. No pins: zero.
-Vec3 Simulation::pins_centre(const MatX3& a) const {
-  const bool only_pins = a.rows() == Index(pin_index_.size());
+Vec3 Simulation::pins_centre(const MatX3& a, bool pins_only) const {
   Vec3 sum = Vec3::Zero();
   double m = 0;
   for (Index k = 0; k < Index(pin_index_.size()); ++k) {
     const double mk = topo_.mass[pin_index_[k]];
-    sum += mk * Vec3(a.row(only_pins ? k : pin_index_[k]));
+    sum += mk * Vec3(a.row(pins_only ? k : pin_index_[k]));
     m += mk;
   }
   return m > 0 ? Vec3(sum / m) : Vec3::Zero();

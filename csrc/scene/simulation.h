@@ -267,9 +267,10 @@ class Simulation {
   void check_finite();
   Implausible check_strain(double strain, Index worst_spring);  // max_strain of x_
   Implausible check_energy() const;
-  Vec3 pins_centre(const MatX3& a) const;  // the pinned rows' centre of mass of a
-  double energy_now() const;               // total_energy of (x_, v_)
-  Vec3 momentum() const;                   // sum of m v over every mass, N s
+  // the pinned rows' centre of mass of a: N x 3, or P x 3 in pin order when pins_only
+  Vec3 pins_centre(const MatX3& a, bool pins_only = false) const;
+  double energy_now() const;  // total_energy of (x_, v_)
+  Vec3 momentum() const;      // sum of m v over every mass, N s
   Vec3 momentum(const MatX3& v) const;
   [[noreturn]] void diverge(const std::string& cause, long vertex, const std::string& detail);
 
