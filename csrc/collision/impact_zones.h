@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "collision/params.h"
+#include "common/keyframes.h"
 #include "common/types.h"
 
 namespace flagsim {
@@ -28,13 +29,16 @@ class ImpactZones {
   /// rest). Returns how many were not frozen before.
   Index freeze(const int32_t group[4], const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass);
 
-  /// True when a vertex that is not still lies inside the pole at x.
-  bool any_in_pole(const PoleParams& pole, const MatX3& x, const VecX& inv_mass) const;
+  /// True when a vertex that is not still lies inside the pole at x. motion: a moving pole, at
+  /// motion->to at both x0 and x (the sweep's frame: collide_pole_carried), or nullptr (at rest).
+  bool any_in_pole(const PoleParams& pole, const MatX3& x, const VecX& inv_mass,
+                   const RigidMotion* motion = nullptr) const;
 
   /// Every vertex that is not still and lies inside the pole at x back to x0 (outside the pole),
-  /// its velocity towards the pole's axis removed. Returns how many.
+  /// its velocity towards the pole's axis removed (relative to the surface's velocity there when
+  /// the pole moves; motion as any_in_pole's). Returns how many.
   Index freeze_in_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
-                       const VecX& inv_mass);
+                       const VecX& inv_mass, const RigidMotion* motion = nullptr);
 
   const std::vector<uint8_t>& frozen() const { return frozen_; }
 

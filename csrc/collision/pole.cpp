@@ -132,11 +132,13 @@ double collide_point(const PoleParams& pole, const Vec3& a, Vec3& p, Vec3& v) {
 }
 
 // collide_pole() for vertex i: the pole at rest, or moving (the vertex's path and velocity taken
-// into the pole's frame, relative to the pole's surface, and back).
+// into the pole's frame, relative to the pole's surface, and back). x0 is taken into that frame
+// by `start` (motion->from, or motion->to when x0 is already carried to the piece's end).
 // push: if given, the vertex's velocity change times the moving surface's velocity there is
 // added to it (dv . v_surface, m/s squared: the moving pole's work on it per unit mass).
-double collide_vertex(const PoleParams& pole, const RigidMotion* motion, const MatX3& x0, MatX3& x,
-                      MatX3& v, const VecX& inv_mass, Index i, double* push = nullptr) {
+double collide_vertex(const PoleParams& pole, const RigidMotion* motion, const Pose* start,
+                      const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass, Index i,
+                      double* push = nullptr) {
   if (inv_mass[i] == 0) return -1;
   if (!motion) {
     if (far_from_pole(pole, row(x0, i), row(x, i))) return -1;  // before copying the rows
@@ -147,7 +149,7 @@ double collide_vertex(const PoleParams& pole, const RigidMotion* motion, const M
     v.row(i) = vi.transpose();
     return moved;
   }
-  const Vec3 a = motion->from.inverse(row(x0, i));
+  const Vec3 a = start->inverse(row(x0, i));
   Vec3 p = motion->to.inverse(row(x, i));
   if (far_from_pole(pole, a, p)) return -1;
   const Vec3 surface = motion->velocity_at(p);
@@ -161,11 +163,10 @@ double collide_vertex(const PoleParams& pole, const RigidMotion* motion, const M
   return moved;
 }
 
-}  // namespace
-
-Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
-                   const VecX& inv_mass, double* max_move, const RigidMotion* motion,
-                   const VecX* mass, double* wall_work) {
+// collide_pole and collide_pole_carried: x0 taken into the pole's frame by `start`.
+Index collide_all(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
+                  double* max_move, const RigidMotion* motion, const Pose* start, const VecX* mass,
+                  double* wall_work) {
   Index moved = 0;
   double largest = 0;
   const Index n = x.rows();
@@ -175,20 +176,35 @@ Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
   if (!book && use_team(n >= kParallelGrain)) {
 #pragma omp parallel for schedule(static) reduction(+ : moved) reduction(max : largest)
     for (Index i = 0; i < n; ++i) {
-      const double d = collide_vertex(pole, motion, x0, x, v, inv_mass, i);
+      const double d = collide_vertex(pole, motion, start, x0, x, v, inv_mass, i);
       if (d >= 0) ++moved, largest = std::max(largest, d);
     }
   } else {
     double work = 0;
     for (Index i = 0; i < n; ++i) {
       double push = 0;
-      const double d = collide_vertex(pole, motion, x0, x, v, inv_mass, i, book ? &push : nullptr);
+      const double d =
+          collide_vertex(pole, motion, start, x0, x, v, inv_mass, i, book ? &push : nullptr);
       if (d >= 0) ++moved, largest = std::max(largest, d), work += book ? (*mass)[i] * push : 0.0;
     }
     if (book) *wall_work += work;
   }
   if (max_move) *max_move = largest;
   return moved;
+}
+
+}  // namespace
+
+Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
+                   const VecX& inv_mass, double* max_move, const RigidMotion* motion,
+                   const VecX* mass, double* wall_work) {
+  return collide_all(pole, x0, x, v, inv_mass, max_move, motion, motion ? &motion->from : nullptr,
+                     mass, wall_work);
+}
+
+Index collide_pole_carried(const PoleParams& pole, const RigidMotion& motion, const MatX3& x0,
+                           MatX3& x, MatX3& v, const VecX& inv_mass, double* max_move) {
+  return collide_all(pole, x0, x, v, inv_mass, max_move, &motion, &motion.to, nullptr, nullptr);
 }
 
 }  // namespace flagsim

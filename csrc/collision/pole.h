@@ -30,4 +30,17 @@ Index collide_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
                    const RigidMotion* motion = nullptr, const VecX* mass = nullptr,
                    double* wall_work = nullptr);
 
+/// collide_pole in the frame a moving pole is at rest in, as a sweep that runs there sees it
+/// (self-collision in the pins' frame): x0 already carried by `motion` to the piece's end, so the
+/// pole is at motion.to at both ends of the path x0 -> x; velocities are taken relative to its
+/// surface's, motion.velocity_at. Its work is the frame's (the caller books V . dP).
+Index collide_pole_carried(const PoleParams& pole, const RigidMotion& motion, const MatX3& x0,
+                           MatX3& x, MatX3& v, const VecX& inv_mass, double* max_move = nullptr);
+
+/// inside_pole for the pole where motion->to puts it (nullptr: at rest); x in the world, m.
+inline bool inside_moved_pole(const PoleParams& pole, const RigidMotion* motion, const Vec3& x,
+                              double tolerance = 0.0) {
+  return inside_pole(pole, motion ? motion->to.inverse(x) : x, tolerance);
+}
+
 }  // namespace flagsim

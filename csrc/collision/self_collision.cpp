@@ -195,7 +195,14 @@ void SelfCollision::mark_on_pole(const PoleParams& pole, const MatX3& x) {
   grown.radius += 0.5 * h;
   grown.height += h;
   grown.base.y() -= 0.5 * h;
-  for (Index i = 0; i < n_; ++i) on_pole_[i] = inside_pole(grown, row(x, i));
+  for (Index i = 0; i < n_; ++i) on_pole_[i] = inside_moved_pole(grown, pole_motion_, row(x, i));
+}
+
+// The pole's projection at rest, or moving in its frame (resolve()'s pole_motion).
+Index SelfCollision::collide_with_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
+                                       const VecX& inv_mass, double* max_move) const {
+  if (pole_motion_) return collide_pole_carried(pole, *pole_motion_, x0, x, v, inv_mass, max_move);
+  return collide_pole(pole, x0, x, v, inv_mass, max_move);
 }
 
 // contacts_ for every pair, in parallel on one state; after the first sweep only pairs with a
@@ -283,7 +290,7 @@ bool SelfCollision::sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_m
   Index pushed = 0;
   if (pole) {
     double largest = 0;
-    pushed = collide_pole(*pole, x0, x, v, inv_mass, &largest);
+    pushed = collide_with_pole(*pole, x0, x, v, inv_mass, &largest);
     stats_.pole += pushed;
     changed = changed || largest > 1e-2 * h;
   }
@@ -319,7 +326,7 @@ bool SelfCollision::find_violations(const MatX3& x0, const MatX3& x, const VecX&
     });
   }
   const bool any = std::find(flag_.begin(), flag_.end(), uint8_t{1}) != flag_.end();
-  return any || (pole && zones_.any_in_pole(*pole, x, inv_mass));
+  return any || (pole && zones_.any_in_pole(*pole, x, inv_mass, pole_motion_));
 }
 
 void SelfCollision::freeze_fallback(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
@@ -337,15 +344,17 @@ void SelfCollision::freeze_fallback(const MatX3& x0, MatX3& x, MatX3& v, const V
       K::corners(candidates_, pr, group);
       stats_.frozen += zones_.freeze(group, x0, x, v, inv_mass);
     });
-    if (pole) stats_.frozen += zones_.freeze_in_pole(*pole, x0, x, v, inv_mass);
+    if (pole) stats_.frozen += zones_.freeze_in_pole(*pole, x0, x, v, inv_mass, pole_motion_);
   }
 }
 
 const SelfCollisionStats& SelfCollision::resolve(const MatX3& x0, MatX3& x, MatX3& v,
                                                  const VecX& inv_mass, const PoleParams* pole,
-                                                 const Projector* constraints) {
+                                                 const Projector* constraints,
+                                                 const RigidMotion* pole_motion) {
   stats_ = SelfCollisionStats{};
-  if (pole) stats_.pole += collide_pole(*pole, x0, x, v, inv_mass);  // the sweeps start outside
+  pole_motion_ = pole ? pole_motion : nullptr;
+  if (pole) stats_.pole += collide_with_pole(*pole, x0, x, v, inv_mass, nullptr);  // start outside
   bool complete = false;  // candidates cover every pair that can violate at the current x
   for (int attempt = 0; attempt <= kMaxRebuilds && !complete; ++attempt) {
     broad_phase(x0, x, inv_mass, /*shifted=*/true);
@@ -358,6 +367,7 @@ const SelfCollisionStats& SelfCollision::resolve(const MatX3& x0, MatX3& x, MatX
   }
   if (!complete) broad_phase(x0, x, inv_mass, /*shifted=*/true);
   freeze_fallback(x0, x, v, inv_mass, pole);
+  pole_motion_ = nullptr;  // the caller's, valid for this call only
   return stats_;
 }
 

@@ -83,10 +83,13 @@ class SelfCollision {
 
   /// One step's response (see above). x0, x, v: N x 3 (m, m, m/s); inv_mass: N (1/kg, 0 pinned);
   /// pole: the pole to keep vertices out of in the same sweeps, or nullptr; constraints: see
-  /// Projector, or nullptr.
+  /// Projector, or nullptr; pole_motion: a moving pole, nullptr at rest. The response then runs
+  /// in its frame: x0 carried by pole_motion to the piece's end (the pole at pole_motion->to at
+  /// both ends), velocities into it taken relative to its surface (collide_pole_carried).
   const SelfCollisionStats& resolve(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass,
                                     const PoleParams* pole = nullptr,
-                                    const Projector* constraints = nullptr);
+                                    const Projector* constraints = nullptr,
+                                    const RigidMotion* pole_motion = nullptr);
 
   const SelfCollisionStats& stats() const { return stats_; }
   const SelfCollisionParams& params() const { return params_; }
@@ -107,6 +110,8 @@ class SelfCollision {
     bool any = false, degenerate = false, changed = false;
   };
   void mark_on_pole(const PoleParams& pole, const MatX3& x);
+  Index collide_with_pole(const PoleParams& pole, const MatX3& x0, MatX3& x, MatX3& v,
+                          const VecX& inv_mass, double* max_move) const;
   void detect_contacts(const MatX3& x0, const MatX3& x, bool first);
   Responses respond(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass);
   bool sweep(const MatX3& x0, MatX3& x, MatX3& v, const VecX& inv_mass, const PoleParams* pole,
@@ -140,6 +145,8 @@ class SelfCollision {
   // thickness apart along the whole step, so find_violations has no pair to flag at that x.
   bool quiet_ = false;
   SelfCollisionStats stats_;
+  // resolve()'s pole_motion during the call (nullptr: the pole at rest, or none).
+  const RigidMotion* pole_motion_ = nullptr;
 };
 
 }  // namespace flagsim

@@ -1001,9 +1001,12 @@ void Simulation::stage_self_collision() {
       for (Index i = 0; i < x_.rows(); ++i)
         x0_carried_.row(i) =
             pins_frame_.to.apply(pins_frame_.from.inverse(row(x_piece_, i))).transpose();
+    // The pole inside the sweeps, at rest or where the pins' pose puts it (at rest in their
+    // frame: at the piece's end at both x0_carried_ and x_), moving with them.
     self_collision_->resolve(frame ? x0_carried_ : x_piece_, x_, v_, topo_.inv_mass,
-                             built(Stage::kPole) && !pole_moves_ ? &scene_.pole : nullptr,
-                             built(Stage::kStrainLimit) ? &strain_projector_ : nullptr);
+                             built(Stage::kPole) ? &scene_.pole : nullptr,
+                             built(Stage::kStrainLimit) ? &strain_projector_ : nullptr,
+                             pole_moves_ ? &pole_motion_ : nullptr);
     // The rest of the response does not conserve momentum either: a pinned vertex takes no share
     // of a contact's impulse (the pin holds it), impulses are averaged per vertex (Jacobi), and
     // the fallback stops a group with a pin. Its work in the lab is its work in the pins' frame

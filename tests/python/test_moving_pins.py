@@ -404,29 +404,33 @@ def test_a_carried_flag_books_self_collision_as_the_still_one(pole):
     without a pole, the flag folds over its pinned edge: before, the carried flag booked 4x the
     still one's self_collision per step, and a crossing stopped short along the lab's path (5 cm
     a step behind the pins) made it halve its step 88 and part from the still flag by 3 cm; now
-    the two agree to round-off. With the pole, a still pole is kept inside self-collision's
-    sweeps (booked to self_collision) and a moving one by stage_pole (booked to pole): the two
-    entries' sum agrees to 2e-3 J and the flags to a few mm (docs/design.md "Moving pins and
-    Galilean invariance")."""
+    the two agree to round-off. With the pole, the sweeps keep the pole where the pins' pose puts
+    it, moving with them, as they keep a still one: before, only stage_pole kept a moving pole,
+    the carried flag booked +0.018 J to `pole` where the still one booked 0, and the flags parted
+    by millimetres (docs/design.md "Moving pins and Galilean invariance")."""
 
     def folding(s):
         s.self_collision.enabled = True
         s.pole.enabled = pole
 
     still, carried = still_and_carried("implicit", folding)
+    pushes = [0, 0]  # the pole's responses inside the sweeps
     for _ in range(150):
         still.step()
         carried.step()
         halved = [sim.last_step_stats["energy_halvings"] for sim in (still, carried)]
         assert halved[1] == halved[0]
+        pushes = [n + sim.self_collision_stats["pole"] for n, sim in zip(pushes, (still, carried))]
     a, b = still.energy_ledger(), carried.energy_ledger()
-    if pole:
-        assert a["pole"] == 0 and b["pole"] > 0.01  # the split this test states
-        both = ("self_collision", "pole")
-        assert sum(b[k] for k in both) == pytest.approx(sum(a[k] for k in both), abs=3e-3)
-        np.testing.assert_allclose(shifted_back(carried), still.positions, rtol=0, atol=1e-2)
-    else:
-        assert a["self_collision"] > 0.1, a  # the layers met
-        np.testing.assert_allclose(shifted_back(carried), still.positions, rtol=0, atol=1e-9)
-        for entry in ("self_collision", "strain_limit", "integrator"):
-            assert b[entry] == pytest.approx(a[entry], abs=1e-4), (entry, a, b)
+    assert a["self_collision"] > 1e-3, a  # the layers met
+    assert pushes[1] == pushes[0] and (pushes[0] > 0) == pole
+    # Round-off; with the pole, until a held contact on it parts them at step 59 (4.5e-8 m after
+    # 150 steps, as without self-collision: test_a_flag_carried_at_5_m_s_is_the_still_flag...).
+    near = 1e-6 if pole else 1e-9
+    np.testing.assert_allclose(shifted_back(carried), still.positions, rtol=0, atol=near)
+    # Every entry but the frame's work (pins, and the drag that resists it) and the frame's
+    # kinetic energy set as an edit; the remainder to the CG tolerance (1.4e-5 J).
+    for entry in a:
+        if entry not in ("pins", "drag", "edits", "total"):
+            tol = 1e-4 if entry == "integrator" else near
+            assert b[entry] == pytest.approx(a[entry], abs=tol), (entry, a, b)

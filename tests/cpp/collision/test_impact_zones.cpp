@@ -89,5 +89,34 @@ TEST(ImpactZones, AVertexInThePoleGoesBackWithoutItsInwardVelocity) {
   EXPECT_EQ(zones.freeze_in_pole(pole, x0, x, v, w), 0);
 }
 
+// The same with the pole carried at U (x0 carried with it, as in self-collision's sweeps): the
+// vertex goes back to x0 and loses its inward velocity relative to the pole, keeping U.
+TEST(ImpactZones, AVertexInACarriedPoleGoesBackWithThePolesVelocity) {
+  PoleParams pole;
+  const Vec3 U(5.0, 0.0, 0.0);
+  RigidMotion motion;
+  motion.h = 0.01;
+  motion.from.t = U;
+  motion.to.t = U * 1.01;
+  MatX3 x0(2, 3), x(2, 3), v(2, 3);
+  x0 << 0.1, 0, 0, 0.1, 0, 0.1;
+  x << 0.02, 0, 0, 0.02, 0, 0.1;
+  v << -3, 1, 2, -3, 1, 2;
+  for (Index i = 0; i < 2; ++i) {
+    x0.row(i) += motion.to.t.transpose();
+    x.row(i) += motion.to.t.transpose();
+    v.row(i) += U.transpose();
+  }
+  VecX w = VecX::Ones(2);
+  ImpactZones zones(2);
+  EXPECT_FALSE(zones.any_in_pole(pole, x, w));  // the pole at rest is 5 m behind
+  EXPECT_TRUE(zones.any_in_pole(pole, x, w, &motion));
+  EXPECT_EQ(zones.freeze_in_pole(pole, x0, x, v, w, &motion), 1);
+  EXPECT_EQ(x.row(0), x0.row(0));
+  EXPECT_NEAR((v.row(0).transpose() - Vec3(5, 1, 2)).norm(), 0, 1e-12);  // radial part gone
+  EXPECT_EQ(v.row(1).transpose(), Vec3(2, 1, 2));
+  EXPECT_FALSE(zones.any_in_pole(pole, x, w, &motion));
+}
+
 }  // namespace
 }  // namespace flagsim

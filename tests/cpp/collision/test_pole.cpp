@@ -141,5 +141,36 @@ TEST(Pole, AMovingPoleReportsItsWorkOnTheVerticesItStops) {
   EXPECT_EQ(none, 0.0);
 }
 
+// In the frame a pole translating at U is at rest in (x0 carried to the piece's end, as
+// self-collision's sweeps run), collide_pole_carried is collide_pole at rest moved along: the same
+// positions shifted by the pole's end translation, the same velocities plus U, vertex by vertex
+// (Galilean invariance, to round-off). A vertex entering the pole, one ending inside, one passing.
+TEST(Pole, ACarriedPoleIsThePoleAtRestMovedAlong) {
+  const PoleParams p = pole();
+  const Vec3 U(5.0, 0.0, -1.0);
+  const double h = 0.01, t = 0.37;
+  RigidMotion motion;
+  motion.h = h;
+  motion.from.t = U * t;
+  motion.to.t = U * (t + h);
+  MatX3 x0(3, 3), x(3, 3), v(3, 3);
+  x0 << -0.2, 0.0, 0.01, 0.1, 0.3, 0.0, 0.3, 0.0, 0.3;
+  x << -0.02, 0.0, 0.03, -0.1, 0.3, 0.01, 0.35, 0.0, 0.3;
+  v << 18.0, 0.0, 2.0, -20.0, 0.0, 1.0, 5.0, 0.0, 0.0;
+  const VecX w = VecX::Ones(3);
+  MatX3 xc = x, vc = v, x0c = x0;
+  for (Index i = 0; i < 3; ++i) {
+    x0c.row(i) += motion.to.t.transpose();
+    xc.row(i) += motion.to.t.transpose();
+    vc.row(i) += U.transpose();
+  }
+  EXPECT_EQ(collide_pole(p, x0, x, v, w), 2);
+  EXPECT_EQ(collide_pole_carried(p, motion, x0c, xc, vc, w), 2);
+  for (Index i = 0; i < 3; ++i) {
+    EXPECT_NEAR((xc.row(i) - motion.to.t.transpose() - x.row(i)).norm(), 0, 1e-14) << i;
+    EXPECT_NEAR((vc.row(i) - U.transpose() - v.row(i)).norm(), 0, 1e-12) << i;
+  }
+}
+
 }  // namespace
 }  // namespace flagsim
