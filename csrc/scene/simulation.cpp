@@ -479,9 +479,11 @@ void Simulation::build_between_flags() {
       const Index o = between_offset_[std::size_t(i)], m = f.topo_.num_vertices();
       f.x_ = x.middleRows(o, m);
       f.v_ = v.middleRows(o, m);
+      if (between_frame_) f.sweep_strain_momentum_ -= f.momentum();
       limit_strain(f.topo_, f.scene_.integrator.strain_limit,
                    f.scene_.integrator.strain_limit_iterations, f.x_, f.v_, f.forces_.contacts,
                    f.forces_.contact_offset, &f.sweep_pin_work_, f.forces_.contact_speed);
+      if (between_frame_) f.sweep_strain_momentum_ += f.momentum();
       x.middleRows(o, m) = f.x_;
       v.middleRows(o, m) = f.v_;
     }
@@ -510,15 +512,37 @@ bool Simulation::flags_may_touch() const {
   return false;
 }
 
+// The frame contacts between flags run in: the pins' motion over the step when every flag's pins
+// follow the same pose (keyframed or set by set_pin_pose; two flags carried by one pose are the
+// same two flags at rest), else none (the lab's): the flags' start positions are collision-free
+// between flags only as they were, and carried by different poses they may overlap. Pins at rest,
+// held, or moved by targets (no pose) keep the lab's frame.
+bool Simulation::common_pin_frame(RigidMotion& frame) const {
+  const auto same = [](const Pose& a, const Pose& b) { return a.R == b.R && a.t == b.t; };
+  frame = {pin_pose(time_), pin_pose(time_ + scene_.dt), scene_.dt};
+  for (int i = 0; i < num_flags(); ++i) {
+    const Simulation& f = flag(i);
+    if (f.pin_driver_ != PinDriver::kKeyframes && f.pin_driver_ != PinDriver::kPose) return false;
+    if (!same(f.pin_pose(time_), frame.from) || !same(f.pin_pose(time_ + scene_.dt), frame.to))
+      return false;
+  }
+  return true;
+}
+
 // Contacts between flags over the whole step (start positions x_start_, collision-free, to the
 // positions the flags' own stages left): the self-collision response on the union of the flags,
 // with the same guarantees (collision/self_collision.h). The change of each flag's energy goes
-// to its ledger's self_collision entry. No pole in this pass: each flag's own pass kept its pole.
+// to its ledger's self_collision entry, but for the pins' work in it. When every flag's pins
+// follow one pose, the response runs in its frame, as a flag's own does (stage_self_collision):
+// the start carried by the pose to the step's end, and V . dP of each flag's response (V its pins'
+// velocity) booked to its pins. No pole in this pass: each flag's own pass kept its pole.
 void Simulation::stage_between_flags() {
   if (!between_) return;
   StageClock::Scope t(&clock_, Stage::kSelfCollision);
   between_stats_ = SelfCollisionStats{};
   if (!flags_may_touch()) return;
+  RigidMotion frame;
+  between_frame_ = common_pin_frame(frame);
   for (int i = 0; i < num_flags(); ++i) {
     const Simulation& f = flag(i);
     const Index o = between_offset_[std::size_t(i)], m = f.topo_.num_vertices();
@@ -526,10 +550,16 @@ void Simulation::stage_between_flags() {
     bx_.middleRows(o, m) = f.x_;
     bv_.middleRows(o, m) = f.v_;
   }
+  if (between_frame_)
+    for (Index k = 0; k < bx0_.rows(); ++k)
+      bx0_.row(k) = frame.to.apply(frame.from.inverse(row(bx0_, k))).transpose();
   bool strain = false;
   for (int i = 0; i < num_flags(); ++i) {
-    strain = strain || flag(i).built(Stage::kStrainLimit);
-    flag(i).sweep_pin_work_ = 0;
+    Simulation& f = flag(i);
+    strain = strain || f.built(Stage::kStrainLimit);
+    f.sweep_pin_work_ = 0;
+    f.sweep_strain_momentum_.setZero();
+    f.between_p0_ = between_frame_ ? f.momentum() : Vec3::Zero();
   }
   between_stats_ = between_->resolve(bx0_, bx_, bv_, binv_mass_, nullptr,
                                      strain ? &between_projector_ : nullptr);
@@ -538,6 +568,9 @@ void Simulation::stage_between_flags() {
     const Index o = between_offset_[std::size_t(i)], m = f.topo_.num_vertices();
     f.x_ = bx_.middleRows(o, m);
     f.v_ = bv_.middleRows(o, m);
+    if (between_frame_)
+      f.sweep_pin_work_ +=
+          f.pins_centre(f.v_).dot(f.momentum() - f.between_p0_ - f.sweep_strain_momentum_);
     const double e = f.energy_now();
     f.ledger_.pins += f.sweep_pin_work_;
     f.ledger_.self_collision += e - f.energy_end_ - f.sweep_pin_work_;

@@ -250,6 +250,7 @@ class Simulation {
   Implausible stage_check();
   // After every flag's pieces: contacts between flags (several flags, self_collision enabled).
   void stage_between_flags();
+  bool common_pin_frame(RigidMotion& frame) const;  // every flag's pins' pose, if they share it
   bool flags_may_touch() const;
   // After the step: the air grid advances, the "visual" flap displaces the exported geometry.
   void advance_fluid();
@@ -322,6 +323,7 @@ class Simulation {
   // sweeps (booked to pins, not self_collision), summed over one response
   double sweep_pin_work_ = 0;
   Vec3 sweep_strain_momentum_ = Vec3::Zero();  // N s: that strain limiting's momentum change
+  Vec3 between_p0_ = Vec3::Zero();             // N s: momentum before the pass between flags
   Vec3 pins_centre_0_ = Vec3::Zero();          // m: the pins' centre of mass at construction
   MatX3 flap_drift_;  // (N x 3) m/s, "displace": dz n / h, the integrator's drift
   MatX3 flap_force_;  // (N x 3) N, "force": held over the piece by the integrator
@@ -383,6 +385,7 @@ class Simulation {
   std::unique_ptr<SelfCollision> between_;
   SelfCollisionStats between_stats_;
   std::vector<Index> between_offset_;
+  bool between_frame_ = false;  // this step's pass runs in the pins' common frame
   MatX3 bx0_, bx_, bv_;  // (sum N x 3) union of the flags' step-start positions, positions, v
   VecX binv_mass_;       // (sum N) union of the inverse masses
   SelfCollision::Projector between_projector_;  // every flag's strain limit on its rows
