@@ -217,21 +217,15 @@ def unexplained(ledger: dict[str, float], since: dict[str, float]) -> float:
 
 
 def net_unexplained(
-    ledger: dict[str, float],
-    since: dict[str, float],
-    energy: dict[str, float] | None = None,
-    gravity_since: float = 0.0,
+    ledger: dict[str, float], since: dict[str, float], holdable: float | None = None
 ) -> float:
     """The same without the split, J: what the run still holds of what it made (a projection's
     gain that the next solve took out again does not count here; it does in each step). With
-    `energy` (sim.energy() now) and the gravity potential at `since`, bounded by what the flag
-    can hold: its kinetic and spring energy and its rise since then (the check stage's run
-    measure, Simulation::check_energy)."""
+    `holdable` (sim.holdable_energy(): the flag's kinetic and spring energy and its rise, relative
+    to its pins once they moved), bounded by it, as the check stage's run measure is
+    (Simulation::check_energy)."""
     net = sum(ledger[k] - since[k] for k in ("integrator",) + _PROJECTIONS)
-    if energy is None:
-        return net
-    held = energy["kinetic"] + energy["spring"] + max(energy["gravity"] - gravity_since, 0.0)
-    return min(net, held)
+    return net if holdable is None else min(net, holdable)
 
 
 def run_case(case: dict[str, Any]) -> dict[str, Any]:
@@ -270,7 +264,6 @@ def run_case(case: dict[str, Any]) -> dict[str, Any]:
     chunk = max(1, steps // 200)  # energy, strain and the ledger's balance sampled ~200 times
     e0 = sum(sim.energy().values())  # the range includes the start: dissipation shows
     l0 = sim.energy_ledger()  # edits made by `prepare`
-    g0 = sim.energy()["gravity"]
     e_min, e_max, strain, subs, cgs, halvings = e0, e0, 0.0, 0, 0, 0
     most = worst_step = ledger_error = 0.0
     outcome, cause = "plausible", ""
@@ -288,7 +281,7 @@ def run_case(case: dict[str, Any]) -> dict[str, Any]:
                 halvings = max(halvings, st["energy_halvings"])
                 now = sim.energy_ledger()
                 worst_step = max(worst_step, unexplained(now, before))
-                most = max(most, net_unexplained(now, l0, sim.energy(), g0))
+                most = max(most, net_unexplained(now, l0, sim.holdable_energy()))
             done += n
             e = sum(sim.energy().values())
             ledger = sim.energy_ledger()
