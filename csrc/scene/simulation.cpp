@@ -813,12 +813,9 @@ void Simulation::restore_step_start() {
 // edge, relative to the pole. A pole the pins' pose carries (flag.pin_motion, set_pin_pose) is
 // sampled where the pose puts the edge at t, less the edge's velocity over [t, t + h]: a flag
 // carried along with its air flaps as the still one does (docs/flapping.md). Pins that never
-// moved: the lab's air at the edge's rest positions.
+// moved have the identity pose (pose_now_), which leaves the edge's rest positions and the lab's
+// air to the bit.
 double Simulation::sample_pole_air_speed(double t, double h) {
-  if (pin_driver_ == PinDriver::kNone) {
-    air_velocity(edge_points_, edge_air_);
-    return edge_air_.rowwise().norm().mean();
-  }
   const RigidMotion pole{pin_pose(t), pin_pose(t + h), h};
   for (Index r = 0; r < edge_points_.rows(); ++r)
     edge_at_.row(r) = pole.from.apply(row(edge_points_, r)).transpose();
