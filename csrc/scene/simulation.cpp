@@ -814,8 +814,10 @@ void Simulation::restore_step_start() {
 // sampled where the pose puts the edge at t, less the edge's velocity over [t, t + h]: a flag
 // carried along with its air flaps as the still one does (docs/flapping.md). Pins that never
 // moved have the identity pose (pose_now_), which leaves the edge's rest positions and the lab's
-// air to the bit.
+// air to the bit. Without air (air.model = "none") there is nothing to flap the flag: u_p = 0
+// however the pole moves (relative to the pole, the missing air would read as a wind).
 double Simulation::sample_pole_air_speed(double t, double h) {
+  if (scene_.air.model == AirModel::kNone) return 0.0;
   const RigidMotion pole{pin_pose(t), pin_pose(t + h), h};
   for (Index r = 0; r < edge_points_.rows(); ++r)
     edge_at_.row(r) = pole.from.apply(row(edge_points_, r)).transpose();
