@@ -511,9 +511,22 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
         d["stable_step"] = st.stable_step;
         d["energy_halvings"] = st.energy_halvings;
         d["air_samples_outside"] = s.air_outside_last_step();
+        const StepHalvings& h = s.last_step_halvings();
+        d["halvings_total"] = h.total();
+        d["halvings_energy"] = h.energy;
+        d["halvings_strain"] = h.strain;
+        d["halvings_piece_energy"] = h.piece_energy;
+        d["halvings_cg"] = h.cg;
         return d;
       },
-      "integrator statistics of the last step");
+      "statistics of the last step. Its halvings, summed over all its pieces and redos (sum them "
+      "over steps for a run's): halvings_total = halvings_energy + halvings_strain (the step "
+      "redone in 2, 4, ... pieces because the check found energy no stage explains, or strain "
+      "beyond the strain limit's promise) + halvings_piece_energy + halvings_cg (an implicit "
+      "piece halved inside the integrator by its energy guard, or because CG did not converge). "
+      "Of the last piece only: substeps, cg_iterations, halvings (the integrator's), stable_step; "
+      "energy_halvings is the last piece's guard halvings plus the step's redo levels (any cause; "
+      "docs/energy.md)");
   sim.def_property_readonly(
       "fluid", [](Simulation& s) { return s.fluid(); }, py::return_value_policy::reference_internal,
       "the air grid (flagsim.Fluid) when the scene uses one (air.model 'grid'), else None; "

@@ -642,6 +642,7 @@ void Simulation::begin_step() {
   energy_end_start_ = energy_end_;
   drag_impulse_.setZero();
   step_pin_impulse_.setZero();
+  halvings_ = StepHalvings{};
   if (built(Stage::kFlap)) flap_.save_step_start();
   if (built(Stage::kPins)) {
     for (Index k = 0; k < pin_start_.rows(); ++k) pin_start_.row(k) = x_.row(pin_index_[k]);
@@ -654,10 +655,20 @@ void Simulation::halve_until_plausible(Implausible bad) {
     if (level == scene_.integrator.max_halvings)
       diverge(bad.cause, bad.vertex,
               bad.why + " even in " + std::to_string(1L << level) + " pieces");
+    count_halving(bad.cause);
     restore_step_start();
     bad = pieces(++level);
   }
   stats_.energy_halvings += level;
+}
+
+void Simulation::count_halving(const std::string& cause) {
+  if (cause == "strain")
+    ++halvings_.strain;
+  else if (cause == "energy")
+    ++halvings_.energy;
+  else
+    throw std::logic_error("count_halving: a step redone for '" + cause + "'");
 }
 
 void Simulation::finish_step() {
@@ -1167,6 +1178,8 @@ void Simulation::stage_integrate() {
         integrate(topo_, forces_, scene_.integrator, h_, u_, x_, v_, scratch_, stats_, &clock_);
   }
   book_integrator_work();
+  halvings_.piece_energy += stats_.energy_halvings;  // this piece's, before the step's are added
+  halvings_.cg += stats_.halvings - stats_.energy_halvings;
   if (status != IntegrateStatus::kOk) integrate_failed(status);
   Vec3 external = topo_.mass.sum() * h_ * scene_.gravity + stats_.work.contact_impulse;
   if (forces_.drag) external += Vec3(drag_impulse_.colwise().sum()) - j0;

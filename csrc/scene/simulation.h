@@ -20,6 +20,19 @@
 
 namespace flagsim {
 
+/// The halvings of one step, by the check that refused (docs/energy.md "The plausibility
+/// check"). A step's redo in 2^k pieces counts k, one per level, under the cause that refused the
+/// level before it; a piece the implicit integrator halved counts once per halving, in every
+/// piece of every level tried. Plain counts: a run's halvings by cause are their sums.
+struct StepHalvings {
+  long energy = 0;        ///< step redone: energy no stage explains (the check's "energy")
+  long strain = 0;        ///< step redone: strain beyond integrator.strain_limit's promise
+  long piece_energy = 0;  ///< implicit piece halved: its remainder or strain limiting's work
+                          ///< above the guard (ForceSet::energy_guard)
+  long cg = 0;            ///< implicit piece halved: CG did not reach integrator.cg_tolerance
+  long total() const { return energy + strain + piece_energy + cg; }
+};
+
 /// Energy the flag took from or gave to each stage since the Simulation was built, J
 /// (docs/energy.md). Balance, with E_mech = kinetic + spring and E = E_mech + gravity potential
 /// (the three terms of energy()):
@@ -147,7 +160,11 @@ class Simulation {
   double holdable_energy() const;
   /// Largest spring strain (l - L) / L of the current positions.
   double max_strain() const { return flagsim::max_strain(topo_, x_); }
+  /// The integrator's statistics of the last step's last piece (IntegratorStats; energy_halvings
+  /// also counts the step's redos in shorter pieces, whatever refused it).
   const IntegratorStats& last_step_stats() const { return stats_; }
+  /// Every halving of the last step, by the check that refused (summed over its pieces and redos).
+  const StepHalvings& last_step_halvings() const { return halvings_; }
 
   /// N, the force the flag exerted on its pins in the last step (the reaction of the pins,
   /// pole and tethers to it; contact with the pole cylinder not included): from the flag's
@@ -214,10 +231,11 @@ class Simulation {
     long vertex = -1;
     std::string why;
   };
-  void begin_step();                            // the state the step may go back to
-  Implausible pieces(int level);                // this flag's step as 2^level pieces
-  void halve_until_plausible(Implausible bad);  // redo in shorter pieces while a piece fails
-  void sample_air_ahead();                      // the first piece's air, before the air steps
+  void begin_step();                             // the state the step may go back to
+  Implausible pieces(int level);                 // this flag's step as 2^level pieces
+  void halve_until_plausible(Implausible bad);   // redo in shorter pieces while a piece fails
+  void count_halving(const std::string& cause);  // halvings_ by the check's cause
+  void sample_air_ahead();                       // the first piece's air, before the air steps
   bool steps_beside_air(int& done);  // every flag's first piece while the air steps beside
   Implausible step_piece();
   void restore_step_start();
@@ -280,8 +298,9 @@ class Simulation {
   ForceSet forces_;
   IntegratorScratch scratch_;
   IntegratorStats stats_;
-  MatX3 x_, v_, n_, u_;  // (N x 3) positions, velocities, normals, air at masses
-  MatX3 x_of_n_;         // (N x 3) the positions n_ was computed from (normals_for_x)
+  StepHalvings halvings_;  // of the step being stepped, reset by begin_step
+  MatX3 x_, v_, n_, u_;    // (N x 3) positions, velocities, normals, air at masses
+  MatX3 x_of_n_;           // (N x 3) the positions n_ was computed from (normals_for_x)
   // The state energy_run_ was last computed at (N x 3 each; book_energy_change): the next
   // step's integrate() starts from those bits unless something moved them in between.
   MatX3 x_of_e_, v_of_e_;
