@@ -981,9 +981,14 @@ void Simulation::find_resting_contacts() {
         return (q.array() < s.lo.array() - more).any() || (q.array() > s.hi.array() + more).any();
       };
       if (solid_motions_[k].empty()) {
-        // A vertex the last piece ended on its plane is `reach` from the surface give or take
-        // round-off: listed up to one more slack, or its next piece would decide by a last bit.
-        const double listed = reach + kRestingSlack * s.thickness;
+        // Listed as far as its speed takes it in the piece (as the pole lists them), and at
+        // least one more slack (a vertex the last piece ended on its plane is `reach` from a flat
+        // surface give or take round-off). A vertex that slid s over a curved surface ends about
+        // s^2 / 2R beyond its plane (R the radius): listed by the slack alone, it dropped out,
+        // fell in unheld, and the projection pushed it out sideways, past the strain limit
+        // (banner_walk's sphere, docs/solids.md).
+        const double ahead = h_ * row(v_, i).norm();
+        const double listed = reach + std::max(kRestingSlack * s.thickness, ahead);
         if (beyond(p, listed)) continue;
         Vec3 n;
         const double d = solid_distance(s.geometry, p, &n);
