@@ -95,7 +95,9 @@ struct TypedSolver final : Fluid::Solver {
   bool explicit_viscosity = false;
   // Curl-noise turbulence (fluid/turbulence.h): psi on the edges at psi_time (psi_prev) and the
   // step's end (psi_next); NaN psi_time: psi_prev must be recomputed (after an undo or rebuild).
+  // The noise slices psi blends, kept between steps (EdgeNoise).
   CurlNoise noise{TurbulenceParams{}, {}};
+  EdgeNoise noise_slices;
   std::array<AlignedVector<T>, 3> psi_prev, psi_next;
   double psi_time = std::numeric_limits<double>::quiet_NaN();
   bool turbulent = false;
@@ -148,7 +150,7 @@ struct TypedSolver final : Fluid::Solver {
     const Vec3 w0 = p.wind.at(0.0);
     set_uniform(geo.periodic ? w0 : Vec3(w0.x(), 0, 0));
     if (turbulent) {  // the noise at t = 0 on top of the mean flow
-      noise.potential_on_edges(geo, 0.0, psi_next);
+      noise.potential_on_edges(geo, 0.0, noise_slices, psi_next);
       for (int a = 0; a < 3; ++a) std::fill(psi_prev[a].begin(), psi_prev[a].end(), T(0));
       add_discrete_curl(psi_next, psi_prev, u);
       std::swap(psi_prev, psi_next);
@@ -160,8 +162,8 @@ struct TypedSolver final : Fluid::Solver {
   /// u += curl (psi(t1) - psi(t0)): the change of the noise over the step, a divergence-free
   /// forcing (a discrete curl), so without advection u stays the mean flow plus the noise.
   void add_turbulence(double t0, double t1) {
-    if (!(psi_time == t0)) noise.potential_on_edges(geo, t0, psi_prev);
-    noise.potential_on_edges(geo, t1, psi_next);
+    if (!(psi_time == t0)) noise.potential_on_edges(geo, t0, noise_slices, psi_prev);
+    noise.potential_on_edges(geo, t1, noise_slices, psi_next);
     add_discrete_curl(psi_next, psi_prev, u);
     std::swap(psi_prev, psi_next);
     psi_time = t1;
@@ -199,6 +201,7 @@ struct TypedSolver final : Fluid::Solver {
   void rebuild_solids() override {
     solids.build(geo, params);
     noise = CurlNoise(params.turbulence, params.obstacles);
+    if (turbulent) noise_slices.reset(geo, noise.ramped());
     psi_time = std::numeric_limits<double>::quiet_NaN();
     set_solid(solids.any_solid ? solids.solid.data() : nullptr);
     // Walls and solids make their own viscous step (ghost mirrors); without them the implicit

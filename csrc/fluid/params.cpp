@@ -117,12 +117,19 @@ double FluidParams::memory_bytes() const {
   if (!fft) values += n;                                    // phi_start (undo_step's warm start)
   if (fft) values += 3 * n0 * n1 * (std::floor(n2 / 2) + 1) * 2;
   // The solid map (csrc/fluid/solids.h): 3 face kinds, an owner (2 bytes) and a mask per cell;
-  // the pressure solve's mask (1 byte). Turbulence: psi on the edges now and at the last step, 6
-  // values per cell. The multigrid hierarchy (csrc/fluid/multigrid.h) and its own mask.
-  values += turbulence.enabled() ? 6.0 * n : 0.0;
+  // the pressure solve's mask (1 byte). Turbulence: psi on the edges now and at the last step,
+  // and in double the two noise slices it blends and, with obstacles, the ramp (EdgeNoise). The
+  // multigrid hierarchy (csrc/fluid/multigrid.h) and its own mask.
+  const double edges =
+      periodic ? 3 * n
+               : n0 * (n1 + 1) * (n2 + 1) + (n0 + 1) * n1 * (n2 + 1) + (n0 + 1) * (n1 + 1) * n2;
+  const bool turbulent = turbulence.enabled();
+  values += turbulent ? 2 * edges : 0.0;
+  const double noise_doubles = turbulent ? (obstacles.empty() ? 2 : 3) * edges : 0.0;
   const double multigrid = pressure == Pressure::kMultigrid ? kMultigridBytesPerCell + 1.0 : 0.0;
   const double bytes =
-      values * double(precision == Precision::kFloat ? sizeof(float) : sizeof(double));
+      values * double(precision == Precision::kFloat ? sizeof(float) : sizeof(double)) +
+      noise_doubles * double(sizeof(double));
   // kMemorySlack: FFTW's plans and what the measured peak adds beyond the arrays (docs/design.md).
   return kMemorySlack * bytes + n * (1.0 + (masks ? 6.0 : 0.0) + multigrid);
 }

@@ -108,17 +108,6 @@ void CurlNoise::raw(const Vec3& x, const Frame& f, Vec3& psi, Mat3* jacobian) co
   }
 }
 
-double CurlNoise::raw_channel(int c, const Vec3& x, const Frame& f) const {
-  const double k = std::floor(f.phase), fr = f.phase - k;
-  const double b = fr * fr * fr * (fr * (fr * 6.0 - 15.0) + 10.0);
-  const auto slice = static_cast<int64_t>(k);
-  const Vec3 q = x / f.length;
-  Vec3 g;
-  const double n0 = gradient_noise(channel_key(p_.seed, c, slice), q, g);
-  const double n1 = b > 0 ? gradient_noise(channel_key(p_.seed, c, slice + 1), q, g) : 0.0;
-  return f.intensity * f.length * ((1 - b) * n0 + b * n1);
-}
-
 double CurlNoise::ramp(const Vec3& x, Vec3* gradient) const {
   if (gradient) gradient->setZero();
   if (solids_.empty()) return 1.0;
@@ -175,21 +164,73 @@ Vec3 edge_position(const GridGeometry& geo, int a, int i, int j, int k) {
          geo.h * Vec3(i + (a == 0 ? 0.5 : 0.0), j + (a == 1 ? 0.5 : 0.0), k + (a == 2 ? 0.5 : 0.0));
 }
 
+void EdgeNoise::reset(const GridGeometry& geo, bool ramped) {
+  for (int a = 0; a < 3; ++a) {
+    const std::size_t n = edge_shape(geo, a).size();
+    n0[a].resize(n);
+    n1[a].resize(n);
+    ramp[a].resize(ramped ? n : 0);
+  }
+  valid = ramp_ready = false;
+}
+
+void CurlNoise::update_slices(const GridGeometry& geo, std::int64_t k, double length,
+                              EdgeNoise& slices) const {
+  // Evaluates `what` at every edge of axis a into out[a]: what(a, x) with x the edge's midpoint.
+  auto at_edges = [&](std::array<AlignedVector<double>, 3>& out, auto&& what) {
+    for (int a = 0; a < 3; ++a) {
+      const Shape3 s = edge_shape(geo, a);
+      double* o = out[a].data();
+      parallel_for(Index(s.n[0]), [&](Index i) {
+        for (int j = 0; j < s.n[1]; ++j)
+          for (int kk = 0; kk < s.n[2]; ++kk)
+            o[s.index(int(i), j, kk)] = what(a, edge_position(geo, a, int(i), j, kk));
+      });
+    }
+  };
+  auto slice = [&](std::int64_t key) {
+    return [&, key](int a, const Vec3& x) {
+      Vec3 g;
+      return gradient_noise(channel_key(p_.seed, a, key), x / length, g);
+    };
+  };
+  if (ramped() && !slices.ramp_ready) {
+    at_edges(slices.ramp, [&](int, const Vec3& x) { return ramp(x, nullptr); });
+    slices.ramp_ready = true;
+  }
+  if (slices.valid && slices.length == length && slices.slice == k) return;
+  if (slices.valid && slices.length == length && slices.slice + 1 == k) {
+    std::swap(slices.n0, slices.n1);  // the next slice becomes this one
+  } else {
+    at_edges(slices.n0, slice(k));
+  }
+  at_edges(slices.n1, slice(k + 1));
+  slices.valid = true;
+  slices.slice = k;
+  slices.length = length;
+}
+
+// psi_c = alpha A L [(1 - b) n_{c,k} + b n_{c,k+1}] (see raw()), from the stored slices.
 template <class T>
-void CurlNoise::potential_on_edges(const GridGeometry& geo, double t,
+void CurlNoise::potential_on_edges(const GridGeometry& geo, double t, EdgeNoise& slices,
                                    std::array<AlignedVector<T>, 3>& psi) const {
   const Frame f = frame(t);
+  if (!enabled_ || f.intensity == 0) {
+    for (int a = 0; a < 3; ++a) std::fill(psi[a].begin(), psi[a].end(), T(0));
+    return;
+  }
+  const double k = std::floor(f.phase), fr = f.phase - k;
+  const double b = fr * fr * fr * (fr * (fr * 6.0 - 15.0) + 10.0);
+  update_slices(geo, static_cast<int64_t>(k), f.length, slices);
+  const double scale = f.intensity * f.length;
   for (int a = 0; a < 3; ++a) {
-    const Shape3 s = edge_shape(geo, a);
+    const double *n0 = slices.n0[a].data(), *n1 = slices.n1[a].data();
+    const double* alpha = ramped() ? slices.ramp[a].data() : nullptr;
     T* out = psi[a].data();
-    parallel_for(Index(s.n[0]), [&](Index i) {
-      for (int j = 0; j < s.n[1]; ++j)
-        for (int k = 0; k < s.n[2]; ++k) {
-          const Vec3 x = edge_position(geo, a, int(i), j, k);
-          double value = 0;
-          if (enabled_ && f.intensity != 0) value = ramp(x, nullptr) * raw_channel(a, x, f);
-          out[s.index(int(i), j, k)] = T(value);
-        }
+    parallel_for(Index(psi[a].size()), [&](Index e) {
+      // b = 0: the next slice is not read (it weighs nothing; 0 * n1 could flip a zero's sign)
+      const double raw = scale * ((1 - b) * n0[e] + b * (b > 0 ? n1[e] : 0.0));
+      out[e] = T(alpha ? alpha[e] * raw : raw);
     });
   }
 }
@@ -237,7 +278,7 @@ void add_discrete_curl(const std::array<AlignedVector<T>, 3>& psi1,
 }
 
 #define FLAGSIM_INSTANTIATE_TURBULENCE(T)                                                 \
-  template void CurlNoise::potential_on_edges<T>(const GridGeometry&, double,             \
+  template void CurlNoise::potential_on_edges<T>(const GridGeometry&, double, EdgeNoise&, \
                                                  std::array<AlignedVector<T>, 3>&) const; \
   template void add_discrete_curl<T>(const std::array<AlignedVector<T>, 3>&,              \
                                      const std::array<AlignedVector<T>, 3>&, MacGrid<T>&);

@@ -440,4 +440,26 @@ TEST(GridArrays, IterativeBackendsAreCoveredByTheEstimate) {
     }
 }
 
+TEST(GridArrays, TurbulenceKeepsPsiAndItsNoiseSlices) {
+  // psi now and at the last step (2 edge arrays of the grid's precision), the two noise slices it
+  // blends (2 in double) and, with an obstacle, the ramp (1 in double): 3 edges per cell when
+  // periodic.
+  for (const Precision precision : {Precision::kDouble, Precision::kFloat})
+    for (const bool obstacle : {false, true}) {
+      FluidParams p = cube(32, obstacle ? "multigrid" : "fft", "semi_lagrangian");
+      p.precision = precision;
+      if (obstacle) {
+        p.obstacles.emplace_back();
+        p.obstacles[0].center = p.origin + Vec3(1.0, 1.0, 1.0) * 16 * p.cell_size;
+      }
+      const Counted plain = count_arrays(p);
+      p.turbulence.intensity.keys = {{0.0, 1.0}};
+      const Counted noisy = count_arrays(p);
+      const double value = precision == Precision::kFloat ? 4.0 : 8.0;
+      EXPECT_NEAR(noisy.arrays - plain.arrays, 3 * (2 + (obstacle ? 3 : 2) * 8.0 / value), 1e-9);
+      EXPECT_GE(noisy.estimate, noisy.bytes);
+      EXPECT_LE(noisy.estimate, 2.0 * noisy.bytes);
+    }
+}
+
 }  // namespace flagsim
