@@ -24,10 +24,11 @@ constexpr double kGrad[12][3] = {{1, 1, 0}, {-1, 1, 0}, {1, -1, 0}, {-1, -1, 0},
                                  {1, 0, 1}, {-1, 0, 1}, {1, 0, -1}, {-1, 0, -1},
                                  {0, 1, 1}, {0, -1, 1}, {0, 1, -1}, {0, -1, -1}};
 
-// Gradient noise n(q) of one (channel, slice) key and its gradient dn/dq:
+// Gradient noise n(q) of one (channel, slice) key and, with kGradient, its gradient dn/dq:
 //   n = sum over the 8 lattice corners o of w_o(f) g_o . (f - o),  w_o = prod_d (o_d ? s_d :
-//   1-s_d), s = fade(f) (Perlin 2002), f = q - floor(q).
-double gradient_noise(uint64_t key, const Vec3& q, Vec3& grad) {
+//   1-s_d), s = fade(f) (Perlin 2002), f = q - floor(q). n's bits do not depend on kGradient.
+template <bool kGradient>
+double gradient_noise(uint64_t key, const Vec3& q, Vec3* grad) {
   double fl[3], f[3], s[3], ds[3];
   int64_t i0[3];
   for (int d = 0; d < 3; ++d) {
@@ -35,10 +36,10 @@ double gradient_noise(uint64_t key, const Vec3& q, Vec3& grad) {
     f[d] = q[d] - fl[d];
     i0[d] = static_cast<int64_t>(fl[d]);
     s[d] = f[d] * f[d] * f[d] * (f[d] * (f[d] * 6.0 - 15.0) + 10.0);
-    ds[d] = 30.0 * f[d] * f[d] * (f[d] - 1.0) * (f[d] - 1.0);
+    if (kGradient) ds[d] = 30.0 * f[d] * f[d] * (f[d] - 1.0) * (f[d] - 1.0);
   }
   double n = 0;
-  grad.setZero();
+  if (kGradient) grad->setZero();
   // corner hash mix(key ^ mix(i ^ mix(j ^ mix(k)))), the inner mixes shared between corners
   const uint64_t mz[2] = {mix(uint64_t(i0[2])), mix(uint64_t(i0[2] + 1))};
   uint64_t myz[4];
@@ -50,12 +51,15 @@ double gradient_noise(uint64_t key, const Vec3& q, Vec3& grad) {
     const double r[3] = {f[0] - ox, f[1] - oy, f[2] - oz};
     const double dot = g[0] * r[0] + g[1] * r[1] + g[2] * r[2];
     const double w[3] = {ox ? s[0] : 1 - s[0], oy ? s[1] : 1 - s[1], oz ? s[2] : 1 - s[2]};
-    const double dw[3] = {ox ? ds[0] : -ds[0], oy ? ds[1] : -ds[1], oz ? ds[2] : -ds[2]};
     const double W = w[0] * w[1] * w[2];
     n += W * dot;
-    grad[0] += W * g[0] + dot * dw[0] * w[1] * w[2];
-    grad[1] += W * g[1] + dot * w[0] * dw[1] * w[2];
-    grad[2] += W * g[2] + dot * w[0] * w[1] * dw[2];
+    if (kGradient) {
+      const double dw[3] = {ox ? ds[0] : -ds[0], oy ? ds[1] : -ds[1], oz ? ds[2] : -ds[2]};
+      Vec3& gr = *grad;
+      gr[0] += W * g[0] + dot * dw[0] * w[1] * w[2];
+      gr[1] += W * g[1] + dot * w[0] * dw[1] * w[2];
+      gr[2] += W * g[2] + dot * w[0] * w[1] * dw[2];
+    }
   }
   return n;
 }
@@ -101,8 +105,8 @@ void CurlNoise::raw(const Vec3& x, const Frame& f, Vec3& psi, Mat3* jacobian) co
   const Vec3 q = x / f.length;
   for (int c = 0; c < 3; ++c) {
     Vec3 g0, g1;
-    const double n0 = gradient_noise(channel_key(p_.seed, c, slice), q, g0);
-    const double n1 = gradient_noise(channel_key(p_.seed, c, slice + 1), q, g1);
+    const double n0 = gradient_noise<true>(channel_key(p_.seed, c, slice), q, &g0);
+    const double n1 = gradient_noise<true>(channel_key(p_.seed, c, slice + 1), q, &g1);
     psi[c] = f.intensity * f.length * ((1 - b) * n0 + b * n1);
     if (jacobian) jacobian->row(c) = f.intensity * ((1 - b) * g0 + b * g1).transpose();
   }
@@ -190,8 +194,7 @@ void CurlNoise::update_slices(const GridGeometry& geo, std::int64_t k, double le
   };
   auto slice = [&](std::int64_t key) {
     return [&, key](int a, const Vec3& x) {
-      Vec3 g;
-      return gradient_noise(channel_key(p_.seed, a, key), x / length, g);
+      return gradient_noise<false>(channel_key(p_.seed, a, key), x / length, nullptr);
     };
   };
   if (ramped() && !slices.ramp_ready) {
