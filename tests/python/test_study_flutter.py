@@ -172,6 +172,40 @@ def test_quick_study_writes_its_report_and_plot(quick):
     assert every_run.count("\n| ") == len(rows) + 1  # the header and one line per run
 
 
+def test_quick_study_plot_gives_each_series_one_style_in_every_panel(quick):
+    # one legend names the series of all panels, so a series must look the same in each, also
+    # where a panel lacks another (the peak figures leave out runs without a flapping peak)
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows, _, _ = quick
+    # the first series in the plot's order without a flapping peak: every later one moves up a
+    # place in the peak figures' panels
+    first = min((r["model"], r["drag"]) for r in rows)
+    rows = [
+        dict(r, state="no flapping peak") if (r["model"], r["drag"]) == first else r for r in rows
+    ]
+    fig = flutter._figure(rows)
+    styles: dict[str, tuple] = {}
+    counts = []
+    for ax in fig.axes[:-1]:
+        lines = [ln for ln in ax.get_lines() if ", " in ln.get_label()]
+        counts.append(len(lines))
+        for ln in lines:
+            style = (ln.get_color(), ln.get_linestyle(), ln.get_marker())
+            assert styles.setdefault(ln.get_label(), style) == style, ln.get_label()
+    legend = fig.axes[-1].get_legend()
+    for handle, text in zip(legend.legend_handles, legend.get_texts()):
+        if text.get_text() in styles:
+            style = (handle.get_color(), handle.get_linestyle(), handle.get_marker())
+            assert style == styles[text.get_text()], text.get_text()
+    plt.close(fig)
+    assert len(set(styles.values())) == len(styles)  # no two series alike
+    assert min(counts) < max(counts)  # the case this guards: a panel with fewer series
+
+
 def test_a_flapping_peak_is_a_sine_not_slow_wandering():
     t = np.arange(2000) * DT
     assert flutter.has_flapping_peak(np.sin(2 * np.pi * 1.7 * t), DT)

@@ -482,6 +482,21 @@ def write_plots(rows, directory: str) -> str | None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    fig = _figure(rows)
+    os.makedirs(directory, exist_ok=True)
+    path = os.path.join(directory, "flutter.png")
+    tmp = path + ".tmp.png"
+    fig.savefig(tmp)
+    plt.close(fig)
+    os.replace(tmp, path)
+    return path
+
+
+def _figure(rows):
+    """write_plots' figure. Each (model, drag) keeps one colour and line style in every panel,
+    whichever series a panel lacks (the one legend names them all)."""
+    import matplotlib.pyplot as plt
+
     s = flagsim.Scene.paper()
     length = s.flag.width
     derived = []
@@ -502,13 +517,21 @@ def write_plots(rows, directory: str) -> str | None:
     ]
     fig, axes = plt.subplots(2, 4, figsize=(16, 7.5), dpi=90)
     styles = {"eq5": "o-", "turbulence": "s--", "two_way": "^-."}
+    colours = {k: f"C{i}" for i, k in enumerate(sorted({(r["model"], r["drag"]) for r in rows}))}
     umax = max(_num(r, "speed") for r in rows)
     flapping = [r for r in derived if r["state"] == "ok"]
     for ax, (key, label) in zip(axes.flat, panels):
         # the figures of a spectral peak only where there is one (the study's "ok" runs)
         src = flapping if key in _PEAK_FIGURES else derived
         for (model, drag), (us, vs) in sorted(_series(src, key).items()):
-            ax.plot(us, vs, styles.get(model, "o-"), ms=4, label=f"{MODEL_TITLES[model]}, {drag}")
+            ax.plot(
+                us,
+                vs,
+                styles.get(model, "o-"),
+                color=colours[(model, drag)],
+                ms=4,
+                label=f"{MODEL_TITLES[model]}, {drag}",
+            )
         if key == "frequency":
             us = np.linspace(2, umax, 20)
             ax.plot(us, us / (WAVELENGTH_REF * length), "k:", label="U / (1.87 L) (waves at U)")
@@ -536,13 +559,7 @@ def write_plots(rows, directory: str) -> str | None:
     axes.flat[-1].legend(handles, labels, fontsize=8, loc="center")
     fig.suptitle("flagsim study flutter: the paper's flag (0.81 m x 0.54 m, 0.15 kg/m^2)")
     fig.tight_layout()
-    os.makedirs(directory, exist_ok=True)
-    path = os.path.join(directory, "flutter.png")
-    tmp = path + ".tmp.png"
-    fig.savefig(tmp)
-    plt.close(fig)
-    os.replace(tmp, path)
-    return path
+    return fig
 
 
 def _fmt(r, key, spec=".3g") -> str:
