@@ -185,6 +185,7 @@ int diffuse_explicit(const SolidMap& map, double nu_dt, MacGrid<T>& u, MacGrid<T
     throw std::logic_error("diffuse_explicit: the map holds no solids and no no-slip walls");
   const int substeps = std::max(1, int(std::ceil(r / 0.15)));
   const double a = r / substeps;
+  const uint8_t kOpen = uint8_t(FaceKind::kOpen), kInside = uint8_t(FaceKind::kInside);
   for (int s = 0; s < substeps; ++s) {
     copy_grid(u, scratch);
     for (int c = 0; c < 3; ++c) {
@@ -192,40 +193,77 @@ int diffuse_explicit(const SolidMap& map, double nu_dt, MacGrid<T>& u, MacGrid<T
       const T* src = scratch.comp[c].data();
       T* dst = u.comp[c].data();
       const uint8_t* kind = map.face[c].data();
-      parallel_for_if(Index(sh.size()) > kGridParallelGrain, long(sh.n[0]) * sh.n[1],
-                      [&](Index row) {
-                        const int i = int(row / sh.n[1]), j = int(row % sh.n[1]);
-                        for (int k = 0; k < sh.n[2]; ++k) {
-                          const std::size_t q = sh.index(i, j, k);
-                          if (kind[q] != uint8_t(FaceKind::kOpen)) continue;
-                          const double xc = src[q];
-                          double acc = 0;
-                          const int ijk[3] = {i, j, k};
-                          for (int d = 0; d < 3; ++d)
-                            for (int side = -1; side <= 1; side += 2) {
-                              const int m = step_index(ijk[d], side, sh.n[d], g.periodic);
-                              if (m < 0) {
-                                // Beyond the grid: a y or z wall's mirror; the x ends (inflow face
-                                // for the tangential components, outflow) are zero-gradient.
-                                if (d != 0 && d != c && map.wall[d][side > 0] == Slip::kNoSlip)
-                                  acc -= 2 * xc;
-                                continue;
-                              }
-                              int nb[3] = {i, j, k};
-                              nb[d] = m;
-                              const std::size_t qn = sh.index(nb[0], nb[1], nb[2]);
-                              if (kind[qn] == uint8_t(FaceKind::kInside)) {
-                                int cell[3] = {nb[0], nb[1],
-                                               nb[2]};  // an inside node's two cells share an owner
-                                const uint16_t o = map.cell_owner(cell[0], cell[1], cell[2]);
-                                if (o != 0 && map.slip[o - 1] == Slip::kNoSlip) acc -= 2 * xc;
-                              } else {
-                                acc += double(src[qn]) - xc;
-                              }
-                            }
-                          dst[q] = T(xc + a * acc);
-                        }
-                      });
+      // One open node: acc sums its six neighbours' differences in the order d = 0, 1, 2, side
+      // -1 then +1 (both paths below keep that order, so they give the same bits).
+      auto node = [&](int i, int j, int k) {
+        const std::size_t q = sh.index(i, j, k);
+        const double xc = src[q];
+        double acc = 0;
+        const int ijk[3] = {i, j, k};
+        for (int d = 0; d < 3; ++d)
+          for (int side = -1; side <= 1; side += 2) {
+            const int m = step_index(ijk[d], side, sh.n[d], g.periodic);
+            if (m < 0) {
+              // Beyond the grid: a y or z wall's mirror; the x ends (inflow face for the
+              // tangential components, outflow) are zero-gradient.
+              if (d != 0 && d != c && map.wall[d][side > 0] == Slip::kNoSlip) acc -= 2 * xc;
+              continue;
+            }
+            int nb[3] = {i, j, k};
+            nb[d] = m;
+            const std::size_t qn = sh.index(nb[0], nb[1], nb[2]);
+            if (kind[qn] == kInside) {
+              // an inside node's two cells share an owner
+              const uint16_t o = map.cell_owner(nb[0], nb[1], nb[2]);
+              if (o != 0 && map.slip[o - 1] == Slip::kNoSlip) acc -= 2 * xc;
+            } else {
+              acc += double(src[qn]) - xc;
+            }
+          }
+        dst[q] = T(xc + a * acc);
+      };
+      const int nk = sh.n[2];
+      auto row_pass = [&](Index row) {
+        const int i = int(row / sh.n[1]), j = int(row % sh.n[1]);
+        const int im = step_index(i, -1, sh.n[0], g.periodic),
+                  ip = step_index(i, 1, sh.n[0], g.periodic),
+                  jm = step_index(j, -1, sh.n[1], g.periodic),
+                  jp = step_index(j, 1, sh.n[1], g.periodic);
+        const bool inner_row = im >= 0 && ip >= 0 && jm >= 0 && jp >= 0;
+        if (!inner_row) {
+          for (int k = 0; k < nk; ++k)
+            if (kind[sh.index(i, j, k)] == kOpen) node(i, j, k);
+          return;
+        }
+        // the row and its four neighbouring rows (d = 0, then d = 1)
+        const std::size_t q0 = sh.index(i, j, 0);
+        const std::size_t rows[4] = {sh.index(im, j, 0), sh.index(ip, j, 0), sh.index(i, jm, 0),
+                                     sh.index(i, jp, 0)};
+        for (int k = 0; k < nk; ++k) {
+          if (kind[q0 + k] != kOpen) continue;
+          const int km = step_index(k, -1, nk, g.periodic), kp = step_index(k, 1, nk, g.periodic);
+          // A node whose six neighbours are in the grid (across a periodic wrap too) and none
+          // inside a solid: the plain 7-point sum, no wall or solid rules.
+          const bool plain = km >= 0 && kp >= 0 && kind[rows[0] + k] != kInside &&
+                             kind[rows[1] + k] != kInside && kind[rows[2] + k] != kInside &&
+                             kind[rows[3] + k] != kInside && kind[q0 + km] != kInside &&
+                             kind[q0 + kp] != kInside;
+          if (!plain) {
+            node(i, j, k);
+            continue;
+          }
+          const double xc = src[q0 + k];
+          double acc = 0;
+          acc += double(src[rows[0] + k]) - xc;
+          acc += double(src[rows[1] + k]) - xc;
+          acc += double(src[rows[2] + k]) - xc;
+          acc += double(src[rows[3] + k]) - xc;
+          acc += double(src[q0 + km]) - xc;
+          acc += double(src[q0 + kp]) - xc;
+          dst[q0 + k] = T(xc + a * acc);
+        }
+      };
+      parallel_for_if(Index(sh.size()) > kGridParallelGrain, long(sh.n[0]) * sh.n[1], row_pass);
     }
   }
   return substeps;

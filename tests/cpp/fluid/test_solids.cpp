@@ -155,6 +155,59 @@ TEST(Solids, NoSlipWallsMirrorTheVelocity) {
       }
 }
 
+// Away from walls and solids the explicit viscous step is the 7-point Laplacian: of u = x^2 + 2
+// y^2 + 3 z^2 it is 12 at every such node, in each component (the axes weighted apart, so a
+// neighbour taken along the wrong axis shows), on a bounded and a periodic grid with a solid.
+TEST(Solids, ExplicitViscosityIsTheLaplacianAwayFromWallsAndSolids) {
+  for (const bool periodic : {false, true}) {
+    const double h = 0.1, nu_dt = 0.1 * h * h;  // one substep
+    const GridGeometry g = grid(10, 9, 8, h, periodic);
+    FluidParams p;
+    p.boundary = periodic ? Boundary::kPeriodic : Boundary::kTunnel;
+    ObstacleParams box;
+    box.center = Vec3(0.5, 0.45, 0.4);
+    box.half_size = Vec3(0.12, 0.12, 0.12);
+    p.obstacles = {box};
+    SolidMap m;
+    m.build(g, p);
+    MacGrid<double> u(g), scratch(g);
+    auto field = [](const Vec3& x) {
+      return x.x() * x.x() + 2 * x.y() * x.y() + 3 * x.z() * x.z();
+    };
+    for (int c = 0; c < 3; ++c) {
+      const Shape3 s = u.shape[c];
+      for (int i = 0; i < s.n[0]; ++i)
+        for (int j = 0; j < s.n[1]; ++j)
+          for (int k = 0; k < s.n[2]; ++k) u.at(c, i, j, k) = field(g.face_position(c, i, j, k));
+    }
+    const MacGrid<double> before = u;
+    EXPECT_EQ(diffuse_explicit(m, nu_dt, u, scratch), 1);
+    int checked = 0;
+    for (int c = 0; c < 3; ++c) {
+      const Shape3 s = u.shape[c];
+      const uint8_t* kind = m.face[c].data();
+      // nodes at least two faces from the grid's ends (no wrap: the field is not periodic) whose
+      // six neighbours are open
+      for (int i = 2; i + 2 < s.n[0]; ++i)
+        for (int j = 2; j + 2 < s.n[1]; ++j)
+          for (int k = 2; k + 2 < s.n[2]; ++k) {
+            bool open = kind[s.index(i, j, k)] == uint8_t(FaceKind::kOpen);
+            for (int d = 0; d < 3 && open; ++d)
+              for (int side = -1; side <= 1; side += 2) {
+                int nb[3] = {i, j, k};
+                nb[d] += side;
+                open = open && kind[s.index(nb[0], nb[1], nb[2])] == uint8_t(FaceKind::kOpen);
+              }
+            if (!open) continue;
+            ++checked;
+            EXPECT_NEAR(u.at(c, i, j, k) - before.at(c, i, j, k), 12 * nu_dt, 1e-12)
+                << c << " " << i << " " << j << " " << k;
+          }
+    }
+    EXPECT_GT(checked, 100);
+  }
+}
+
 // Inside a solid the mirror holds too: a free-slip slab leaves a uniform flow along it alone, a
 // no-slip slab slows the nodes beside it.
 TEST(Solids, SlabSlipDecidesTheShear) {
