@@ -249,14 +249,18 @@ void add_discrete_curl(const std::array<AlignedVector<T>, 3>& psi1,
   const GridGeometry& geo = u.geo;
   const double inv_h = 1.0 / geo.h;
   const std::array<Shape3, 3> es{edge_shape(geo, 0), edge_shape(geo, 1), edge_shape(geo, 2)};
-  auto d = [&](int a, int i, int j, int k) -> double {
+  // The row (i, j) of the edges along axis a (periodic: indices wrap), and psi1 - psi0 at its k.
+  struct EdgeRow {
+    const T *p1, *p0;
+    double operator()(int k) const { return double(p1[k]) - double(p0[k]); }
+  };
+  auto row = [&](int a, int i, int j) {
     if (geo.periodic) {
       i %= geo.nx;
       j %= geo.ny;
-      k %= geo.nz;
     }
-    const std::size_t e = es[a].index(i, j, k);
-    return double(psi1[a][e]) - double(psi0[a][e]);
+    const std::size_t e = es[a].index(i, j, 0);
+    return EdgeRow{psi1[a].data() + e, psi0[a].data() + e};
   };
   // (the two edge axes p, q of face axis c, as in the formulas above: c = 0 -> Z, Y; ...)
   for (int c = 0; c < 3; ++c) {
@@ -264,18 +268,27 @@ void add_discrete_curl(const std::array<AlignedVector<T>, 3>& psi1,
     T* q = u.comp[c].data();
     parallel_for(Index(s.n[0]), [&](Index ii) {
       const int i = int(ii);
-      for (int j = 0; j < s.n[1]; ++j)
+      for (int j = 0; j < s.n[1]; ++j) {
+        // the rows the four edges of face (i, j, k) lie on; along k, k + 1 wraps when periodic
+        const EdgeRow a =
+            row(c == 0 ? 2 : (c == 1 ? 0 : 1), c == 2 ? i + 1 : i, c == 0 ? j + 1 : j);
+        const EdgeRow b = row(c == 0 ? 2 : (c == 1 ? 0 : 1), i, j);
+        const EdgeRow e =
+            row(c == 0 ? 1 : (c == 1 ? 2 : 0), c == 1 ? i + 1 : i, c == 2 ? j + 1 : j);
+        const EdgeRow f = row(c == 0 ? 1 : (c == 1 ? 2 : 0), i, j);
+        T* out = q + s.index(i, j, 0);
         for (int k = 0; k < s.n[2]; ++k) {
+          const int k1 = geo.periodic && k + 1 == geo.nz ? 0 : k + 1;
           double curl;
-          if (c == 0)
-            curl = d(2, i, j + 1, k) - d(2, i, j, k) - d(1, i, j, k + 1) + d(1, i, j, k);
-          else if (c == 1)
-            curl = d(0, i, j, k + 1) - d(0, i, j, k) - d(2, i + 1, j, k) + d(2, i, j, k);
-          else
-            curl = d(1, i + 1, j, k) - d(1, i, j, k) - d(0, i, j + 1, k) + d(0, i, j, k);
-          const std::size_t e = s.index(i, j, k);
-          q[e] = T(double(q[e]) + curl * inv_h);
+          if (c == 0)  // Z(i, j+1, k) - Z(i, j, k) - Y(i, j, k+1) + Y(i, j, k)
+            curl = a(k) - b(k) - f(k1) + f(k);
+          else if (c == 1)  // X(i, j, k+1) - X(i, j, k) - Z(i+1, j, k) + Z(i, j, k)
+            curl = a(k1) - b(k) - e(k) + f(k);
+          else  // Y(i+1, j, k) - Y(i, j, k) - X(i, j+1, k) + X(i, j, k)
+            curl = a(k) - b(k) - e(k) + f(k);
+          out[k] = T(double(out[k]) + curl * inv_h);
         }
+      }
     });
   }
 }
