@@ -26,42 +26,68 @@ constexpr double kGrad[12][3] = {{1, 1, 0}, {-1, 1, 0}, {1, -1, 0}, {-1, -1, 0},
 
 // Gradient noise n(q) of one (channel, slice) key and, with kGradient, its gradient dn/dq:
 //   n = sum over the 8 lattice corners o of w_o(f) g_o . (f - o),  w_o = prod_d (o_d ? s_d :
-//   1-s_d), s = fade(f) (Perlin 2002), f = q - floor(q). n's bits do not depend on kGradient.
+//   1-s_d), s = fade(f) (Perlin 2002), f = q - floor(q). In three parts: each axis's cell and
+// fade, the corners' gradients (which depend on the cell only), and the sum. n's bits do not
+// depend on kGradient.
+
+// One axis of q: the cell i0 = floor(q), f = q - i0, the fade s(f) and, with kGradient, ds/df.
+struct AxisFade {
+  int64_t i0;
+  double f, s, ds;
+};
 template <bool kGradient>
-double gradient_noise(uint64_t key, const Vec3& q, Vec3* grad) {
-  double fl[3], f[3], s[3], ds[3];
-  int64_t i0[3];
-  for (int d = 0; d < 3; ++d) {
-    fl[d] = std::floor(q[d]);
-    f[d] = q[d] - fl[d];
-    i0[d] = static_cast<int64_t>(fl[d]);
-    s[d] = f[d] * f[d] * f[d] * (f[d] * (f[d] * 6.0 - 15.0) + 10.0);
-    if (kGradient) ds[d] = 30.0 * f[d] * f[d] * (f[d] - 1.0) * (f[d] - 1.0);
-  }
-  double n = 0;
-  if (kGradient) grad->setZero();
-  // corner hash mix(key ^ mix(i ^ mix(j ^ mix(k)))), the inner mixes shared between corners
-  const uint64_t mz[2] = {mix(uint64_t(i0[2])), mix(uint64_t(i0[2] + 1))};
+inline AxisFade axis_fade(double q) {
+  const double fl = std::floor(q);
+  const double f = q - fl;
+  return {static_cast<int64_t>(fl), f, f * f * f * (f * (f * 6.0 - 15.0) + 10.0),
+          kGradient ? 30.0 * f * f * (f - 1.0) * (f - 1.0) : 0.0};
+}
+
+// The gradients of the 8 corners of lattice cell (i, j, k): corner o = (ox, oy, oz), the bits of
+// o; hash mix(key ^ mix(i ^ mix(j ^ mix(k)))), the inner mixes shared between corners.
+inline void corner_gradients(uint64_t key, int64_t i, int64_t j, int64_t k, const double* g[8]) {
+  const uint64_t mz[2] = {mix(uint64_t(k)), mix(uint64_t(k + 1))};
   uint64_t myz[4];
-  for (int o = 0; o < 4; ++o) myz[o] = mix(uint64_t(i0[1] + (o & 1)) ^ mz[o >> 1]);
+  for (int o = 0; o < 4; ++o) myz[o] = mix(uint64_t(j + (o & 1)) ^ mz[o >> 1]);
   for (int o = 0; o < 8; ++o) {
     const int ox = o & 1, oy = (o >> 1) & 1, oz = (o >> 2) & 1;
-    const uint64_t h = mix(key ^ mix(uint64_t(i0[0] + ox) ^ myz[oy | (oz << 1)]));
-    const double* g = kGrad[h % 12];
-    const double r[3] = {f[0] - ox, f[1] - oy, f[2] - oz};
-    const double dot = g[0] * r[0] + g[1] * r[1] + g[2] * r[2];
-    const double w[3] = {ox ? s[0] : 1 - s[0], oy ? s[1] : 1 - s[1], oz ? s[2] : 1 - s[2]};
+    g[o] = kGrad[mix(key ^ mix(uint64_t(i + ox) ^ myz[oy | (oz << 1)])) % 12];
+  }
+}
+
+// The sum over the corners, given their gradients g and the three axes' fades.
+template <bool kGradient>
+inline double corner_sum(const double* const g[8], const AxisFade a[3], Vec3* grad) {
+  double n = 0;
+  if (kGradient) grad->setZero();
+  for (int o = 0; o < 8; ++o) {
+    const int ox = o & 1, oy = (o >> 1) & 1, oz = (o >> 2) & 1;
+    const double* go = g[o];
+    const double r[3] = {a[0].f - ox, a[1].f - oy, a[2].f - oz};
+    const double dot = go[0] * r[0] + go[1] * r[1] + go[2] * r[2];
+    const double w[3] = {ox ? a[0].s : 1 - a[0].s, oy ? a[1].s : 1 - a[1].s,
+                         oz ? a[2].s : 1 - a[2].s};
     const double W = w[0] * w[1] * w[2];
     n += W * dot;
     if (kGradient) {
-      const double dw[3] = {ox ? ds[0] : -ds[0], oy ? ds[1] : -ds[1], oz ? ds[2] : -ds[2]};
+      const double dw[3] = {ox ? a[0].ds : -a[0].ds, oy ? a[1].ds : -a[1].ds,
+                            oz ? a[2].ds : -a[2].ds};
       Vec3& gr = *grad;
-      gr[0] += W * g[0] + dot * dw[0] * w[1] * w[2];
-      gr[1] += W * g[1] + dot * w[0] * dw[1] * w[2];
-      gr[2] += W * g[2] + dot * w[0] * w[1] * dw[2];
+      gr[0] += W * go[0] + dot * dw[0] * w[1] * w[2];
+      gr[1] += W * go[1] + dot * w[0] * dw[1] * w[2];
+      gr[2] += W * go[2] + dot * w[0] * w[1] * dw[2];
     }
   }
   return n;
+}
+
+template <bool kGradient>
+double gradient_noise(uint64_t key, const Vec3& q, Vec3* grad) {
+  const AxisFade a[3] = {axis_fade<kGradient>(q[0]), axis_fade<kGradient>(q[1]),
+                         axis_fade<kGradient>(q[2])};
+  const double* g[8];
+  corner_gradients(key, a[0].i0, a[1].i0, a[2].i0, g);
+  return corner_sum<kGradient>(g, a, grad);
 }
 
 inline uint64_t channel_key(uint32_t seed, int channel, int64_t slice) {
@@ -192,10 +218,28 @@ void CurlNoise::update_slices(const GridGeometry& geo, std::int64_t k, double le
       });
     }
   };
-  auto slice = [&](std::int64_t key) {
-    return [&, key](int a, const Vec3& x) {
-      return gradient_noise<false>(channel_key(p_.seed, a, key), x / length, nullptr);
-    };
+  // Slice `slice` of channel a at every edge of axis a: along a row only q_z changes, so the
+  // corners' gradients are hashed again only where q_z enters another lattice cell.
+  auto noise_slice = [&](std::array<AlignedVector<double>, 3>& out, std::int64_t slice) {
+    for (int a = 0; a < 3; ++a) {
+      const Shape3 s = edge_shape(geo, a);
+      const uint64_t key = channel_key(p_.seed, a, slice);
+      parallel_for(Index(s.n[0]), [&](Index i) {
+        for (int j = 0; j < s.n[1]; ++j) {
+          double* o = out[a].data() + s.index(int(i), j, 0);
+          const Vec3 q0 = edge_position(geo, a, int(i), j, 0) / length;
+          AxisFade f[3] = {axis_fade<false>(q0[0]), axis_fade<false>(q0[1]), {}};
+          const double* g[8];
+          for (int k = 0; k < s.n[2]; ++k) {
+            const Vec3 q = edge_position(geo, a, int(i), j, k) / length;
+            const int64_t cell = f[2].i0;
+            f[2] = axis_fade<false>(q[2]);
+            if (k == 0 || f[2].i0 != cell) corner_gradients(key, f[0].i0, f[1].i0, f[2].i0, g);
+            o[k] = corner_sum<false>(g, f, nullptr);
+          }
+        }
+      });
+    }
   };
   if (ramped() && !slices.ramp_ready) {
     at_edges(slices.ramp, [&](int, const Vec3& x) { return ramp(x, nullptr); });
@@ -205,9 +249,9 @@ void CurlNoise::update_slices(const GridGeometry& geo, std::int64_t k, double le
   if (slices.valid && slices.length == length && slices.slice + 1 == k) {
     std::swap(slices.n0, slices.n1);  // the next slice becomes this one
   } else {
-    at_edges(slices.n0, slice(k));
+    noise_slice(slices.n0, k);
   }
-  at_edges(slices.n1, slice(k + 1));
+  noise_slice(slices.n1, k + 1);
   slices.valid = true;
   slices.slice = k;
   slices.length = length;
