@@ -206,18 +206,6 @@ void EdgeNoise::reset(const GridGeometry& geo, bool ramped) {
 
 void CurlNoise::update_slices(const GridGeometry& geo, std::int64_t k, double length,
                               EdgeNoise& slices) const {
-  // Evaluates `what` at every edge of axis a into out[a]: what(a, x) with x the edge's midpoint.
-  auto at_edges = [&](std::array<AlignedVector<double>, 3>& out, auto&& what) {
-    for (int a = 0; a < 3; ++a) {
-      const Shape3 s = edge_shape(geo, a);
-      double* o = out[a].data();
-      parallel_for(Index(s.n[0]), [&](Index i) {
-        for (int j = 0; j < s.n[1]; ++j)
-          for (int kk = 0; kk < s.n[2]; ++kk)
-            o[s.index(int(i), j, kk)] = what(a, edge_position(geo, a, int(i), j, kk));
-      });
-    }
-  };
   // Slice `slice` of channel a at every edge of axis a: along a row only q_z changes, so the
   // corners' gradients are hashed again only where q_z enters another lattice cell.
   auto noise_slice = [&](std::array<AlignedVector<double>, 3>& out, std::int64_t slice) {
@@ -241,8 +229,16 @@ void CurlNoise::update_slices(const GridGeometry& geo, std::int64_t k, double le
       });
     }
   };
-  if (ramped() && !slices.ramp_ready) {
-    at_edges(slices.ramp, [&](int, const Vec3& x) { return ramp(x, nullptr); });
+  if (ramped() && !slices.ramp_ready) {  // alpha at every edge, once for these solids
+    for (int a = 0; a < 3; ++a) {
+      const Shape3 s = edge_shape(geo, a);
+      double* o = slices.ramp[a].data();
+      parallel_for(Index(s.n[0]), [&](Index i) {
+        for (int j = 0; j < s.n[1]; ++j)
+          for (int kk = 0; kk < s.n[2]; ++kk)
+            o[s.index(int(i), j, kk)] = ramp(edge_position(geo, a, int(i), j, kk), nullptr);
+      });
+    }
     slices.ramp_ready = true;
   }
   if (slices.valid && slices.length == length && slices.slice == k) return;
