@@ -30,6 +30,9 @@ constexpr double kGrad[12][3] = {{1, 1, 0}, {-1, 1, 0}, {1, -1, 0}, {-1, -1, 0},
 // fade, the corners' gradients (which depend on the cell only), and the sum. n's bits do not
 // depend on kGradient.
 
+// Perlin 2002's quintic fade 6 f^5 - 15 f^4 + 10 f^3 (space within a cell, time between slices).
+inline double fade(double f) { return f * f * f * (f * (f * 6.0 - 15.0) + 10.0); }
+
 // One axis of q: the cell i0 = floor(q), f = q - i0, the fade s(f) and, with kGradient, ds/df.
 struct AxisFade {
   int64_t i0;
@@ -39,7 +42,7 @@ template <bool kGradient>
 inline AxisFade axis_fade(double q) {
   const double fl = std::floor(q);
   const double f = q - fl;
-  return {static_cast<int64_t>(fl), f, f * f * f * (f * (f * 6.0 - 15.0) + 10.0),
+  return {static_cast<int64_t>(fl), f, fade(f),
           kGradient ? 30.0 * f * f * (f - 1.0) * (f - 1.0) : 0.0};
 }
 
@@ -126,7 +129,7 @@ CurlNoise::Frame CurlNoise::frame(double t) const {
 // d psi_c / dx = A [(1 - b) grad n_{c,k} + b grad n_{c,k+1}] (the L cancels).
 void CurlNoise::raw(const Vec3& x, const Frame& f, Vec3& psi, Mat3* jacobian) const {
   const double k = std::floor(f.phase), fr = f.phase - k;
-  const double b = fr * fr * fr * (fr * (fr * 6.0 - 15.0) + 10.0);
+  const double b = fade(fr);
   const auto slice = static_cast<int64_t>(k);
   const Vec3 q = x / f.length;
   for (int c = 0; c < 3; ++c) {
@@ -263,7 +266,7 @@ void CurlNoise::potential_on_edges(const GridGeometry& geo, double t, EdgeNoise&
     return;
   }
   const double k = std::floor(f.phase), fr = f.phase - k;
-  const double b = fr * fr * fr * (fr * (fr * 6.0 - 15.0) + 10.0);
+  const double b = fade(fr);
   update_slices(geo, static_cast<int64_t>(k), f.length, slices);
   const double scale = f.intensity * f.length;
   for (int a = 0; a < 3; ++a) {
