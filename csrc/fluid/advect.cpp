@@ -112,8 +112,9 @@ void for_each_plane(const Shape3& sh, F&& plane) {
 /// in cell units. Uses a + f (b - a) so that a uniform field is reproduced exactly.
 template <class T>
 struct Interpolator {
-  const T* q;
+  const T* q;  // node (0, 0, 0)
   int n0, n1, n2;
+  std::size_t sx, sy;  // strides along x and y
   double o0, o1, o2;
   bool periodic;
 
@@ -122,10 +123,24 @@ struct Interpolator {
         n0(g.shape[c].n[0]),
         n1(g.shape[c].n[1]),
         n2(g.shape[c].n[2]),
+        sx(std::size_t(n1) * n2),
+        sy(std::size_t(n2)),
         o0(GridGeometry::offset(c, 0)),
         o1(GridGeometry::offset(c, 1)),
         o2(GridGeometry::offset(c, 2)),
         periodic(g.geo.periodic) {}
+  /// Component c's clamped padded copy (its ghosts are never read: the clamp stays on the nodes).
+  Interpolator(const PaddedComponent<T>& p, int c)
+      : q(p.data.data() + p.index(0, 0, 0)),
+        n0(p.n[0]),
+        n1(p.n[1]),
+        n2(p.n[2]),
+        sx(std::size_t(p.p1) * p.p2),
+        sy(std::size_t(p.p2)),
+        o0(GridGeometry::offset(c, 0)),
+        o1(GridGeometry::offset(c, 1)),
+        o2(GridGeometry::offset(c, 2)),
+        periodic(false) {}
 
   struct Corners {
     std::size_t r00, r01, r10, r11;
@@ -137,10 +152,10 @@ struct Interpolator {
     const Axis x = locate(px - o0, n0, periodic);
     const Axis y = locate(py - o1, n1, periodic);
     const Axis z = locate(pz - o2, n2, periodic);
-    return {(std::size_t(x.i0) * n1 + y.i0) * n2,
-            (std::size_t(x.i0) * n1 + y.i1) * n2,
-            (std::size_t(x.i1) * n1 + y.i0) * n2,
-            (std::size_t(x.i1) * n1 + y.i1) * n2,
+    return {std::size_t(x.i0) * sx + std::size_t(y.i0) * sy,
+            std::size_t(x.i0) * sx + std::size_t(y.i1) * sy,
+            std::size_t(x.i1) * sx + std::size_t(y.i0) * sy,
+            std::size_t(x.i1) * sx + std::size_t(y.i1) * sy,
             z.i0,
             z.i1,
             x.f,
@@ -425,10 +440,17 @@ void advect_maccormack(const MacGrid<T>& u, double dt, const SampleBoundary& bc,
 
 template <class T>
 void PaddedComponent<T>::resize(const Shape3& s) {
+  resize_clamped(s, s.n);
+  clamped = false;
+}
+
+template <class T>
+void PaddedComponent<T>::resize_clamped(const Shape3& s, const int m[3]) {
   for (int d = 0; d < 3; ++d) n[d] = s.n[d];
-  p1 = n[1] + 2 * kGhost;
-  p2 = n[2] + 2 * kGhost;
-  data.assign(std::size_t(n[0] + 2 * kGhost) * p1 * p2, T(0));
+  clamped = true;
+  p1 = m[1] + 2 * kGhost;
+  p2 = m[2] + 2 * kGhost;
+  data.assign(std::size_t(m[0] + 2 * kGhost) * p1 * p2, T(0));
 }
 
 #ifdef FLAGSIM_HAVE_VECTORS
@@ -498,6 +520,25 @@ template <class T>
 void PaddedComponent<T>::fill(const T* src) {
   constexpr int G = kGhost;
   const int n0 = n[0], n1 = n[1], n2 = n[2];
+  const bool parallel = Index(data.size()) > kCopyParallelGrain;
+  if (clamped) {
+    // Every padded row (i, j) is source row (clamp i, clamp j): its nodes, then its last node
+    // repeated to the padded end, after G copies of its first node.
+    const int m0 = int(data.size() / (std::size_t(p1) * p2)) - 2 * G;
+    const int tail = p2 - G - n2;
+    parallel_for_if(parallel, m0 + 2 * G, [&](Index plane) {
+      const int a = std::min(std::max(int(plane) - G, 0), n0 - 1);
+      T* d = data.data() + std::size_t(plane) * p1 * p2;
+      for (int b = -G; b < p1 - G; ++b, d += p2) {
+        const T* s =
+            src + (std::size_t(a) * n1 + std::size_t(std::min(std::max(b, 0), n1 - 1))) * n2;
+        std::fill(d, d + G, s[0]);
+        std::copy(s, s + n2, d + G);
+        std::fill(d + G + n2, d + G + n2 + tail, s[n2 - 1]);
+      }
+    });
+    return;
+  }
   // i in [-G, n + G): one conditional add or subtract when n >= G, a modulo otherwise.
   auto wrap = [](int i, int n) {
     return n >= G ? (i < 0 ? i + n : i >= n ? i - n : i) : ((i % n) + n) % n;
@@ -507,7 +548,6 @@ void PaddedComponent<T>::fill(const T* src) {
   const int vb = vector_bytes();
   const bool rows_by_vectors = n1 >= G && n2 >= G && n2 * int(sizeof(T)) >= (vb == 32 ? 32 : 16);
 #endif
-  const bool parallel = Index(data.size()) > kCopyParallelGrain;
 #ifdef FLAGSIM_HAVE_VECTORS
   if (rows_by_vectors && n0 >= G) {
     // The n0 planes from src, then the ghost planes (which wrap along i) as copies of padded
@@ -558,11 +598,18 @@ void PaddedComponent<T>::unpad(T* dst) const {
 }
 
 template <class T>
-void PeriodicAdvectScratch<T>::resize(const GridGeometry& g, bool maccormack) {
+void AdvectScratch<T>::resize(const GridGeometry& g, bool maccormack) {
+  const int m[3] = {g.nx + 1, g.ny + 1, g.nz + 1};  // every component's nodes fit
+  auto size = [&](PaddedComponent<T>& p, int c) {
+    if (g.periodic)
+      p.resize(g.face_shape(c));
+    else
+      p.resize_clamped(g.face_shape(c), m);
+  };
   for (int c = 0; c < 3; ++c) {
-    u[c].resize(g.face_shape(c));
+    size(u[c], c);
     if (maccormack)
-      hat[c].resize(g.face_shape(c));
+      size(hat[c], c);
     else
       hat[c] = PaddedComponent<T>();
   }
@@ -859,9 +906,15 @@ struct LanesOf {
 /// Where the lanes' lower nodes share one offset from their node on each axis (~78 % of such
 /// vectors of 4 lanes at 128^3, ~55 % of 8) the 8 nodes are 8 contiguous vector loads, else they
 /// are loaded lane by lane (loading both candidates and selecting per lane measured no faster).
-/// Returns false, out untouched, when a departure is a ghost layer's reach or more (or not finite).
-template <int C, class V, class T>
-FLAGSIM_INLINE bool far_sample(const SlRow<T>& w, int k, V u0, V u1, V u2, V& out) {
+/// far_cell: that sampling's cell, the 8 nodes v (trilinear's order) of each lane's cell in the
+/// padded component whose node (i, j, 0) is at row (the strides of w's), and the weights wt (in
+/// T), at the departure x - d or, Fwd, at x + d (MacCormack's reverse step: trace's fwd). A
+/// clamped component's ghosts repeat its nearest node, so there the cell holds the generic
+/// kernels' clamped nodes. Returns false, v and wt untouched, when a departure is a ghost layer's
+/// reach or more (or not finite).
+template <int C, bool Fwd, class V, class T>
+FLAGSIM_INLINE bool far_cell(const SlRow<T>& w, const T* row, int k, const V& u0, const V& u1,
+                             const V& u2, V v[8], V wt[3]) {
   constexpr int G = PaddedComponent<T>::kGhost;
   constexpr int W = int(sizeof(V) / sizeof(T));
   constexpr int DW = int(sizeof(V) / sizeof(double));  // lanes of a part
@@ -917,10 +970,11 @@ FLAGSIM_INLINE bool far_sample(const SlRow<T>& w, int k, V u0, V u1, V u2, V& ou
                     (abs_lanes(d2) < reach);  // false for NaN
     if (!all_lanes(ok)) return false;
     const D lane = iota + double(k + h * DW);  // the lanes' k, exactly
-    // back = x - d, g = back - offset (node units), as trace() and PaddedRow::corner.
-    const D g0 = ((D{} + w.x0) - d0) - kO0;
-    const D g1 = ((D{} + w.x1) - d1) - kO1;
-    const D g2 = ((lane + kO2) - d2) - kO2;
+    // back = x - d (fwd = x + d), g = back - offset (node units), as trace() and
+    // PaddedRow::corner.
+    const D g0 = (Fwd ? (D{} + w.x0) + d0 : (D{} + w.x0) - d0) - kO0;
+    const D g1 = (Fwd ? (D{} + w.x1) + d1 : (D{} + w.x1) - d1) - kO1;
+    const D g2 = (Fwd ? (lane + kO2) + d2 : (lane + kO2) - d2) - kO2;
     o[0][h] = floor_of(g0, f[0][h]) - w.i;
     o[1][h] = floor_of(g1, f[1][h]) - w.j;
     o[2][h] = floor_of(g2, f[2][h]) - __builtin_convertvector(lane, I);
@@ -934,9 +988,8 @@ FLAGSIM_INLINE bool far_sample(const SlRow<T>& w, int k, V u0, V u1, V u2, V& ou
   for (int h = 1; h < H; ++h) eq &= same(h);
   const bool common = all_lanes(eq);
   const std::ptrdiff_t at[8] = {0, 1, w.sy, w.sy + 1, w.sx, w.sx + 1, w.sx + w.sy, w.sx + w.sy + 1};
-  V v[8];  // the 8 nodes of each lane's cell, in trilinear's order
   if (common) {
-    const T* b = w.own + k + o[0][0][0] * w.sx + o[1][0][0] * w.sy + o[2][0][0];
+    const T* b = row + k + o[0][0][0] * w.sx + o[1][0][0] * w.sy + o[2][0][0];
     for (int a = 0; a < 8; ++a) v[a] = load_lanes<V>(b + at[a]);
   } else {  // lane by lane (a cell face crossed within the vector: ~22 % at 128^3, 4 lanes)
     // Gathered into arrays, then loaded: lanes set one by one in a vector read to GCC as the
@@ -944,7 +997,7 @@ FLAGSIM_INLINE bool far_sample(const SlRow<T>& w, int k, V u0, V u1, V u2, V& ou
     T g[8][W];
     for (int l = 0; l < W; ++l) {
       const int h = l / DW, r = l % DW;
-      const T* p = w.own + (k + l) + o[0][h][r] * w.sx + o[1][h][r] * w.sy + o[2][h][r];
+      const T* p = row + (k + l) + o[0][h][r] * w.sx + o[1][h][r] * w.sy + o[2][h][r];
       g[0][l] = p[0];
       g[1][l] = p[1];
       g[2][l] = p[w.sy];
@@ -957,16 +1010,31 @@ FLAGSIM_INLINE bool far_sample(const SlRow<T>& w, int k, V u0, V u1, V u2, V& ou
     for (int a = 0; a < 8; ++a) v[a] = load_lanes<V>(g[a]);
   }
   // lerp in T (lerp(): a + T(f) (b - a)); for a double grid the conversions are no-ops.
-  V wt[3];
   for (int a = 0; a < 3; ++a)
     for (int h = 0; h < H; ++h) {
       const P x = __builtin_convertvector(f[a][h], P);
       std::memcpy(reinterpret_cast<char*>(&wt[a]) + h * sizeof(P), &x, sizeof(P));
     }
+  return true;
+}
+
+/// trilinear() on lanes: the same operations per lane.
+template <class V>
+FLAGSIM_INLINE V trilinear_lanes(const V v[8], const V wt[3]) {
   const V c00 = v[0] + wt[2] * (v[1] - v[0]), c01 = v[2] + wt[2] * (v[3] - v[2]);
   const V c10 = v[4] + wt[2] * (v[5] - v[4]), c11 = v[6] + wt[2] * (v[7] - v[6]);
   const V y0 = c00 + wt[1] * (c01 - c00), y1 = c10 + wt[1] * (c11 - c10);
-  out = y0 + wt[0] * (y1 - y0);
+  return y0 + wt[0] * (y1 - y0);
+}
+
+/// The semi-Lagrangian value by far_cell: the general sampler's bits. Returns false, out
+/// untouched, when a departure is a ghost layer's reach or more (or not finite).
+template <int C, class V, class T>
+FLAGSIM_INLINE bool far_sample(const SlRow<T>& w, int k, const V& u0, const V& u1, const V& u2,
+                               V& out) {
+  V v[8], wt[3];
+  if (!far_cell<C, false>(w, w.own, k, u0, u1, u2, v, wt)) return false;
+  out = trilinear_lanes(v, wt);
   return true;
 }
 #endif
@@ -1054,12 +1122,12 @@ template <int C, class T>
 struct PaddedRow {
   static constexpr double kO0 = C == 0 ? 0.0 : 0.5, kO1 = C == 1 ? 0.0 : 0.5;
   static constexpr double kO2 = C == 2 ? 0.0 : 0.5;
-  const PeriodicAdvectScratch<T>& sc;
+  const AdvectScratch<T>& sc;
   PaddedSampler<T> q, qhat;
   std::ptrdiff_t stride[3];
   int i, j;
   std::size_t idx0;  // padded index of (i, j, 0)
-  PaddedRow(const PeriodicAdvectScratch<T>& sc, int i, int j)
+  PaddedRow(const AdvectScratch<T>& sc, int i, int j)
       : sc(sc), q(sc.u[C]), qhat(sc.hat[C]), i(i), j(j), idx0(sc.u[C].index(i, j, 0)) {
     stride[0] = std::ptrdiff_t(sc.u[C].p1) * sc.u[C].p2;
     stride[1] = sc.u[C].p2;
@@ -1101,7 +1169,7 @@ constexpr int kMaxRows = 4096;
 /// it bit for bit. D: every node also gains the explicit viscous term beta lap u^n
 /// (viscous_term), beta = nu dt / h^2.
 template <int C, bool D, class T>
-void padded_sl(const PeriodicAdvectScratch<T>& sc, double s, T beta, T* out) {
+void padded_sl(const AdvectScratch<T>& sc, double s, T beta, T* out) {
   const PaddedComponent<T>& p = sc.u[C];
   constexpr int E1 = C == 0 ? 1 : 0, E2 = C == 2 ? 1 : 2;  // the other two components
   const std::ptrdiff_t sx = std::ptrdiff_t(p.p1) * p.p2, sy = p.p2;
@@ -1158,7 +1226,7 @@ void padded_sl(const PeriodicAdvectScratch<T>& sc, double s, T beta, T* out) {
 
 /// out += beta lap u^n for component C (viscous_term, the same bits as padded_sl's fused term).
 template <int C, class T>
-void padded_viscous(const PeriodicAdvectScratch<T>& sc, T beta, T* out) {
+void padded_viscous(const AdvectScratch<T>& sc, T beta, T* out) {
   const PaddedComponent<T>& p = sc.u[C];
   const std::ptrdiff_t sx = std::ptrdiff_t(p.p1) * p.p2, sy = p.p2;
   for_each_row(Shape3{{p.n[0], p.n[1], p.n[2]}}, [&](int i, int j, std::size_t base) {
@@ -1169,57 +1237,247 @@ void padded_viscous(const PeriodicAdvectScratch<T>& sc, T beta, T* out) {
 }
 
 template <int C, class T>
-void padded_sl_any(const PeriodicAdvectScratch<T>& sc, double s, double beta, T* out) {
+void padded_sl_any(const AdvectScratch<T>& sc, double s, double beta, T* out) {
   if (beta > 0)
     padded_sl<C, true>(sc, s, T(beta), out);
   else
     padded_sl<C, false>(sc, s, T(0), out);
 }
 
-/// MacCormack correction and limiter of component C into out, h the unpadded predictor.
+/// The kernels' view of row (i, j) of component C of a bounded grid from its clamped padded
+/// copies (see GenericRow, whose arithmetic and bits it has): the velocity's nodes read without
+/// clamps (the ghosts repeat the nearest node), the samples clamped onto the nodes as there.
 template <int C, class T>
-void padded_mc(const PeriodicAdvectScratch<T>& sc, double s, const T* h, T* out) {
+struct ClampedRow {
+  static constexpr double kO0 = C == 0 ? 0.0 : 0.5, kO1 = C == 1 ? 0.0 : 0.5;
+  static constexpr double kO2 = C == 2 ? 0.0 : 0.5;
+  const AdvectScratch<T>& sc;
+  Interpolator<T> q, qhat;
+  std::ptrdiff_t stride[3];
+  std::size_t idx0;  // padded index of (i, j, 0)
+  double x0, x1;
+  T inflow;
+  InflowShape shape;
+  ClampedRow(const AdvectScratch<T>& sc, int i, int j, const SampleBoundary& bc)
+      : sc(sc),
+        q(sc.u[C], C),
+        qhat(sc.hat[C].data.empty() ? sc.u[C] : sc.hat[C], C),
+        idx0(sc.u[C].index(i, j, 0)),
+        x0(i + kO0),
+        x1(j + kO1),
+        inflow(T(bc.inflow[C])),
+        shape(bc.shape) {
+    stride[0] = std::ptrdiff_t(sc.u[C].p1) * sc.u[C].p2;
+    stride[1] = sc.u[C].p2;
+    stride[2] = 1;
+  }
+  T inflow_at(const double p[3]) const { return T(double(inflow) * shape.at(p)); }
+  void node(int k, double x[3]) const {
+    x[0] = x0;
+    x[1] = x1;
+    x[2] = k + kO2;
+  }
+  void velocity(int k, double vel[3]) const { padded_velocity<C>(sc.u, idx0 + k, stride, vel); }
+  T own(int k) const { return sc.u[C].data[idx0 + k]; }
+  bool upstream(const double p[3]) const { return p[0] < 0; }
+  T sample(const Trace& t, int) const { return q(t.back[0], t.back[1], t.back[2]); }
+  T sample_hat(const Trace& t, int) const { return qhat(t.fwd[0], t.fwd[1], t.fwd[2]); }
+  void nodes(const Trace& t, int, T v[8]) const {
+    q.nodes(q.corners(t.back[0], t.back[1], t.back[2]), v);
+  }
+};
+
+#ifdef FLAGSIM_HAVE_VECTORS
+/// maccormack_correct then maccormack_clamp on lanes: the same operations per lane (a float
+/// grid's correction in double, as there; std::min and std::max as the selects they are).
+template <class V>
+FLAGSIM_INLINE V maccormack_lanes(V hat, V u, V bar, const V nodes[8]) {
+  using E = std::remove_reference_t<decltype(hat[0])>;
+  V value;
+  if constexpr (std::is_same<E, double>::value) {
+    value = hat + 0.5 * (u - bar);
+  } else {
+    using D = typename LanesOf<double, int(sizeof(V) / sizeof(E))>::V;
+    const D x = __builtin_convertvector(hat, D) + 0.5 * __builtin_convertvector(u - bar, D);
+    value = __builtin_convertvector(x, V);
+  }
+  V lo = nodes[0], hi = nodes[0];
+  for (int a = 1; a < 8; ++a) {
+    lo = nodes[a] < lo ? nodes[a] : lo;
+    hi = hi < nodes[a] ? nodes[a] : hi;
+  }
+  const V m = lo < value ? value : lo;
+  return m < hi ? m : hi;
+}
+#endif
+
+/// One row of padded_far on vectors of L (void: none), the last one overlapping the one before
+/// (a node's value depends on the copies only). Mc: MacCormack's corrected, clamped value from
+/// the predictor h (the unpadded row) and its padded copy (the row at hat_row); else the
+/// semi-Lagrangian value by far_sample. Returns false when some departure is a ghost layer's
+/// reach or more (or not finite), or the row is shorter than a vector: the caller redoes the row.
+template <int C, bool Mc, class L, class T>
+FLAGSIM_INLINE bool far_row_body(const SlRow<T>& w, int n2, const T* hat_row, const T* h) {
+#ifdef FLAGSIM_HAVE_VECTORS
+  if constexpr (!std::is_void<L>::value) {
+    using V = typename L::V;
+    if (n2 < L::W) return false;
+    bool ok = true;
+    auto at = [&](int k) FLAGSIM_INLINE_LAMBDA {
+      V u0, u1, u2;
+      node_velocity<C>(w, k, u0, u1, u2);
+      V out;
+      if constexpr (Mc) {
+        V hv[8], hw[3], nv[8], nw[3];
+        if (!far_cell<C, true>(w, hat_row, k, u0, u1, u2, hv, hw) ||
+            !far_cell<C, false>(w, w.own, k, u0, u1, u2, nv, nw)) {
+          ok = false;
+          return;
+        }
+        out = maccormack_lanes(load_lanes<V>(h + k), load_lanes<V>(w.own + k),
+                               trilinear_lanes(hv, hw), nv);
+      } else if (!far_sample<C>(w, k, u0, u1, u2, out)) {
+        ok = false;
+        return;
+      }
+      store_lanes(w.dst + k, out);
+    };
+    int k = 0;
+    for (; k + L::W <= n2; k += L::W) at(k);
+    if (k < n2) at(n2 - L::W);
+    return ok;
+  }
+#endif
+  (void)w, (void)n2, (void)hat_row, (void)h;
+  return false;
+}
+
+/// One pass of component C from the padded copies into out, node for node the generic kernels'
+/// value (their bits): Mc, MacCormack's correction from the predictor h (unpadded; its padded
+/// copy in sc.hat); else the semi-Lagrangian value (a bounded grid's: the periodic one is
+/// padded_sl's). Rows whose departures all lie within the ghosts run on vectors (far_cell, the
+/// general sampler's arithmetic), the others node by node: PaddedRow (periodic), ClampedRow
+/// (bounded; also every plane within the ghosts' reach of the inflow face, where a departure may
+/// fall upstream of it and take the inflow).
+template <int C, bool Mc, class T>
+void padded_far(const AdvectScratch<T>& sc, double s, const SampleBoundary& bc, const T* h,
+                T* out) {
+  constexpr int G = PaddedComponent<T>::kGhost;
   const PaddedComponent<T>& p = sc.u[C];
-  for_each_row(Shape3{{p.n[0], p.n[1], p.n[2]}}, [&](int i, int j, std::size_t base) {
-    maccormack_row(PaddedRow<C, T>(sc, i, j), s, p.n[2], h + base, out + base);
+  const bool bounded = p.clamped;
+  constexpr int E1 = C == 0 ? 1 : 0, E2 = C == 2 ? 1 : 2;  // the other two components
+  const std::ptrdiff_t sx = std::ptrdiff_t(p.p1) * p.p2, sy = p.p2;
+  const std::ptrdiff_t stride[3] = {sx, sy, 1};
+  const int n1 = p.n[1], n2 = p.n[2];
+  const T* hat0 = Mc ? sc.hat[C].data.data() : nullptr;
+  const auto plane = [n1, n2, sy](auto c, SlRow<T> w, const T* hat_row, const T* h_plane,
+                                  unsigned char* row_done) FLAGSIM_INLINE_LAMBDA {
+    using K = decltype(c);
+    bool all = true;
+    for (int j = 0; j < n1; ++j) {
+      w.j = j;
+      w.x1 = j + GridGeometry::offset(C, 1);
+      row_done[j] = far_row_body<C, Mc, typename K::L>(w, n2, hat_row, h_plane);
+      all = row_done[j] && all;
+      w.own += sy;
+      w.rows9[4] += sy;  // node_velocity's own row (the other eight: upwind_sample's only)
+      w.e1 += sy;
+      w.e2 += sy;
+      w.dst += n2;
+      if (Mc) {
+        hat_row += sy;
+        h_plane += n2;
+      }
+    }
+    return all;
+  };
+  const auto plane_fn =
+      on_widest_lanes<T, bool(SlRow<T>, const T*, const T*, unsigned char*)>(plane);
+  for_each_plane(Shape3{{p.n[0], n1, n2}}, [&](int i) {
+    const std::size_t idx0 = p.index(i, 0, 0);
+    const std::size_t base = std::size_t(i) * n1 * n2;
+    SlRow<T> w{};
+    w.own = w.rows9[4] = p.data.data() + idx0;
+    w.e1 = sc.u[E1].data.data() + idx0;
+    w.e2 = sc.u[E2].data.data() + idx0;
+    w.dc = stride[C];
+    w.d1s = stride[E1];
+    w.d2s = stride[E2];
+    w.sx = sx;
+    w.sy = sy;
+    w.st = T(s);
+    w.s = s;
+    w.dst = out + base;
+    w.i = i;
+    w.x0 = i + GridGeometry::offset(C, 0);
+    unsigned char row_done[kMaxRows];           // rows of at most 4096 nodes (the resolution limit)
+    const bool by_nodes = bounded && w.x0 < G;  // a departure may cross the inflow face
+    if (!by_nodes && plane_fn(w, Mc ? hat0 + idx0 : nullptr, Mc ? h + base : nullptr, row_done))
+      return;
+    for (int j = 0; j < n1; ++j) {
+      if (!by_nodes && row_done[j]) continue;
+      const std::size_t r = base + std::size_t(j) * n2;
+      if (bounded) {
+        const ClampedRow<C, T> row(sc, i, j, bc);
+        if constexpr (Mc)
+          maccormack_row(row, s, n2, h + r, out + r);
+        else
+          semi_lagrangian_row(row, s, n2, out + r);
+      } else {
+        const PaddedRow<C, T> row(sc, i, j);
+        if constexpr (Mc)
+          maccormack_row(row, s, n2, h + r, out + r);
+        else
+          semi_lagrangian_row(row, s, n2, out + r);
+      }
+    }
   });
 }
 
 }  // namespace
 
 template <class T>
-void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, PeriodicAdvectScratch<T>& scratch,
+void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, AdvectScratch<T>& scratch,
                      MacGrid<T>& hat, double viscous_beta) {
-  fill_periodic_source(u, scratch);
-  advect_periodic_source(u, dt, maccormack, scratch, hat, viscous_beta);
+  fill_advect_source(u, scratch);
+  advect_from_source(u, dt, maccormack, scratch, hat, SampleBoundary{}, viscous_beta);
 }
 
 template <class T>
-void fill_periodic_source(const MacGrid<T>& u, PeriodicAdvectScratch<T>& scratch) {
+void advect_bounded(MacGrid<T>& u, double dt, const SampleBoundary& bc, bool maccormack,
+                    AdvectScratch<T>& scratch, MacGrid<T>& hat) {
+  fill_advect_source(u, scratch);
+  advect_from_source(u, dt, maccormack, scratch, hat, bc);
+}
+
+template <class T>
+void fill_advect_source(const MacGrid<T>& u, AdvectScratch<T>& scratch) {
   for (int c = 0; c < 3; ++c) scratch.u[c].fill(u.comp[c].data());
 }
 
 template <class T>
-void advect_periodic_source(MacGrid<T>& u, double dt, bool maccormack,
-                            PeriodicAdvectScratch<T>& scratch, MacGrid<T>& hat,
-                            double viscous_beta) {
+void advect_from_source(MacGrid<T>& u, double dt, bool maccormack, AdvectScratch<T>& scratch,
+                        MacGrid<T>& hat, const SampleBoundary& bc, double viscous_beta) {
   const double s = dt / u.geo.h;
   // Semi-Lagrangian (into hat for MacCormack, else straight into u: only padded copies are read;
-  // the viscous term fused in).
-  if (!maccormack) {
-    padded_sl_any<0>(scratch, s, viscous_beta, u.comp[0].data());
-    padded_sl_any<1>(scratch, s, viscous_beta, u.comp[1].data());
-    padded_sl_any<2>(scratch, s, viscous_beta, u.comp[2].data());
-    return;
+  // a periodic grid's viscous term fused in).
+  MacGrid<T>& sl = maccormack ? hat : u;
+  if (!u.geo.periodic) {
+    padded_far<0, false>(scratch, s, bc, static_cast<const T*>(nullptr), sl.comp[0].data());
+    padded_far<1, false>(scratch, s, bc, static_cast<const T*>(nullptr), sl.comp[1].data());
+    padded_far<2, false>(scratch, s, bc, static_cast<const T*>(nullptr), sl.comp[2].data());
+  } else {
+    const double beta = maccormack ? 0.0 : viscous_beta;
+    padded_sl_any<0>(scratch, s, beta, sl.comp[0].data());
+    padded_sl_any<1>(scratch, s, beta, sl.comp[1].data());
+    padded_sl_any<2>(scratch, s, beta, sl.comp[2].data());
   }
-  padded_sl_any<0>(scratch, s, 0.0, hat.comp[0].data());
-  padded_sl_any<1>(scratch, s, 0.0, hat.comp[1].data());
-  padded_sl_any<2>(scratch, s, 0.0, hat.comp[2].data());
+  if (!maccormack) return;
   for (int c = 0; c < 3; ++c) scratch.hat[c].fill(hat.comp[c].data());
-  padded_mc<0>(scratch, s, hat.comp[0].data(), u.comp[0].data());
-  padded_mc<1>(scratch, s, hat.comp[1].data(), u.comp[1].data());
-  padded_mc<2>(scratch, s, hat.comp[2].data(), u.comp[2].data());
-  if (viscous_beta > 0) {  // MacCormack: the viscous term in a pass of its own
+  padded_far<0, true>(scratch, s, bc, hat.comp[0].data(), u.comp[0].data());
+  padded_far<1, true>(scratch, s, bc, hat.comp[1].data(), u.comp[1].data());
+  padded_far<2, true>(scratch, s, bc, hat.comp[2].data(), u.comp[2].data());
+  if (u.geo.periodic && viscous_beta > 0) {  // MacCormack: the viscous term in a pass of its own
     padded_viscous<0>(scratch, T(viscous_beta), u.comp[0].data());
     padded_viscous<1>(scratch, T(viscous_beta), u.comp[1].data());
     padded_viscous<2>(scratch, T(viscous_beta), u.comp[2].data());
@@ -1245,22 +1503,24 @@ void sample_weight_squares(const MacGrid<T>& g, const double* points, long m, do
   }
 }
 
-#define FLAGSIM_INSTANTIATE_ADVECT(T)                                                           \
-  template T sample_component<T>(const MacGrid<T>&, int, const double[3]);                      \
-  template long sample_velocity<T>(const MacGrid<T>&, const double*, long, double*);            \
-  template void spread_velocity<T>(const double*, long, const double*, double, MacGrid<T>&);    \
-  template void sample_weight_squares<T>(const MacGrid<T>&, const double*, long, double*);      \
-  template void advect_semi_lagrangian<T>(const MacGrid<T>&, double, const SampleBoundary&,     \
-                                          MacGrid<T>&);                                         \
-  template void advect_maccormack<T>(const MacGrid<T>&, double, const SampleBoundary&,          \
-                                     MacGrid<T>&, MacGrid<T>&);                                 \
-  template struct PaddedComponent<T>;                                                           \
-  template struct PeriodicAdvectScratch<T>;                                                     \
-  template void advect_periodic<T>(MacGrid<T>&, double, bool, PeriodicAdvectScratch<T>&,        \
-                                   MacGrid<T>&, double);                                        \
-  template void fill_periodic_source<T>(const MacGrid<T>&, PeriodicAdvectScratch<T>&);          \
-  template void advect_periodic_source<T>(MacGrid<T>&, double, bool, PeriodicAdvectScratch<T>&, \
-                                          MacGrid<T>&, double);
+#define FLAGSIM_INSTANTIATE_ADVECT(T)                                                            \
+  template T sample_component<T>(const MacGrid<T>&, int, const double[3]);                       \
+  template long sample_velocity<T>(const MacGrid<T>&, const double*, long, double*);             \
+  template void spread_velocity<T>(const double*, long, const double*, double, MacGrid<T>&);     \
+  template void sample_weight_squares<T>(const MacGrid<T>&, const double*, long, double*);       \
+  template void advect_semi_lagrangian<T>(const MacGrid<T>&, double, const SampleBoundary&,      \
+                                          MacGrid<T>&);                                          \
+  template void advect_maccormack<T>(const MacGrid<T>&, double, const SampleBoundary&,           \
+                                     MacGrid<T>&, MacGrid<T>&);                                  \
+  template struct PaddedComponent<T>;                                                            \
+  template struct AdvectScratch<T>;                                                              \
+  template void advect_periodic<T>(MacGrid<T>&, double, bool, AdvectScratch<T>&, MacGrid<T>&,    \
+                                   double);                                                      \
+  template void advect_bounded<T>(MacGrid<T>&, double, const SampleBoundary&, bool,              \
+                                  AdvectScratch<T>&, MacGrid<T>&);                               \
+  template void fill_advect_source<T>(const MacGrid<T>&, AdvectScratch<T>&);                     \
+  template void advect_from_source<T>(MacGrid<T>&, double, bool, AdvectScratch<T>&, MacGrid<T>&, \
+                                      const SampleBoundary&, double);
 FLAGSIM_INSTANTIATE_ADVECT(float)
 FLAGSIM_INSTANTIATE_ADVECT(double)
 

@@ -58,8 +58,9 @@ template <class T>
 void advect_maccormack(const MacGrid<T>& u, double dt, const SampleBoundary& bc, MacGrid<T>& hat,
                        MacGrid<T>& out);
 
-/// Copy of one periodic component with G ghost layers on every side filled by wrapping, so a
-/// stencil within G nodes of any node needs no index arithmetic modulo n. Allocated once.
+/// Copy of one component with G ghost layers on every side, so a stencil within G nodes of any
+/// node needs no index arithmetic: a periodic grid's ghosts wrap, a bounded grid's repeat the
+/// nearest node (the clamp of advect_semi_lagrangian's sampling). Allocated once.
 template <class T>
 struct PaddedComponent {
   /// 3: departures of up to 3 cells on every axis take the vector paths (advect.cpp far_sample;
@@ -67,46 +68,60 @@ struct PaddedComponent {
   static constexpr int kGhost = 3;
   int n[3] = {0, 0, 0};   ///< unpadded node counts
   int p1 = 0, p2 = 0;     ///< padded sizes of axes 1 and 2
-  AlignedVector<T> data;  ///< (n0 + 2G) x (n1 + 2G) x (n2 + 2G)
+  bool clamped = false;   ///< ghosts repeat the nearest node (bounded grid) instead of wrapping
+  AlignedVector<T> data;  ///< (m0 + 2G) x (m1 + 2G) x (m2 + 2G), m = n or resize_clamped's
+  /// Wrapped ghosts, m = n.
   void resize(const Shape3& s);
-  /// data <- src (n0 x n1 x n2, C order) with wrapped ghosts.
+  /// Clamped ghosts in a box of m >= n nodes per axis (the nodes beyond n are ghosts too): the
+  /// three components of a bounded grid, sized with m = (nx + 1, ny + 1, nz + 1), share their
+  /// strides, so one index reaches a node of each.
+  void resize_clamped(const Shape3& s, const int m[3]);
+  /// data <- src (n0 x n1 x n2, C order) with its ghosts.
   void fill(const T* src);
   /// dst (n0 x n1 x n2, C order) <- the interior of data: undoes fill.
   void unpad(T* dst) const;
-  /// Index of node (i, j, k), each in [-G, n + G).
+  /// Index of node (i, j, k), each in [-G, m + G).
   std::size_t index(int i, int j, int k) const {
     return (std::size_t(i + kGhost) * p1 + std::size_t(j + kGhost)) * p2 + std::size_t(k + kGhost);
   }
 };
 
-/// Scratch of advect_periodic: padded copies of u^n and of the MacCormack predictor (hat: only
-/// when resized for MacCormack).
+/// Scratch of the padded advection (advect_periodic, advect_bounded): padded copies of u^n and
+/// of the MacCormack predictor (hat: only when resized for MacCormack).
 template <class T>
-struct PeriodicAdvectScratch {
+struct AdvectScratch {
   std::array<PaddedComponent<T>, 3> u, hat;
+  /// Wrapped ghosts for a periodic grid, clamped ones in a common box for a bounded grid.
   void resize(const GridGeometry& g, bool maccormack = true);
 };
 
 /// Self-advection of a periodic grid in place (u <- A(u)), semi-Lagrangian or MacCormack, the
-/// same arithmetic as advect_semi_lagrangian / advect_maccormack (identical results) but reading
-/// ghost-padded copies: departure points within a cell of their node take a wrap-free path.
-/// hat: scratch of u's geometry (MacCormack; unused, and may be empty, otherwise). No allocation.
+/// same scheme as advect_semi_lagrangian / advect_maccormack but reading ghost-padded copies:
+/// departure points within a cell of their node take a wrap-free upwind form (the same value to
+/// round-off), the others the generic kernels' arithmetic (their bits). hat: scratch of u's
+/// geometry (MacCormack; unused, and may be empty, otherwise). No allocation.
 /// viscous_beta = nu dt / h^2 > 0 adds the explicit viscous step of u^n, u <- A(u^n) +
 /// beta h^2 lap u^n (7-point MAC Laplacian per component; fused into the semi-Lagrangian pass,
 /// a pass of its own after MacCormack): stable for beta <= 1/6; the Fluid takes it only where
 /// beta is small (docs/design.md, "Explicit viscosity on periodic fft grids").
 template <class T>
-void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, PeriodicAdvectScratch<T>& scratch,
+void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, AdvectScratch<T>& scratch,
                      MacGrid<T>& hat, double viscous_beta = 0);
 
-/// advect_periodic in two parts: the padded copies of u^n (reads u only), then the advection from
-/// them (writes u). Between the two, u^n may still be read elsewhere (the Simulation's pipeline
-/// samples it: Fluid::WriteGate).
+/// Self-advection of a bounded grid in place from clamped padded copies: advect_semi_lagrangian /
+/// advect_maccormack (their bits on every node: departures within the ghosts on vectors, the
+/// others and the planes beside the inflow face node by node). No allocation.
 template <class T>
-void fill_periodic_source(const MacGrid<T>& u, PeriodicAdvectScratch<T>& scratch);
+void advect_bounded(MacGrid<T>& u, double dt, const SampleBoundary& bc, bool maccormack,
+                    AdvectScratch<T>& scratch, MacGrid<T>& hat);
+
+/// The padded advection in two parts: the padded copies of u^n (reads u only), then the advection
+/// from them (writes u; bc: a bounded grid's inflow; viscous_beta: periodic only). Between the
+/// two, u^n may still be read elsewhere (the Simulation's pipeline samples it: Fluid::WriteGate).
 template <class T>
-void advect_periodic_source(MacGrid<T>& u, double dt, bool maccormack,
-                            PeriodicAdvectScratch<T>& scratch, MacGrid<T>& hat,
-                            double viscous_beta = 0);
+void fill_advect_source(const MacGrid<T>& u, AdvectScratch<T>& scratch);
+template <class T>
+void advect_from_source(MacGrid<T>& u, double dt, bool maccormack, AdvectScratch<T>& scratch,
+                        MacGrid<T>& hat, const SampleBoundary& bc = {}, double viscous_beta = 0);
 
 }  // namespace flagsim

@@ -73,7 +73,7 @@ template <class T>
 struct TypedSolver final : Fluid::Solver {
   // Grid-sized arrays, each allocated only where a stage of this configuration uses it (counted
   // in docs/design.md "Memory"; tests/cpp/fluid/test_fluid.cpp GridArrays.* hold the counts).
-  MacGrid<T> u, prev, hat;     // current field; tunnel advection source; MacCormack / rhs scratch
+  MacGrid<T> u, hat;           // current field; MacCormack / rhs scratch
   AlignedVector<T> phi;        // nx*ny*nz or empty (fft): potential dt p / rho (m^2/s)
   AlignedVector<T> phi_start;  // nx*ny*nz or empty (fft): phi at the step's start (undo_step)
   // nx*ny*nz or empty (fft), 1/s: the pcg / multigrid right-hand side in a step, divergence()
@@ -87,7 +87,7 @@ struct TypedSolver final : Fluid::Solver {
   CgScratch<T> cg;
   AlignedVector<uint8_t> solid;  // nx*ny*nz, 1 = solid cell (the pressure solve's mask)
   std::vector<FanStencil<T>> fans;
-  PeriodicAdvectScratch<T> padded;  // periodic grids: ghost-padded u^n and MacCormack predictor
+  AdvectScratch<T> padded;  // ghost-padded u^n and MacCormack predictor (the advection's source)
   double tol = 0;
   bool maccormack = false, use_fft = false, use_mg = false;
   std::vector<double> inflow_w;  // tunnel: the inflow profile per (j, k) of the x-min face
@@ -117,10 +117,7 @@ struct TypedSolver final : Fluid::Solver {
     // hat: MacCormack's predictor, the tunnel's, and the iterative and explicit diffusion's copy
     // (pcg, multigrid); a periodic semi-Lagrangian fft grid never touches it.
     if (maccormack || !geo.periodic || !use_fft) hat = MacGrid<T>(geo);
-    if (geo.periodic)
-      padded.resize(geo, maccormack);
-    else
-      prev = MacGrid<T>(geo);
+    padded.resize(geo, maccormack);
     const std::size_t cells = geo.cells().size();
     // fft projects in its first half spectrum: phi is the pcg / multigrid potential (and the
     // obstacles' pressure, which fft cannot have).
@@ -254,24 +251,15 @@ struct TypedSolver final : Fluid::Solver {
     const double beta = nu_dt / (geo.h * geo.h);
     const bool viscous_explicit =
         geo.periodic && !explicit_viscosity && beta > 0 && beta <= kExplicitViscosityBeta;
-    // 1. self-advection of u^n (reads prev, writes u)
+    // 1. self-advection of u^n (reads its padded copy, writes u)
     {
       ScopedTimer timer(stats.seconds_advect);
       const auto pass = [gate]() {  // u^n is copied; from here on u is written
         if (gate) gate->wait(gate->arg);
       };
-      if (geo.periodic) {
-        fill_periodic_source(u, padded);
-        pass();
-        advect_periodic_source(u, dt, maccormack, padded, hat, viscous_explicit ? beta : 0.0);
-      } else {
-        copy_grid(u, prev);
-        pass();
-        if (maccormack)
-          advect_maccormack(prev, dt, bc, hat, u);
-        else
-          advect_semi_lagrangian(prev, dt, bc, u);
-      }
+      fill_advect_source(u, padded);
+      pass();
+      advect_from_source(u, dt, maccormack, padded, hat, bc, viscous_explicit ? beta : 0.0);
     }
     // 2. external force
     {
@@ -339,13 +327,10 @@ struct TypedSolver final : Fluid::Solver {
     return bad == 0;
   }
 
-  // u^n is still held by the step's own copy: the padded source (periodic) or prev (tunnel).
+  // u^n is still held by the step's own copy: the padded source.
   // The pcg warm start phi may hold the failure too: it restarts from zero.
   void undo_step(double t0) override {
-    if (geo.periodic)
-      for (int c = 0; c < 3; ++c) padded.u[c].unpad(u.comp[c].data());
-    else
-      copy_grid(prev, u);
+    for (int c = 0; c < 3; ++c) padded.u[c].unpad(u.comp[c].data());
     std::fill(phi.begin(), phi.end(), T(0));
     time = t0;
     --stats.steps;

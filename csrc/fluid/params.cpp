@@ -104,14 +104,15 @@ double FluidParams::memory_bytes() const {
   const bool maccormack = advection == Advection::kMacCormack;
   // The grid-sized arrays of fluid.cpp's TypedSolver, in values of the grid's precision (the
   // table in docs/design.md "Memory"; tests/cpp/fluid/test_fluid.cpp counts them):
-  // u; div, phi (pcg, multigrid); periodic: the ghost-padded u^n (and the MacCormack predictor's);
-  // tunnel: u^n; hat (MacCormack, tunnel, pcg / multigrid); the CG vectors (pcg, multigrid); fft: 3
-  // spectra.
+  // u; div, phi (pcg, multigrid); the ghost-padded u^n and the MacCormack predictor's (a tunnel's
+  // components in a common box of (n + 1)^3 nodes); hat (MacCormack, tunnel, pcg / multigrid); the
+  // CG vectors (pcg, multigrid); fft: 3 spectra.
   constexpr double G = 2 * 3;  // PaddedComponent::kGhost on either side
-  const double padded = 3 * (n0 + G) * (n1 + G) * (n2 + G);
+  const double m = periodic ? 0.0 : 1.0;
+  const double padded = 3 * (n0 + m + G) * (n1 + m + G) * (n2 + m + G);
   const double faces = 3 * n + (periodic ? 0.0 : n1 * n2 + n0 * n2 + n0 * n1);
   double values = faces + (fft ? 0 : 2) * n;
-  values += periodic ? padded * (maccormack ? 2 : 1) : faces;
+  values += padded * (maccormack ? 2 : 1);
   if (maccormack || !periodic || !fft) values += faces;
   if (!fft) values += 4 * (faces / 3 + n1 * n2 + n0 * n2);  // CgScratch: the largest component
   if (!fft) values += n;                                    // phi_start (undo_step's warm start)

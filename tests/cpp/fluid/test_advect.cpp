@@ -72,7 +72,7 @@ TEST_P(PeriodicFastPath, MatchesTheGenericKernels) {
   else
     advect_semi_lagrangian(u0, dt, SampleBoundary{}, generic);
   MacGrid<double> fast = u0;
-  PeriodicAdvectScratch<double> scratch;
+  AdvectScratch<double> scratch;
   scratch.resize(u0.geo);
   advect_periodic(fast, dt, maccormack, scratch, hat);
   EXPECT_FALSE(same_bits(generic, fast));  // the fast path ran (different rounding)
@@ -87,7 +87,9 @@ INSTANTIATE_TEST_SUITE_P(Advect, PeriodicFastPath,
 // (within the 3 ghost layers; contiguous loads where the lanes' lower nodes share their offsets,
 // lane by lane where the flow crosses a cell face within a vector), which does the general
 // sampler's arithmetic: the generic kernel's bits on every node, at every vector width, on double
-// and float grids (float: the departure point in double, the interpolation in float).
+// and float grids (float: the departure point in double, the interpolation in float). MacCormack's
+// correction (far_cell forward into the predictor and back into u^n, on vectors) then gives
+// advect_maccormack's bits too.
 template <class T>
 void expect_far_departures_give_the_generic_bits(int nz) {
   const GridGeometry g = periodic_geometry(10, 9, nz);
@@ -104,16 +106,22 @@ void expect_far_departures_give_the_generic_bits(int nz) {
                                         : -0.6 + 0.3 * std::cos(x - y);
           u0.at(c, i, j, k) = T(cells / s);
         }
-  MacGrid<T> generic(g), hat(g);
-  advect_semi_lagrangian(u0, dt, SampleBoundary{}, generic);
-  for (const int cap : {0, 16}) {
-    vector_bytes(cap);
-    MacGrid<T> fast = u0;
-    PeriodicAdvectScratch<T> scratch;
-    scratch.resize(g);
-    advect_periodic(fast, dt, false, scratch, hat);
-    vector_bytes(0);
-    EXPECT_TRUE(same_bits(generic, fast)) << "vector cap " << cap << " nz " << nz;
+  for (const bool maccormack : {false, true}) {
+    MacGrid<T> generic(g), hat(g);
+    if (maccormack)
+      advect_maccormack(u0, dt, SampleBoundary{}, hat, generic);
+    else
+      advect_semi_lagrangian(u0, dt, SampleBoundary{}, generic);
+    for (const int cap : {0, 16}) {
+      vector_bytes(cap);
+      MacGrid<T> fast = u0;
+      AdvectScratch<T> scratch;
+      scratch.resize(g, maccormack);
+      advect_periodic(fast, dt, maccormack, scratch, hat);
+      vector_bytes(0);
+      EXPECT_TRUE(same_bits(generic, fast))
+          << "vector cap " << cap << " nz " << nz << " maccormack " << maccormack;
+    }
   }
 }
 
@@ -136,7 +144,7 @@ TEST(Advect, PeriodicFastPathKeepsAUniformFieldExactly) {
   for (const Vec3& w : {Vec3(0.3, -0.2, 0.45), Vec3(-0.7, 0.1, -0.05)}) {
     MacGrid<double> u(g), hat(g);
     for (int c = 0; c < 3; ++c) std::fill(u.comp[c].begin(), u.comp[c].end(), w[c]);
-    PeriodicAdvectScratch<double> scratch;
+    AdvectScratch<double> scratch;
     scratch.resize(g);
     advect_periodic(u, 0.1, false, scratch, hat);
     for (int c = 0; c < 3; ++c)
@@ -191,7 +199,7 @@ void expect_widths_agree(double scale, int nz) {
   auto run = [&](int cap) {
     vector_bytes(cap);
     MacGrid<T> u = u0, hat(g);
-    PeriodicAdvectScratch<T> scratch;
+    AdvectScratch<T> scratch;
     scratch.resize(g);
     advect_periodic(u, 0.1, false, scratch, hat);
     vector_bytes(0);
@@ -227,7 +235,7 @@ void expect_viscous_term_exact(bool maccormack, double scale, int nz) {
   auto run = [&](double b, int cap) {
     vector_bytes(cap);
     MacGrid<T> u = u0, hat(g);
-    PeriodicAdvectScratch<T> scratch;
+    AdvectScratch<T> scratch;
     scratch.resize(g, maccormack);
     advect_periodic(u, 0.1, maccormack, scratch, hat, b);
     vector_bytes(0);
@@ -300,6 +308,88 @@ TEST(Advect, PaddedComponentGhostsAreTheWrappedNodes) {
     expect_ghosts_are_the_wrapped_nodes<double>(4, n2 == 6 ? 3 : 5, n2);
     expect_ghosts_are_the_wrapped_nodes<float>(4, n2 == 6 ? 3 : 5, n2);
   }
+}
+
+// A bounded grid's ghosts repeat the nearest node, past the box's every end: the components of
+// a tunnel share the box (n + 1 nodes per axis), so a component's nodes beyond its own count are
+// ghosts too.
+TEST(Advect, ClampedGhostsRepeatTheNearestNode) {
+  constexpr int G = PaddedComponent<double>::kGhost;
+  const int n[3] = {4, 3, 5}, m[3] = {5, 4, 6};
+  std::vector<double> src(std::size_t(n[0]) * n[1] * n[2]);
+  for (std::size_t i = 0; i < src.size(); ++i) src[i] = double(i);
+  PaddedComponent<double> p;
+  p.resize_clamped(Shape3{{n[0], n[1], n[2]}}, m);
+  p.fill(src.data());
+  auto clamp = [](int i, int n) { return std::min(std::max(i, 0), n - 1); };
+  for (int i = -G; i < m[0] + G; ++i)
+    for (int j = -G; j < m[1] + G; ++j)
+      for (int k = -G; k < m[2] + G; ++k)
+        ASSERT_EQ(
+            p.data[p.index(i, j, k)],
+            src[(std::size_t(clamp(i, n[0])) * n[1] + clamp(j, n[1])) * n[2] + clamp(k, n[2])])
+            << "node " << i << " " << j << " " << k;
+  std::vector<double> back(src.size());
+  p.unpad(back.data());
+  EXPECT_EQ(back, src);
+}
+
+// A tunnel's padded advection (advect_bounded: clamped ghosts, far_cell on vectors, ClampedRow
+// node by node beside the inflow face and where a departure leaves the ghosts) against the
+// generic kernels on the unpadded field: the same bits on every node, semi-Lagrangian and
+// MacCormack, double and float, at every vector width, with a uniform and a parabolic inflow.
+// Departures of 0.3 cells (within a cell), 2 (within the ghosts) and 5 (past them, and past the
+// box, where the clamp and the inflow decide) in the random field's standard deviation; rows of
+// 23 and 24 nodes (a last vector overlapping the one before at every width) and of 5 (shorter
+// than a float vector).
+template <class T>
+void expect_bounded_fast_path_gives_the_generic_bits(double scale, int nz, bool parabolic) {
+  GridGeometry g;
+  g.nx = 11;
+  g.ny = 7;
+  g.nz = nz;
+  g.h = 0.1;
+  g.origin = Vec3(0.3, -0.2, 0.0);
+  g.periodic = false;
+  MacGrid<T> u0(g);
+  std::mt19937 rng(17);
+  std::normal_distribution<double> normal(0.0, scale);
+  for (auto& comp : u0.comp)
+    for (T& x : comp) x = T(normal(rng));
+  SampleBoundary bc;
+  bc.inflow = Vec3(0.7 * scale, -0.2 * scale, 0.1 * scale);
+  if (parabolic) {
+    bc.shape.parabolic[1] = bc.shape.parabolic[2] = true;
+    bc.shape.n[1] = g.ny;
+    bc.shape.n[2] = g.nz;
+  }
+  const double dt = 0.1;  // u dt / h = u cells
+  for (const bool maccormack : {false, true}) {
+    MacGrid<T> generic(g), hat(g);
+    if (maccormack)
+      advect_maccormack(u0, dt, bc, hat, generic);
+    else
+      advect_semi_lagrangian(u0, dt, bc, generic);
+    for (const int cap : {0, 16}) {
+      vector_bytes(cap);
+      MacGrid<T> fast = u0;
+      AdvectScratch<T> scratch;
+      scratch.resize(g, maccormack);
+      advect_bounded(fast, dt, bc, maccormack, scratch, hat);
+      vector_bytes(0);
+      EXPECT_TRUE(same_bits(generic, fast))
+          << "scale " << scale << " nz " << nz << " maccormack " << maccormack << " cap " << cap;
+    }
+  }
+}
+
+TEST(Advect, BoundedFastPathGivesTheGenericKernelsBits) {
+  for (const double scale : {0.3, 2.0, 5.0})
+    for (const int nz : {23, 24, 5})
+      for (const bool parabolic : {false, true}) {
+        expect_bounded_fast_path_gives_the_generic_bits<double>(scale, nz, parabolic);
+        expect_bounded_fast_path_gives_the_generic_bits<float>(scale, nz, parabolic);
+      }
 }
 
 }  // namespace flagsim

@@ -429,6 +429,23 @@ TEST(GridArrays, MacCormackAddsItsPredictorAndItsPaddedCopy) {
   EXPECT_LE(mc.estimate, 1.5 * mc.bytes);
 }
 
+TEST(GridArrays, TunnelAdvectsFromPaddedCopiesInACommonBox) {
+  // A tunnel's u^n is padded with its three components in one box of 33^3 nodes plus the ghosts
+  // (advect_bounded); MacCormack adds the predictor's padded copy (the predictor itself, hat, is
+  // there already: the multigrid diffusion's copy).
+  const double box = std::pow((33.0 + 2 * PaddedComponent<double>::kGhost) / 32.0, 3);
+  FluidParams p = cube(32, "multigrid", "semi_lagrangian");
+  p.boundary = Boundary::kTunnel;
+  const Counted sl = count_arrays(p);
+  p.advection = Advection::kMacCormack;
+  const Counted mc = count_arrays(p);
+  EXPECT_NEAR(mc.arrays - sl.arrays, 3 * box, 1e-3);
+  for (const Counted& c : {sl, mc}) {
+    EXPECT_GE(c.estimate, c.bytes);
+    EXPECT_LE(c.estimate, 2.0 * c.bytes);
+  }
+}
+
 TEST(GridArrays, IterativeBackendsAreCoveredByTheEstimate) {
   for (const char* pressure : {"pcg", "multigrid"})
     for (const char* boundary : {"periodic", "tunnel"}) {
