@@ -1116,19 +1116,19 @@ FLAGSIM_INLINE bool sl_plane_body(SlRow<T> w, int n1, int n2_, std::ptrdiff_t sy
   return near;
 }
 
-/// The kernels' view of row (i, j) of component C of a periodic grid from its padded copies (see
-/// GenericRow): departures within a cell of the node sample without wrapping.
+/// What the node-by-node views of a row (i, j) of component C on padded copies share: the node's
+/// position, its velocity (padded_velocity: the neighbours read without wrapping or clamping) and
+/// its own value.
 template <int C, class T>
-struct PaddedRow {
+struct PaddedRowBase {
   static constexpr double kO0 = C == 0 ? 0.0 : 0.5, kO1 = C == 1 ? 0.0 : 0.5;
   static constexpr double kO2 = C == 2 ? 0.0 : 0.5;
   const AdvectScratch<T>& sc;
-  PaddedSampler<T> q, qhat;
   std::ptrdiff_t stride[3];
   int i, j;
   std::size_t idx0;  // padded index of (i, j, 0)
-  PaddedRow(const AdvectScratch<T>& sc, int i, int j)
-      : sc(sc), q(sc.u[C]), qhat(sc.hat[C]), i(i), j(j), idx0(sc.u[C].index(i, j, 0)) {
+  PaddedRowBase(const AdvectScratch<T>& sc, int i, int j)
+      : sc(sc), i(i), j(j), idx0(sc.u[C].index(i, j, 0)) {
     stride[0] = std::ptrdiff_t(sc.u[C].p1) * sc.u[C].p2;
     stride[1] = sc.u[C].p2;
     stride[2] = 1;
@@ -1140,6 +1140,16 @@ struct PaddedRow {
   }
   void velocity(int k, double vel[3]) const { padded_velocity<C>(sc.u, idx0 + k, stride, vel); }
   T own(int k) const { return sc.u[C].data[idx0 + k]; }
+};
+
+/// The kernels' view of row (i, j) of component C of a periodic grid from its padded copies (see
+/// GenericRow): departures within a cell of the node sample without wrapping.
+template <int C, class T>
+struct PaddedRow : PaddedRowBase<C, T> {
+  using B = PaddedRowBase<C, T>;
+  using B::i, B::idx0, B::j, B::kO0, B::kO1, B::kO2, B::sc;
+  PaddedSampler<T> q, qhat;
+  PaddedRow(const AdvectScratch<T>& sc, int i, int j) : B(sc, i, j), q(sc.u[C]), qhat(sc.hat[C]) {}
   bool upstream(const double*) const { return false; }
   T inflow_at(const double*) const { return T(0); }  // never taken: a periodic grid has no inflow
   typename PaddedSampler<T>::Corner corner(const PaddedSampler<T>& s, const PaddedComponent<T>& p,
@@ -1248,37 +1258,17 @@ void padded_sl_any(const AdvectScratch<T>& sc, double s, double beta, T* out) {
 /// copies (see GenericRow, whose arithmetic and bits it has): the velocity's nodes read without
 /// clamps (the ghosts repeat the nearest node), the samples clamped onto the nodes as there.
 template <int C, class T>
-struct ClampedRow {
-  static constexpr double kO0 = C == 0 ? 0.0 : 0.5, kO1 = C == 1 ? 0.0 : 0.5;
-  static constexpr double kO2 = C == 2 ? 0.0 : 0.5;
-  const AdvectScratch<T>& sc;
+struct ClampedRow : PaddedRowBase<C, T> {
   Interpolator<T> q, qhat;
-  std::ptrdiff_t stride[3];
-  std::size_t idx0;  // padded index of (i, j, 0)
-  double x0, x1;
   T inflow;
   InflowShape shape;
   ClampedRow(const AdvectScratch<T>& sc, int i, int j, const SampleBoundary& bc)
-      : sc(sc),
+      : PaddedRowBase<C, T>(sc, i, j),
         q(sc.u[C], C),
         qhat(sc.hat[C].data.empty() ? sc.u[C] : sc.hat[C], C),
-        idx0(sc.u[C].index(i, j, 0)),
-        x0(i + kO0),
-        x1(j + kO1),
         inflow(T(bc.inflow[C])),
-        shape(bc.shape) {
-    stride[0] = std::ptrdiff_t(sc.u[C].p1) * sc.u[C].p2;
-    stride[1] = sc.u[C].p2;
-    stride[2] = 1;
-  }
+        shape(bc.shape) {}
   T inflow_at(const double p[3]) const { return T(double(inflow) * shape.at(p)); }
-  void node(int k, double x[3]) const {
-    x[0] = x0;
-    x[1] = x1;
-    x[2] = k + kO2;
-  }
-  void velocity(int k, double vel[3]) const { padded_velocity<C>(sc.u, idx0 + k, stride, vel); }
-  T own(int k) const { return sc.u[C].data[idx0 + k]; }
   bool upstream(const double p[3]) const { return p[0] < 0; }
   T sample(const Trace& t, int) const { return q(t.back[0], t.back[1], t.back[2]); }
   T sample_hat(const Trace& t, int) const { return qhat(t.fwd[0], t.fwd[1], t.fwd[2]); }
