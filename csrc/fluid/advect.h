@@ -46,7 +46,8 @@ template <class T>
 void sample_weight_squares(const MacGrid<T>& g, const double* points, long m, double* out);
 
 /// Semi-Lagrangian self-advection: out = u(x - dt u(x)) at every face (Stam 1999).
-/// u, out: same geometry, distinct; dt in s.
+/// u, out: same geometry, distinct; dt in s. This and advect_maccormack are the generic kernels,
+/// the reference the Fluid's padded paths (advect_periodic, advect_bounded) are tested against.
 template <class T>
 void advect_semi_lagrangian(const MacGrid<T>& u, double dt, const SampleBoundary& bc,
                             MacGrid<T>& out);
