@@ -6,6 +6,7 @@ import re
 import subprocess
 
 import flagsim
+import pytest
 from flagsim import _core, _revision
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -45,3 +46,24 @@ def test_the_reports_print_it():
 
     assert git_revision() == _revision.revision()
     assert f"(git {_revision.revision()})" in machine_description()
+
+
+@pytest.mark.parametrize("name", ["run_accuracy", "run_flutter", "run_stability"])
+def test_a_study_reads_the_revision_before_it_writes_anything(monkeypatch, tmp_path, name):
+    # Regenerated into a checkout (--docs docs/reports), a study's own plots are local changes to
+    # tracked files: read after them, the report would call every regeneration "-dirty".
+    from flagsim import study
+
+    calls = []
+
+    class Ran(Exception):
+        pass
+
+    def run(*args, **kwargs):
+        raise Ran
+
+    monkeypatch.setattr(study, "machine_description", lambda: calls.append("machine") or "m")
+    monkeypatch.setattr(study, "_run", run)
+    with pytest.raises(Ran):
+        getattr(study, name)(str(tmp_path), progress=False)
+    assert calls == ["machine"]

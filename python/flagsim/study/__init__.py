@@ -51,6 +51,7 @@ def run_stability(
 ) -> list[dict[str, str]]:
     from . import stability
 
+    machine = machine_description()  # before anything is written: see accuracy.write_report
     rows = _run(
         stability,
         stability.cases(reduced),
@@ -60,9 +61,7 @@ def run_stability(
         executor=executor,
         progress=progress,
     )
-    stability.write_report(
-        rows, report_path or os.path.join(out, "stability.md"), machine_description()
-    )
+    stability.write_report(rows, report_path or os.path.join(out, "stability.md"), machine)
     return rows
 
 
@@ -78,6 +77,7 @@ def run_accuracy(
 ) -> list[dict[str, str]]:
     from . import accuracy
 
+    machine = machine_description()
     state_dir = os.path.join(out, "states")
     rows = _run(
         accuracy,
@@ -100,6 +100,7 @@ def run_accuracy(
         report_path or os.path.join(out, "accuracy.md"),
         plots,
         os.path.dirname(report_path) if report_path else out,
+        machine,
     )
     return rows
 
@@ -116,6 +117,7 @@ def run_flutter(
 ) -> list[dict[str, str]]:
     from . import flutter
 
+    machine = machine_description()
     rows = _run(
         flutter,
         flutter.cases(quick),
@@ -127,5 +129,5 @@ def run_flutter(
     )
     plot = flutter.write_plots(rows, plot_dir or out)
     report = report_path or os.path.join(out, "flutter.md")
-    flutter.write_report(rows, report, plot, os.path.dirname(os.path.abspath(report)))
+    flutter.write_report(rows, report, plot, os.path.dirname(os.path.abspath(report)), machine)
     return rows
