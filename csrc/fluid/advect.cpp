@@ -1427,17 +1427,10 @@ void padded_far(const AdvectScratch<T>& sc, double s, const SampleBoundary& bc, 
 }  // namespace
 
 template <class T>
-void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, AdvectScratch<T>& scratch,
-                     MacGrid<T>& hat, double viscous_beta) {
+void advect_padded(MacGrid<T>& u, double dt, bool maccormack, AdvectScratch<T>& scratch,
+                   MacGrid<T>& hat, const SampleBoundary& bc, double viscous_beta) {
   fill_advect_source(u, scratch);
-  advect_from_source(u, dt, maccormack, scratch, hat, SampleBoundary{}, viscous_beta);
-}
-
-template <class T>
-void advect_bounded(MacGrid<T>& u, double dt, const SampleBoundary& bc, bool maccormack,
-                    AdvectScratch<T>& scratch, MacGrid<T>& hat) {
-  fill_advect_source(u, scratch);
-  advect_from_source(u, dt, maccormack, scratch, hat, bc);
+  advect_from_source(u, dt, maccormack, scratch, hat, bc, viscous_beta);
 }
 
 template <class T>
@@ -1504,10 +1497,8 @@ void sample_weight_squares(const MacGrid<T>& g, const double* points, long m, do
                                      MacGrid<T>&, MacGrid<T>&);                                  \
   template struct PaddedComponent<T>;                                                            \
   template struct AdvectScratch<T>;                                                              \
-  template void advect_periodic<T>(MacGrid<T>&, double, bool, AdvectScratch<T>&, MacGrid<T>&,    \
-                                   double);                                                      \
-  template void advect_bounded<T>(MacGrid<T>&, double, const SampleBoundary&, bool,              \
-                                  AdvectScratch<T>&, MacGrid<T>&);                               \
+  template void advect_padded<T>(MacGrid<T>&, double, bool, AdvectScratch<T>&, MacGrid<T>&,      \
+                                 const SampleBoundary&, double);                                 \
   template void fill_advect_source<T>(const MacGrid<T>&, AdvectScratch<T>&);                     \
   template void advect_from_source<T>(MacGrid<T>&, double, bool, AdvectScratch<T>&, MacGrid<T>&, \
                                       const SampleBoundary&, double);

@@ -47,7 +47,7 @@ void sample_weight_squares(const MacGrid<T>& g, const double* points, long m, do
 
 /// Semi-Lagrangian self-advection: out = u(x - dt u(x)) at every face (Stam 1999).
 /// u, out: same geometry, distinct; dt in s. This and advect_maccormack are the generic kernels,
-/// the reference the Fluid's padded paths (advect_periodic, advect_bounded) are tested against.
+/// the reference the Fluid's padded path (advect_padded) is tested against.
 template <class T>
 void advect_semi_lagrangian(const MacGrid<T>& u, double dt, const SampleBoundary& bc,
                             MacGrid<T>& out);
@@ -87,7 +87,7 @@ struct PaddedComponent {
   }
 };
 
-/// Scratch of the padded advection (advect_periodic, advect_bounded): padded copies of u^n and
+/// Scratch of the padded advection (advect_padded): padded copies of u^n and
 /// of the MacCormack predictor (hat: only when resized for MacCormack).
 template <class T>
 struct AdvectScratch {
@@ -96,29 +96,24 @@ struct AdvectScratch {
   void resize(const GridGeometry& g, bool maccormack = true);
 };
 
-/// Self-advection of a periodic grid in place (u <- A(u)), semi-Lagrangian or MacCormack, the
-/// same scheme as advect_semi_lagrangian / advect_maccormack but reading ghost-padded copies:
-/// departure points within a cell of their node take a wrap-free upwind form (the same value to
-/// round-off), the others the generic kernels' arithmetic (their bits). hat: scratch of u's
-/// geometry (MacCormack; unused, and may be empty, otherwise). No allocation.
-/// viscous_beta = nu dt / h^2 > 0 adds the explicit viscous step of u^n, u <- A(u^n) +
-/// beta h^2 lap u^n (7-point MAC Laplacian per component; fused into the semi-Lagrangian pass,
-/// a pass of its own after MacCormack): stable for beta <= 1/6; the Fluid takes it only where
-/// beta is small (docs/design.md, "Explicit viscosity on periodic fft grids").
+/// Self-advection in place (u <- A(u)), semi-Lagrangian or MacCormack, the scheme of
+/// advect_semi_lagrangian / advect_maccormack read from ghost-padded copies of u^n (scratch, sized
+/// for u's geometry). Periodic grid: departures within a cell of their node take a wrap-free
+/// upwind form (the same value to round-off), the others the generic kernels' arithmetic (their
+/// bits). Bounded grid: the generic kernels' bits on every node (departures within the ghosts on
+/// vectors, the others and the planes beside the inflow face node by node); bc: its inflow.
+/// hat: scratch of u's geometry (MacCormack; unused, and may be empty, otherwise). No allocation.
+/// viscous_beta = nu dt / h^2 > 0 (periodic only) adds the explicit viscous step of u^n,
+/// u <- A(u^n) + beta h^2 lap u^n (7-point MAC Laplacian per component; fused into the
+/// semi-Lagrangian pass, a pass of its own after MacCormack): stable for beta <= 1/6; the Fluid
+/// takes it only where beta is small (docs/design.md, "Explicit viscosity on periodic fft grids").
 template <class T>
-void advect_periodic(MacGrid<T>& u, double dt, bool maccormack, AdvectScratch<T>& scratch,
-                     MacGrid<T>& hat, double viscous_beta = 0);
+void advect_padded(MacGrid<T>& u, double dt, bool maccormack, AdvectScratch<T>& scratch,
+                   MacGrid<T>& hat, const SampleBoundary& bc = {}, double viscous_beta = 0);
 
-/// Self-advection of a bounded grid in place from clamped padded copies: advect_semi_lagrangian /
-/// advect_maccormack (their bits on every node: departures within the ghosts on vectors, the
-/// others and the planes beside the inflow face node by node). No allocation.
-template <class T>
-void advect_bounded(MacGrid<T>& u, double dt, const SampleBoundary& bc, bool maccormack,
-                    AdvectScratch<T>& scratch, MacGrid<T>& hat);
-
-/// The padded advection in two parts: the padded copies of u^n (reads u only), then the advection
-/// from them (writes u; bc: a bounded grid's inflow; viscous_beta: periodic only). Between the
-/// two, u^n may still be read elsewhere (the Simulation's pipeline samples it: Fluid::WriteGate).
+/// advect_padded in two parts: the padded copies of u^n (reads u only), then the advection from
+/// them (writes u). Between the two, u^n may still be read elsewhere (the Simulation's pipeline
+/// samples it: Fluid::WriteGate).
 template <class T>
 void fill_advect_source(const MacGrid<T>& u, AdvectScratch<T>& scratch);
 template <class T>

@@ -74,7 +74,7 @@ TEST_P(PeriodicFastPath, MatchesTheGenericKernels) {
   MacGrid<double> fast = u0;
   AdvectScratch<double> scratch;
   scratch.resize(u0.geo);
-  advect_periodic(fast, dt, maccormack, scratch, hat);
+  advect_padded(fast, dt, maccormack, scratch, hat);
   EXPECT_FALSE(same_bits(generic, fast));  // the fast path ran (different rounding)
   EXPECT_LT(max_abs_difference(generic, fast), 3e-15 * scale);  // |u| <~ 4 scale: a few ulps
 }
@@ -117,7 +117,7 @@ void expect_far_departures_give_the_generic_bits(int nz) {
       MacGrid<T> fast = u0;
       AdvectScratch<T> scratch;
       scratch.resize(g, maccormack);
-      advect_periodic(fast, dt, maccormack, scratch, hat);
+      advect_padded(fast, dt, maccormack, scratch, hat);
       vector_bytes(0);
       EXPECT_TRUE(same_bits(generic, fast))
           << "vector cap " << cap << " nz " << nz << " maccormack " << maccormack;
@@ -146,7 +146,7 @@ TEST(Advect, PeriodicFastPathKeepsAUniformFieldExactly) {
     for (int c = 0; c < 3; ++c) std::fill(u.comp[c].begin(), u.comp[c].end(), w[c]);
     AdvectScratch<double> scratch;
     scratch.resize(g);
-    advect_periodic(u, 0.1, false, scratch, hat);
+    advect_padded(u, 0.1, false, scratch, hat);
     for (int c = 0; c < 3; ++c)
       for (double x : u.comp[c]) ASSERT_EQ(x, w[c]);
   }
@@ -201,7 +201,7 @@ void expect_widths_agree(double scale, int nz) {
     MacGrid<T> u = u0, hat(g);
     AdvectScratch<T> scratch;
     scratch.resize(g);
-    advect_periodic(u, 0.1, false, scratch, hat);
+    advect_padded(u, 0.1, false, scratch, hat);
     vector_bytes(0);
     return u;
   };
@@ -237,7 +237,7 @@ void expect_viscous_term_exact(bool maccormack, double scale, int nz) {
     MacGrid<T> u = u0, hat(g);
     AdvectScratch<T> scratch;
     scratch.resize(g, maccormack);
-    advect_periodic(u, 0.1, maccormack, scratch, hat, b);
+    advect_padded(u, 0.1, maccormack, scratch, hat, SampleBoundary{}, b);
     vector_bytes(0);
     return u;
   };
@@ -334,9 +334,9 @@ TEST(Advect, ClampedGhostsRepeatTheNearestNode) {
   EXPECT_EQ(back, src);
 }
 
-// A tunnel's padded advection (advect_bounded: clamped ghosts, far_cell on vectors, ClampedRow
-// node by node beside the inflow face and where a departure leaves the ghosts) against the
-// generic kernels on the unpadded field: the same bits on every node, semi-Lagrangian and
+// A tunnel's padded advection (advect_padded on a tunnel: clamped ghosts, far_cell on vectors,
+// ClampedRow node by node beside the inflow face and where a departure leaves the ghosts) against
+// the generic kernels on the unpadded field: the same bits on every node, semi-Lagrangian and
 // MacCormack, double and float, at every vector width, with a uniform and a parabolic inflow.
 // Departures of 0.3 cells (within a cell), 2 (within the ghosts) and 5 (past them, and past the
 // box, where the clamp and the inflow decide) in the random field's standard deviation; rows of
@@ -375,7 +375,7 @@ void expect_bounded_fast_path_gives_the_generic_bits(double scale, int nz, bool 
       MacGrid<T> fast = u0;
       AdvectScratch<T> scratch;
       scratch.resize(g, maccormack);
-      advect_bounded(fast, dt, bc, maccormack, scratch, hat);
+      advect_padded(fast, dt, maccormack, scratch, hat, bc);
       vector_bytes(0);
       EXPECT_TRUE(same_bits(generic, fast))
           << "scale " << scale << " nz " << nz << " maccormack " << maccormack << " cap " << cap;

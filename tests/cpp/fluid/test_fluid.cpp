@@ -431,7 +431,7 @@ TEST(GridArrays, MacCormackAddsItsPredictorAndItsPaddedCopy) {
 
 TEST(GridArrays, TunnelAdvectsFromPaddedCopiesInACommonBox) {
   // A tunnel's u^n is padded with its three components in one box of 33^3 nodes plus the ghosts
-  // (advect_bounded); MacCormack adds the predictor's padded copy (the predictor itself, hat, is
+  // (advect_padded); MacCormack adds the predictor's padded copy (the predictor itself, hat, is
   // there already: the multigrid diffusion's copy).
   const double box = std::pow((33.0 + 2 * PaddedComponent<double>::kGhost) / 32.0, 3);
   FluidParams p = cube(32, "multigrid", "semi_lagrangian");
