@@ -1166,6 +1166,37 @@ struct PaddedRow : PaddedRowBase<C, T> {
 
 constexpr int kMaxRows = 4096;
 
+/// Plane i's view for the vector kernels (padded_sl, padded_far), set for its row j = 0: the
+/// rows of the padded copies (all components share their strides), dt / h, beta = nu dt / h^2
+/// and out's plane (unpadded).
+template <int C, class T>
+SlRow<T> plane_row(const AdvectScratch<T>& sc, int i, double s, T beta, T* out) {
+  const PaddedComponent<T>& p = sc.u[C];
+  constexpr int E1 = C == 0 ? 1 : 0, E2 = C == 2 ? 1 : 2;  // the other two components
+  const std::ptrdiff_t sx = std::ptrdiff_t(p.p1) * p.p2, sy = p.p2;
+  const std::ptrdiff_t stride[3] = {sx, sy, 1};
+  const std::size_t idx0 = p.index(i, 0, 0);
+  SlRow<T> w;
+  w.own = p.data.data() + idx0;
+  w.e1 = sc.u[E1].data.data() + idx0;
+  w.e2 = sc.u[E2].data.data() + idx0;
+  for (int a = -1; a <= 1; ++a)
+    for (int b = -1; b <= 1; ++b) w.rows9[3 * (a + 1) + (b + 1)] = w.own + a * sx + b * sy;
+  w.dc = stride[C];
+  w.d1s = stride[E1];
+  w.d2s = stride[E2];
+  w.sx = sx;
+  w.sy = sy;
+  w.st = T(s);
+  w.s = s;
+  w.beta = beta;
+  w.dst = out + std::size_t(i) * p.n[1] * p.n[2];
+  w.i = i;
+  w.j = 0;
+  w.x0 = i + GridGeometry::offset(C, 0);
+  return w;
+}
+
 /// Semi-Lagrangian pass of component C: out (unpadded) from padded u^n.
 ///
 /// Each plane i first takes the fast path, row by row: upwind_sample on vectors (32 bytes with
@@ -1181,9 +1212,7 @@ constexpr int kMaxRows = 4096;
 template <int C, bool D, class T>
 void padded_sl(const AdvectScratch<T>& sc, double s, T beta, T* out) {
   const PaddedComponent<T>& p = sc.u[C];
-  constexpr int E1 = C == 0 ? 1 : 0, E2 = C == 2 ? 1 : 2;  // the other two components
   const std::ptrdiff_t sx = std::ptrdiff_t(p.p1) * p.p2, sy = p.p2;
-  const std::ptrdiff_t stride[3] = {sx, sy, 1};
   const T st = T(s);
   const int n1 = p.n[1], n2 = p.n[2];
   const auto plane = [n1, n2, sy](auto c, const SlRow<T>& w, unsigned char* row_done)
@@ -1193,25 +1222,7 @@ void padded_sl(const AdvectScratch<T>& sc, double s, T beta, T* out) {
                          };
   const auto plane_fn = on_widest_lanes<T, bool(const SlRow<T>&, unsigned char*)>(plane, n2);
   for_each_plane(Shape3{{p.n[0], n1, n2}}, [&](int i) {
-    const std::size_t idx0 = p.index(i, 0, 0);
-    SlRow<T> w;
-    w.own = p.data.data() + idx0;
-    w.e1 = sc.u[E1].data.data() + idx0;
-    w.e2 = sc.u[E2].data.data() + idx0;
-    for (int a = -1; a <= 1; ++a)
-      for (int b = -1; b <= 1; ++b) w.rows9[3 * (a + 1) + (b + 1)] = w.own + a * sx + b * sy;
-    w.dc = stride[C];
-    w.d1s = stride[E1];
-    w.d2s = stride[E2];
-    w.sx = sx;
-    w.sy = sy;
-    w.st = st;
-    w.s = s;
-    w.beta = beta;
-    w.dst = out + std::size_t(i) * n1 * n2;
-    w.i = i;
-    w.j = 0;
-    w.x0 = i + GridGeometry::offset(C, 0);
+    const SlRow<T> w = plane_row<C>(sc, i, s, beta, out);
     unsigned char row_done[kMaxRows];  // rows of at most 4096 nodes (the resolution limit)
     if (plane_fn(w, row_done)) return;
     // Departures of a cell or more (or not finite) that far_sample did not take: those nodes
@@ -1355,9 +1366,7 @@ void padded_far(const AdvectScratch<T>& sc, double s, const SampleBoundary& bc, 
   constexpr int G = PaddedComponent<T>::kGhost;
   const PaddedComponent<T>& p = sc.u[C];
   const bool bounded = p.clamped;
-  constexpr int E1 = C == 0 ? 1 : 0, E2 = C == 2 ? 1 : 2;  // the other two components
-  const std::ptrdiff_t sx = std::ptrdiff_t(p.p1) * p.p2, sy = p.p2;
-  const std::ptrdiff_t stride[3] = {sx, sy, 1};
+  const std::ptrdiff_t sy = p.p2;
   const int n1 = p.n[1], n2 = p.n[2];
   const T* hat0 = Mc ? sc.hat[C].data.data() : nullptr;
   const auto plane = [n1, n2, sy](auto c, SlRow<T> w, const T* hat_row, const T* h_plane,
@@ -1370,7 +1379,7 @@ void padded_far(const AdvectScratch<T>& sc, double s, const SampleBoundary& bc, 
       row_done[j] = far_row_body<C, Mc, typename K::L>(w, n2, hat_row, h_plane);
       all = row_done[j] && all;
       w.own += sy;
-      w.rows9[4] += sy;  // node_velocity's own row (the other eight: upwind_sample's only)
+      for (const T*& row : w.rows9) row += sy;
       w.e1 += sy;
       w.e2 += sy;
       w.dst += n2;
@@ -1386,20 +1395,7 @@ void padded_far(const AdvectScratch<T>& sc, double s, const SampleBoundary& bc, 
   for_each_plane(Shape3{{p.n[0], n1, n2}}, [&](int i) {
     const std::size_t idx0 = p.index(i, 0, 0);
     const std::size_t base = std::size_t(i) * n1 * n2;
-    SlRow<T> w{};
-    w.own = w.rows9[4] = p.data.data() + idx0;
-    w.e1 = sc.u[E1].data.data() + idx0;
-    w.e2 = sc.u[E2].data.data() + idx0;
-    w.dc = stride[C];
-    w.d1s = stride[E1];
-    w.d2s = stride[E2];
-    w.sx = sx;
-    w.sy = sy;
-    w.st = T(s);
-    w.s = s;
-    w.dst = out + base;
-    w.i = i;
-    w.x0 = i + GridGeometry::offset(C, 0);
+    const SlRow<T> w = plane_row<C>(sc, i, s, T(0), out);
     unsigned char row_done[kMaxRows];           // rows of at most 4096 nodes (the resolution limit)
     const bool by_nodes = bounded && w.x0 < G;  // a departure may cross the inflow face
     if (!by_nodes && plane_fn(w, Mc ? hat0 + idx0 : nullptr, Mc ? h + base : nullptr, row_done))
@@ -1407,19 +1403,16 @@ void padded_far(const AdvectScratch<T>& sc, double s, const SampleBoundary& bc, 
     for (int j = 0; j < n1; ++j) {
       if (!by_nodes && row_done[j]) continue;
       const std::size_t r = base + std::size_t(j) * n2;
-      if (bounded) {
-        const ClampedRow<C, T> row(sc, i, j, bc);
+      const auto redo = [&](const auto& row) {
         if constexpr (Mc)
           maccormack_row(row, s, n2, h + r, out + r);
         else
           semi_lagrangian_row(row, s, n2, out + r);
-      } else {
-        const PaddedRow<C, T> row(sc, i, j);
-        if constexpr (Mc)
-          maccormack_row(row, s, n2, h + r, out + r);
-        else
-          semi_lagrangian_row(row, s, n2, out + r);
-      }
+      };
+      if (bounded)
+        redo(ClampedRow<C, T>(sc, i, j, bc));
+      else
+        redo(PaddedRow<C, T>(sc, i, j));
     }
   });
 }
