@@ -277,7 +277,7 @@ def test_accuracy_costs_are_wall_time_per_simulated_second_everywhere(tmp_path):
         row("implicit", 0.01, 8e-4, 5e-4),
     ]  # 0.05 s per simulated s
     path = tmp_path / "accuracy.md"
-    accuracy.write_report(rows, str(path), {}, str(tmp_path))
+    accuracy.write_report(rows, str(path), {}, str(tmp_path), "a machine")
     text = path.read_text()
     cheapest = text.split("cheapest setting per error target")[1].split("##")[0]
     assert "| 0.001 m | implicit, dt = 0.01 s | 0.0008 | 0.05 |" in cheapest
