@@ -111,7 +111,7 @@ namespace {
 // One vertex from a to p (velocity v) against the pole at rest: how far it was moved, or -1 when
 // it was left alone. (Callers skip it when far_from_pole: it would leave such a vertex alone.)
 double collide_point(const PoleParams& pole, const Vec3& a, Vec3& p, Vec3& v) {
-  Vec3 normal;
+  Vec3 normal = Vec3::Zero();  // set by entry_time or project_out before any use
   const Vec3 end = p;
   const double t = inside_pole(pole, a) ? -1.0 : entry_time(pole, a, p, normal);
   if (t >= 0) {

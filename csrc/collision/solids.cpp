@@ -76,7 +76,7 @@ bool collide_point(const ClothSolid& s, const Vec3& a, Vec3& p, Vec3& v) {
 ClothSolid::ClothSolid(SolidGeometry g, double thick, double mu)
     : geometry(std::move(g)), thickness(thick), friction(mu) {
   const SolidGeometry& s = geometry;
-  Vec3 ext;
+  Vec3 ext = Vec3::Zero();  // a mesh takes its box from its vertices
   switch (s.shape) {
     case ObstacleShape::kBox: ext = s.half_size; break;
     case ObstacleShape::kSphere: ext.setConstant(s.radius); break;

@@ -164,7 +164,7 @@ int cubic_roots_in_unit_interval(const Eigen::Vector4d& k, double roots[3]) {
   } else if (qb != 0) {
     add_cut(-qc / qb);
   }
-  std::sort(cuts + 1, cuts + n);
+  if (n == 3 && cuts[2] < cuts[1]) std::swap(cuts[1], cuts[2]);  // the interior cuts in order
   cuts[n++] = 1.0;
   int found = 0;
   double f_lo = eval_cubic(k, cuts[0]);

@@ -220,7 +220,7 @@ void CurlNoise::update_slices(const GridGeometry& geo, std::int64_t k, double le
           double* o = out[a].data() + s.index(int(i), j, 0);
           const Vec3 q0 = edge_position(geo, a, int(i), j, 0) / length;
           AxisFade f[3] = {axis_fade<false>(q0[0]), axis_fade<false>(q0[1]), {}};
-          const double* g[8];
+          const double* g[8] = {};  // set at k = 0
           for (int k = 0; k < s.n[2]; ++k) {
             const Vec3 q = edge_position(geo, a, int(i), j, k) / length;
             const int64_t cell = f[2].i0;

@@ -35,7 +35,9 @@ TEST(Shapes, MeshOfABoxHasTheBoxsDistanceAndInside) {
     const double db = solid_distance(box, p, &gb), dm = solid_distance(mesh, p, &gm);
     EXPECT_NEAR(dm, db, 1e-12) << p.transpose();
     EXPECT_EQ(mesh.contains(p), box.contains(p)) << p.transpose();
-    if (db > 1e-9) EXPECT_LT((gm - gb).norm(), 1e-9) << p.transpose();
+    if (db > 1e-9) {
+      EXPECT_LT((gm - gb).norm(), 1e-9) << p.transpose();
+    }
   }
   EXPECT_NEAR(winding_number(mesh.vertices, mesh.faces, box.center), 1.0, 1e-12);
   EXPECT_NEAR(winding_number(mesh.vertices, mesh.faces, Vec3(5, 5, 5)), 0.0, 1e-12);

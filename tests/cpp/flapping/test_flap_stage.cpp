@@ -52,7 +52,9 @@ TEST(FlapStage, DriftMovesEachFreeVertexOntoTheWaveOverThePiece) {
   s.drift(f.topo, f.n, u_p, 0.31, h, drift);
   const VecX z2 = f.z_at(u_p, 0.31);
   for (Index i = 0; i < f.topo.num_vertices(); ++i)
-    if (!f.topo.pinned(i)) EXPECT_NEAR(h * drift(i, 2), z2[i] - z[i], 1e-15) << i;
+    if (!f.topo.pinned(i)) {
+      EXPECT_NEAR(h * drift(i, 2), z2[i] - z[i], 1e-15) << i;
+    }
 }
 
 TEST(FlapStage, RollbackReturnsToTheWaveAppliedAtTheStepStart) {
@@ -93,7 +95,9 @@ TEST(FlapStage, DisplaceMovesTheGeometryAlongTheNormalsAndPinsStay) {
   EXPECT_TRUE(s.z() == z);
   for (Index i = 0; i < f.topo.num_vertices(); ++i) {
     EXPECT_EQ(render(i, 2), f.topo.rest_positions(i, 2) + z[i]);
-    if (f.topo.pinned(i)) EXPECT_EQ(z[i], 0.0);  // L = 0 at a pin: A(0) = 0
+    if (f.topo.pinned(i)) {
+      EXPECT_EQ(z[i], 0.0);  // L = 0 at a pin: A(0) = 0
+    }
   }
   const MatX3 edge = FlapStage::pole_edge_points(f.topo);
   ASSERT_EQ(edge.rows(), f.fp.rows);

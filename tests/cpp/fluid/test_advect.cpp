@@ -316,7 +316,7 @@ TEST(Advect, PaddedComponentGhostsAreTheWrappedNodes) {
 TEST(Advect, ClampedGhostsRepeatTheNearestNode) {
   constexpr int G = PaddedComponent<double>::kGhost;
   const int n[3] = {4, 3, 5}, m[3] = {5, 4, 6};
-  std::vector<double> src(std::size_t(n[0]) * n[1] * n[2]);
+  std::vector<double> src(static_cast<std::size_t>(n[0]) * n[1] * n[2]);
   for (std::size_t i = 0; i < src.size(); ++i) src[i] = double(i);
   PaddedComponent<double> p;
   p.resize_clamped(Shape3{{n[0], n[1], n[2]}}, m);
