@@ -10,9 +10,10 @@ Workloads needing a part this build lacks are skipped with a line saying so.
 
 Each workload runs in its own process (its peak memory is its own): built outside the timing,
 first steps dropped, runs grown until each lasts >= 1 s (--quick: 0.1 s), min and median of 3
-runs, stage split from Simulation.timings. Writes results.csv (the machine described in its
-'#' header lines), results.md, scaling.png (log-log cost against size, slopes printed),
-peers.csv and results.json to --out; --docs PATH writes the report for the docs.
+runs, stage split from Simulation.timings, a speed probe (200 cloth steps, one thread) just
+before and after (how far the machine's speed moved over the run). Writes results.csv (the
+machine described in its '#' header lines), results.md, scaling.png (log-log cost against size,
+slopes printed), peers.csv and results.json to --out; --docs PATH writes the report for the docs.
 """
 
 from .command import configure, main, run

@@ -339,6 +339,7 @@ def run(args) -> int:
                 "slopes": slope_list,
                 "targets": target_list,
                 "taylor_green": accuracy,
+                "speed_probe": report.probe_summary(rows),
             },
             f,
             indent=1,
@@ -367,6 +368,9 @@ def run(args) -> int:
             )
     for name, measured, verdict in target_list:
         print(f"target: {name}: {measured} [{verdict}]")
+    probe = report.probe_sentence(report.probe_summary(rows))
+    if probe:
+        print(probe)
     print(
         f"done in {time.perf_counter() - t_start:.0f} s: {sum(r['ok'] for r in rows)} measured, "
         f"{sum(not r['ok'] for r in rows)} failed, {len(skipped)} skipped; "

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime
+import math
 import os
 import platform
 from importlib import metadata
@@ -58,6 +59,36 @@ def memory_total_gib() -> float | None:
     except (OSError, ValueError, IndexError):
         pass
     return None
+
+
+#: The speed probe: this many steps of the paper flag in uniform wind, best of PROBE_REPEATS.
+PROBE_STEPS, PROBE_REPEATS = 200, 3
+PROBE_WORK = (
+    f"{PROBE_STEPS} steps of the paper flag alone in uniform wind, one thread, best of "
+    f"{PROBE_REPEATS}"
+)
+
+
+def speed_probe() -> float:
+    """ms for PROBE_STEPS steps of the paper flag alone in uniform wind (springs, drag, implicit
+    integration: flagsim's own kind of work) on one thread, the best of PROBE_REPEATS fresh runs.
+    The work is the same every time, so its spread over a benchmark run is how far the machine's
+    speed moved: a VM's core can change speed by 1.4x from one second to the next at load 0,
+    which neither the load average nor the CPU time sees. Leaves one thread set."""
+    import time
+
+    import flagsim
+
+    flagsim.set_num_threads(1)
+    scene = flagsim.Scene.paper()
+    scene.air.model = "uniform"
+    best = math.inf
+    for _ in range(PROBE_REPEATS):
+        sim = flagsim.Simulation(scene)
+        t0 = time.perf_counter()
+        sim.step(PROBE_STEPS)
+        best = min(best, time.perf_counter() - t0)
+    return 1e3 * best
 
 
 def git_revision() -> str:

@@ -10,9 +10,12 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from .machine import PROBE_WORK
+
 #: CSV columns, in order. Figures are per step; *_mb are MiB; stage_split is text; iterations
 #: (pressure CG iterations per projection, mean over the last steps) and project_ms (the
-#: projection stage per step) are filled for the solver group.
+#: projection stage per step) are filled for the solver group; probe_ms_before/after are the
+#: speed probe (machine.speed_probe) just before and after the workload.
 COLUMNS = (
     "group",
     "engine",
@@ -32,6 +35,8 @@ COLUMNS = (
     "stage_split",
     "iterations",
     "project_ms",
+    "probe_ms_before",
+    "probe_ms_after",
     "ok",
     "note",
 )
@@ -94,6 +99,8 @@ def make_row(w, result: dict[str, Any]) -> dict[str, Any]:
                 "ok": True,
             }
         )
+        if result.get("probe_ms"):
+            row["probe_ms_before"], row["probe_ms_after"] = map(float, result["probe_ms"])
         if w.group == "solver":
             if info.get("iterations") is not None:
                 row["iterations"] = float(info["iterations"])
@@ -113,11 +120,55 @@ def make_row(w, result: dict[str, Any]) -> dict[str, Any]:
         row.update({k: "" for k in COLUMNS if k not in row})
         row["ok"] = False
         notes.append(result.get("error") or "failed")
-    for k in ("iterations", "project_ms"):
+    for k in ("iterations", "project_ms", "probe_ms_before", "probe_ms_after"):
         row.setdefault(k, "")
     row["note"] = "; ".join(notes)
     row["_stages_s"] = result.get("stages_s") or {}
     return row
+
+
+#: A speed probe whose slowest reading exceeds its fastest by more than this factor over a run
+#: says that the machine's speed moved enough to decide a wall-clock target near its threshold.
+PROBE_SPREAD = 1.1
+
+
+def probe_summary(rows) -> dict[str, Any] | None:
+    """The speed probe over a run: its readings before and after every measured workload (min,
+    median, max in ms, max / min, the number of workloads), or None when no row has one."""
+    ms = [
+        float(r[k])
+        for r in rows
+        if r["ok"] in (True, "True")
+        for k in ("probe_ms_before", "probe_ms_after")
+        if r.get(k) not in (None, "")
+    ]
+    if not ms:
+        return None
+    return {
+        "workloads": len(ms) // 2,
+        "min_ms": min(ms),
+        "median_ms": float(np.median(ms)),
+        "max_ms": max(ms),
+        "spread": max(ms) / min(ms),
+    }
+
+
+def probe_sentence(summary: dict[str, Any] | None) -> str:
+    """One line on the speed probe for the report and the console ("" without readings)."""
+    if not summary:
+        return ""
+    s = (
+        f"Speed probe (the same {PROBE_WORK}, timed just before and after each of "
+        f"{summary['workloads']} workloads): {summary['min_ms']:.3g}-{summary['max_ms']:.3g} ms, "
+        f"median {summary['median_ms']:.3g} ms, slowest / fastest {summary['spread']:.2f}."
+    )
+    if summary["spread"] > PROBE_SPREAD:
+        s += (
+            f" The machine's speed moved by more than {100 * (PROBE_SPREAD - 1):.0f} % during "
+            "this run: a wall-clock figure within that margin of its target could read either "
+            "way on a rerun, and the cpu column does not show it (a slower core is still busy)."
+        )
+    return s
 
 
 def stage_split(stages_s: dict[str, float]) -> str:
@@ -324,6 +375,12 @@ def _verdict(ok: bool | None) -> str:
     return "not measured" if ok is None else ("met" if ok else "missed")
 
 
+def _probed(row) -> str:
+    """The speed probe around a row's workload, for wall-clock targets ("" without one)."""
+    b, a = _num(row.get("probe_ms_before")), _num(row.get("probe_ms_after"))
+    return "" if b is None or a is None else f" (speed probe {b:.3g} / {a:.3g} ms before / after)"
+
+
 def targets(rows, comps, accuracy: dict[str, Any] | None) -> list[tuple[str, str, str]]:
     """(target, measured figure, met | missed | not measured) for each of the issue's targets."""
     out = []
@@ -333,7 +390,7 @@ def targets(rows, comps, accuracy: dict[str, Any] | None) -> list[tuple[str, str
         out.append(
             (
                 "paper scene, full pipeline: >= 5,000 steps/s, 1 thread",
-                f"{full['steps_per_s']:,.0f} steps/s",
+                f"{full['steps_per_s']:,.0f} steps/s" + _probed(full),
                 _verdict(full["steps_per_s"] >= 5000),
             )
         )
@@ -534,7 +591,7 @@ def pipeline_targets(rows) -> list[tuple[str, str, str]]:
                 f" (serial order {serial['steps_per_s']:,.0f}: "
                 f"{serial['ms_median'] / row['ms_median']:.2f}x)"
             )
-        out.append((what, got, _verdict(row["steps_per_s"] >= goal)))
+        out.append((what, got + _probed(row), _verdict(row["steps_per_s"] >= goal)))
     return out
 
 
@@ -860,6 +917,9 @@ def markdown(
         "A load average near or above the core count means the figures are noisy (other processes "
         "shared the cores); compare the cpu and wall columns."
     )
+    probe = probe_sentence(probe_summary(rows))
+    if probe:
+        L += ["", probe]
     L.append("")
     paper = [r for r in rows if r["group"] == "paper"]
     if paper:

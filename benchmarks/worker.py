@@ -96,9 +96,12 @@ def build(spec: dict[str, Any]):
 def run(spec: dict[str, Any]) -> dict[str, Any]:
     import flagsim
 
-    flagsim.set_num_threads(int(spec["threads"]))
+    from .machine import speed_probe
+
     proto = spec["protocol"]
     out: dict[str, Any] = {"name": spec["name"], "ok": False, "error": ""}
+    probe_before = speed_probe()  # the machine's speed just before the workload (one thread)
+    flagsim.set_num_threads(int(spec["threads"]))
     rss0 = rss_mb()
     t0 = time.perf_counter()
     stepper = build(spec)
@@ -123,6 +126,7 @@ def run(spec: dict[str, Any]) -> dict[str, Any]:
     out["ok"] = bool(check()) if check else True
     if not out["ok"]:  # the strain itself is in out["info"], and so in the row's note
         out["error"] = "state not finite or torn apart after the runs"
+    out["probe_ms"] = [probe_before, speed_probe()]  # and just after
     return out
 
 

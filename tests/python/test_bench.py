@@ -58,6 +58,8 @@ def test_smoke_run_writes_csv_table_and_plot(tmp_path, capsys):
     for r in rows:
         assert r["ok"] == "True", r
         _figures_ok(r)
+        for k in ("probe_ms_before", "probe_ms_after"):  # the speed probe around each workload
+            assert math.isfinite(float(r[k])) and float(r[k]) > 0, (r["variant"], k)
         assert (
             int(r["steps_per_run"]) >= 1
             and int(r["runs"]) == workloads.PROTOCOLS["quick"]["repeats"]
@@ -74,6 +76,8 @@ def test_smoke_run_writes_csv_table_and_plot(tmp_path, capsys):
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000
     data = json.loads((out / "results.json").read_text(encoding="utf-8"))
     assert data["protocol"] == workloads.PROTOCOLS["quick"]
+    assert data["speed_probe"]["workloads"] == len(rows)
+    assert "Speed probe (the same" in md and "Speed probe (the same" in printed
     # one progress line per workload, and a line for everything skipped
     assert printed.count("steps/s (median") == len(rows)
     for what, _ in data["skipped"]:
@@ -253,6 +257,32 @@ def test_protocol_drops_warmup_grows_runs_to_min_time_and_splits_stages(monkeypa
     assert r["wall_s"] == pytest.approx([1e-3] * 3) and r["cpu_s"] == pytest.approx([1e-3] * 3)
     assert r["stages_s"] == pytest.approx({"a": 0.25e-3, "b": 0.75e-3})
     assert clock.steps > 7 + 3 * n  # warm-up and calibration steps are not in the runs
+
+
+def test_the_speed_probe_summary_says_when_the_machine_changed_speed_during_a_run():
+    def row(before, after, ok=True):
+        return {"ok": ok, "probe_ms_before": before, "probe_ms_after": after}
+
+    steady = [row(13.0, 13.2), row(13.1, 12.9)]
+    s = report.probe_summary(steady + [row(40.0, 40.0, ok=False), row("", "")])
+    assert s == pytest.approx(
+        {"workloads": 2, "min_ms": 12.9, "median_ms": 13.05, "max_ms": 13.2, "spread": 13.2 / 12.9}
+    )  # failed rows and rows without readings left out
+    assert "12.9-13.2 ms" in report.probe_sentence(s)
+    assert "moved" not in report.probe_sentence(s)
+    bimodal = report.probe_summary(steady + [row("19.1", "13.0")])  # as read back from the CSV
+    assert bimodal["spread"] == pytest.approx(19.1 / 12.9)
+    assert "moved by more than 10 %" in report.probe_sentence(bimodal)
+    assert report.probe_summary([row("", "")]) is None and report.probe_sentence(None) == ""
+    # the wall-clock targets carry the readings around their own workload
+    paper = {"group": "paper", "variant": "full", "threads": 1, "ok": True, "steps_per_s": 4500.0}
+    (target,) = [
+        t for t in report.targets([dict(paper, **row(13.0, 19.1))], [], None) if "1 thread" in t[0]
+    ]
+    assert (
+        target[1] == "4,500 steps/s (speed probe 13 / 19.1 ms before / after)"
+        and target[2] == "missed"
+    )
 
 
 def test_loglog_slope_and_stage_split():
