@@ -1212,8 +1212,7 @@ SlRow<T> plane_row(const AdvectScratch<T>& sc, int i, double s, T beta, T* out) 
 template <int C, bool D, class T>
 void padded_sl(const AdvectScratch<T>& sc, double s, T beta, T* out) {
   const PaddedComponent<T>& p = sc.u[C];
-  const std::ptrdiff_t sx = std::ptrdiff_t(p.p1) * p.p2, sy = p.p2;
-  const T st = T(s);
+  const std::ptrdiff_t sy = p.p2;
   const int n1 = p.n[1], n2 = p.n[2];
   const auto plane = [n1, n2, sy](auto c, const SlRow<T>& w, unsigned char* row_done)
                          FLAGSIM_INLINE_LAMBDA {
@@ -1235,11 +1234,11 @@ void padded_sl(const AdvectScratch<T>& sc, double s, T beta, T* out) {
         double x[3], vel[3];  // each vel exactly a T: the fast path's velocity, summed in its order
         row.node(k, x);
         row.velocity(k, vel);
-        if (std::fabs(st * T(vel[0])) < 1 && std::fabs(st * T(vel[1])) < 1 &&
-            std::fabs(st * T(vel[2])) < 1)
+        if (std::fabs(w.st * T(vel[0])) < 1 && std::fabs(w.st * T(vel[1])) < 1 &&
+            std::fabs(w.st * T(vel[2])) < 1)
           continue;  // the fast path's departure (same T arithmetic): its value stands
         dst[k] = semi_lagrangian(row, trace(x, s, vel), k);
-        if constexpr (D) dst[k] += viscous_term<T>(w.own + j * sy, sx, sy, k, beta);
+        if constexpr (D) dst[k] += viscous_term<T>(w.own + j * sy, w.sx, sy, k, beta);
       }
     }
   });
