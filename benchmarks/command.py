@@ -319,7 +319,8 @@ def run(args) -> int:
     report.write_csv(os.path.join(args.out, "results.csv"), rows, desc)
     if comps:
         report.write_peers_csv(os.path.join(args.out, "peers.csv"), comps)
-    md_args = dict(command=command, protocol=protocol, load_end=load_end)
+    probe = report.probe_summary(rows)
+    md_args = dict(command=command, protocol=protocol, load_end=load_end, probe=probe)
     with open(os.path.join(args.out, "results.md"), "w", encoding="utf-8") as f:
         f.write(
             report.markdown(
@@ -339,7 +340,7 @@ def run(args) -> int:
                 "slopes": slope_list,
                 "targets": target_list,
                 "taylor_green": accuracy,
-                "speed_probe": report.probe_summary(rows),
+                "speed_probe": probe,
             },
             f,
             indent=1,
@@ -368,9 +369,8 @@ def run(args) -> int:
             )
     for name, measured, verdict in target_list:
         print(f"target: {name}: {measured} [{verdict}]")
-    probe = report.probe_sentence(report.probe_summary(rows))
     if probe:
-        print(probe)
+        print(report.probe_sentence(probe))
     print(
         f"done in {time.perf_counter() - t_start:.0f} s: {sum(r['ok'] for r in rows)} measured, "
         f"{sum(not r['ok'] for r in rows)} failed, {len(skipped)} skipped; "

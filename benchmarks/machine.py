@@ -6,6 +6,7 @@ import datetime
 import math
 import os
 import platform
+import time
 from importlib import metadata
 from typing import Any
 
@@ -73,10 +74,9 @@ def speed_probe() -> float:
     """ms for PROBE_STEPS steps of the paper flag alone in uniform wind (springs, drag, implicit
     integration: flagsim's own kind of work) on one thread, the best of PROBE_REPEATS fresh runs.
     The work is the same every time, so its spread over a benchmark run is how far the machine's
-    speed moved: a VM's core can change speed by 1.4x from one second to the next at load 0,
-    which neither the load average nor the CPU time sees. Leaves one thread set."""
-    import time
-
+    speed moved: on a 2-core AMD EPYC VM at load 0 it alternated between 13.0 and 18.6-19.2 ms
+    from one second to the next (about 1.5x), which neither the load average nor the CPU time
+    saw. Leaves one thread set."""
     import flagsim
 
     flagsim.set_num_threads(1)

@@ -885,6 +885,7 @@ def markdown(
     plot_name: str | None,
     protocol: dict[str, Any],
     load_end: str,
+    probe: dict[str, Any] | None = None,
     docs: bool = False,
 ) -> str:
     L: list[str] = []
@@ -917,9 +918,8 @@ def markdown(
         "A load average near or above the core count means the figures are noisy (other processes "
         "shared the cores); compare the cpu and wall columns."
     )
-    probe = probe_sentence(probe_summary(rows))
-    if probe:
-        L += ["", probe]
+    if probe:  # probe_summary(rows), once per run
+        L += ["", probe_sentence(probe)]
     L.append("")
     paper = [r for r in rows if r["group"] == "paper"]
     if paper:
