@@ -479,11 +479,13 @@ and keep the simulation alive); assigning `sim.positions = x` copies into the sa
         d["sweeps"] = st->sweeps;
         d["broad_phases"] = st->broad_phases;
         d["tree_queries"] = st->tree_queries;
+        d["exact_gaps"] = st->exact_gaps;
         return d;
       },
       "the last step's self-collision counts (None when self_collision is off): candidate pairs, "
       "proximity contacts, continuous crossings stopped short, pole contacts, vertices frozen by "
-      "the fallback, sweeps, broad phases");
+      "the fallback, sweeps, broad phases, those that queried the box trees, and the candidates' "
+      "start gaps computed exactly (the rest bounded from a snapshot)");
   sim.def_property_readonly(
       "between_flags_stats",
       [](const Simulation& s) -> py::object {

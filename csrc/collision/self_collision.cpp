@@ -1,6 +1,9 @@
 #include "collision/self_collision.h"
 
 #include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
 
 #include "collision/pole.h"
 #include "common/parallel.h"
@@ -69,35 +72,108 @@ SelfCollision::SelfCollision(const MatX3i& triangles, Index num_vertices,
       count_v_(static_cast<size_t>(num_vertices), 0),
       on_pole_(static_cast<size_t>(num_vertices), 0),
       moved_(static_cast<size_t>(num_vertices), 0),
-      motion_(num_vertices) {
+      motion_(num_vertices),
+      snap_x_(num_vertices, 3),
+      drift_(num_vertices, 3) {
   const size_t pairs = candidates_.reserved();
   flag_.reserve(pairs);
   contacts_.reserve(pairs);
   start_gap_.reserve(pairs);
+  snap_gap_.reserve(pairs);
+  snap_carry_.reserve(pairs);
+  snap_pairs_.vertex_triangle.reserve(pairs);
+  snap_pairs_.edge_edge.reserve(pairs);
+}
+
+namespace {
+
+constexpr double kUnknown = std::numeric_limits<double>::quiet_NaN();
+
+// A new snapshot is taken when more than 1 / kSnapshotStale of a broad phase's candidates needed
+// their exact start gap: the cloth has moved too far from the old one for its bound to decide.
+constexpr size_t kSnapshotStale = 8;
+
+// A pair's place in the candidates' order (by first item, then by second) as one number.
+inline uint64_t pair_key(const CandidatePair& p) {
+  return uint64_t(uint32_t(p.a)) << 32 | uint32_t(p.b);
+}
+
+// out[k] = the value of `from` for pair k of `to` where from_pairs holds the same pair (both in
+// the candidates' order), else kUnknown. Returns to.size().
+size_t carry(const std::vector<CandidatePair>& from_pairs, const double* from,
+             const std::vector<CandidatePair>& to, double* out) {
+  const size_t m = from_pairs.size();
+  size_t j = 0;
+  for (size_t k = 0; k < to.size(); ++k) {
+    const uint64_t key = pair_key(to[k]);
+    while (j < m && pair_key(from_pairs[j]) < key) ++j;
+    out[k] = j < m && pair_key(from_pairs[j]) == key ? from[j] : kUnknown;
+  }
+  return to.size();
+}
+
+// Whether a and b hold the same pairs in the same order.
+bool same_pairs(const CandidatePairs& a, const CandidatePairs& b) {
+  auto same = [](const std::vector<CandidatePair>& u, const std::vector<CandidatePair>& v) {
+    return u.size() == v.size() &&
+           (u.empty() || std::memcmp(u.data(), v.data(), u.size() * sizeof(CandidatePair)) == 0);
+  };
+  return same(a.vertex_triangle, b.vertex_triangle) && same(a.edge_edge, b.edge_edge);
+}
+
+}  // namespace
+
+// Before a broad phase's candidates replace the last ones: whether to keep the snapshot (the last
+// broad phase's start gaps were mostly bounded, not computed; the bound holds at any x0, so this
+// only decides what the gaps cost), and, after them, each candidate's snapshot distance carried
+// over from the last candidates where it was one of them.
+void SelfCollision::carry_snapshot_gaps(const MatX3& x0, size_t exact) {
+  const CandidatePairs& pairs = candidates_.pairs();
+  // `exact`: the last broad phase's start gaps computed from its x0 (the rest were bounded);
+  // after a snapshot at its own x0, it computed every gap it asked for.
+  const bool stale = !snapshot_ || (!snap_now_ && kSnapshotStale * exact > start_gap_.size());
+  snap_now_ = stale;
+  if (stale) {
+    snap_x_ = x0;
+    snapshot_ = true;
+    snap_guard_ = roundoff_guard(x0.size() ? x0.cwiseAbs().maxCoeff() : 0.0);
+    snap_gap_.assign(pairs.size(), kUnknown);
+  } else if (!same_pairs(snap_pairs_, pairs)) {
+    snap_carry_.resize(pairs.size());
+    const size_t V = carry(snap_pairs_.vertex_triangle, snap_gap_.data(), pairs.vertex_triangle,
+                           snap_carry_.data());
+    carry(snap_pairs_.edge_edge, snap_gap_.data() + snap_pairs_.vertex_triangle.size(),
+          pairs.edge_edge, snap_carry_.data() + V);
+    snap_gap_.swap(snap_carry_);
+  }
+  snap_pairs_.vertex_triangle.assign(pairs.vertex_triangle.begin(), pairs.vertex_triangle.end());
+  snap_pairs_.edge_edge.assign(pairs.edge_edge.begin(), pairs.edge_edge.end());
+  // Each vertex's displacement since the snapshot, for the bounds (out_of_reach).
+  if (!snap_now_) drift_ = x0 - snap_x_;
 }
 
 void SelfCollision::broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv_mass,
                                 bool shifted) {
-  ++stats_.broad_phases;
+  const Index exact = exact_gaps();                           // of the last broad phase
+  if (stats_.broad_phases++ > 0) stats_.exact_gaps += exact;  // (a later one of this resolve)
   quiet_ = false;  // new candidates: no sweep has looked at them yet
   candidates_.collect(x0, x, inv_mass, shifted);
   stats_.tree_queries += !candidates_.from_list();
   const CandidatePairs& pairs = candidates_.pairs();
-  const auto P = static_cast<Index>(pairs.size());
+  carry_snapshot_gaps(x0, static_cast<size_t>(exact));
   flag_.resize(pairs.size());
   contacts_.resize(pairs.size());
-  start_gap_.resize(pairs.size());
-  stats_.candidates = P;
-  // Each pair's distance at the start of the step: with it, a pair whose points cannot have
-  // closed that gap (see out_of_reach) needs no test at all.
-  for_each_pair(pairs, true, [&](auto kind, const CandidatePair& pr, Index k) {
-    using K = decltype(kind);
-    int32_t i[4];
-    K::corners(candidates_, pr, i);
-    PairPoints p;
-    gather(x0, i, p);
-    start_gap_[k] = K::distance(p);
-  });
+  // Each pair's distance at the start of the step, computed (or bounded) by out_of_reach when a
+  // pass first asks for it.
+  start_gap_.assign(pairs.size(), kUnknown);
+  stats_.candidates = static_cast<Index>(pairs.size());
+}
+
+// The start gaps out_of_reach computed since the last broad phase (the rest it bounded).
+Index SelfCollision::exact_gaps() const {
+  Index n = 0;
+  for (const double g : start_gap_) n += !std::isnan(g);
+  return n;
 }
 
 // motion_ = each vertex's displacement over the step less the broad phase's common one (any
@@ -117,16 +193,43 @@ void SelfCollision::measure_motion(const MatX3& x0, const MatX3& x) {
 // Whether pair k (vertices idx) stays at least `need` apart over the whole step: start gap -
 // reach >= need (the distance at any t in [0, 1] is at least start gap - t reach, everything
 // moving linearly), with the reach computed only when the cheap bound above it (from the
-// vertices' own motions, grown by the guard) leaves that open, so the answer is always the exact
-// one.
+// vertices' own motions, grown by the guard) leaves that open. The start gap itself is computed
+// only when a lower bound of it leaves the answer open: the pair's distance in the snapshot less
+// the largest relative displacement of its points since (reach() again: a point of one side
+// moves relative to a point of the other by a convex combination of the corners' relative
+// displacements), grown by both guards. The answer is always the one the exact start gap gives.
 template <class K>
 FLAGSIM_INLINE bool SelfCollision::out_of_reach(const int32_t idx[4], Index k, const MatX3& x0,
-                                                const MatX3& x, double need) const {
+                                                const MatX3& x, double need) {
   const double bound = K::motion_bound(motion_.data(), idx) + motion_guard_;
-  if (start_gap_[k] - bound >= need) return true;
-  PairPoints d;
+  double gap = start_gap_[k];
+  PairPoints p, d;
+  if (std::isnan(gap)) {
+    double& snap = snap_gap_[k];
+    if (snap_now_) {  // the snapshot is x0
+      gather(x0, idx, p);
+      if (std::isnan(snap)) snap = K::distance(p);
+      gap = start_gap_[k] = snap;
+    } else {
+      if (std::isnan(snap)) {
+        PairPoints s;
+        gather(snap_x_, idx, s);
+        snap = K::distance(s);
+      }
+      gather(drift_, idx, d);
+      const double lower = snap - K::reach(d) - (snap_guard_ + motion_guard_);
+      if (lower - bound >= need) return true;
+      gather(x0, idx, p);
+      for (int j = 0; j < 4; ++j) d[j] = row(x, idx[j]) - p[j];
+      const double step_reach = K::reach(d);
+      if (lower - step_reach >= need) return true;
+      gap = start_gap_[k] = K::distance(p);
+      return gap - step_reach >= need;
+    }
+  }
+  if (gap - bound >= need) return true;
   for (int j = 0; j < 4; ++j) d[j] = row(x, idx[j]) - row(x0, idx[j]);
-  return start_gap_[k] - K::reach(d) >= need;
+  return gap - K::reach(d) >= need;
 }
 
 bool SelfCollision::weights(const int32_t idx[4], const Contact& c, const VecX& inv_mass,
@@ -367,6 +470,7 @@ const SelfCollisionStats& SelfCollision::resolve(const MatX3& x0, MatX3& x, MatX
   }
   if (!complete) broad_phase(x0, x, inv_mass, /*shifted=*/true);
   freeze_fallback(x0, x, v, inv_mass, pole);
+  stats_.exact_gaps += exact_gaps();
   pole_motion_ = nullptr;  // the caller's, valid for this call only
   return stats_;
 }

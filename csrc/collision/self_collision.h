@@ -35,6 +35,9 @@
 //       immovable for the pushes (contact mass scaling), so stacked layers do not fight it;
 //     - a pair is skipped outright when its start-of-step distance exceeds the largest relative
 //       displacement of its points plus the thickness (linear motion cannot close that gap);
+//       that distance is bounded from below first, by the pair's distance in a snapshot of an
+//       earlier step's positions less its points' largest relative displacement since, and
+//       computed only where the bound leaves the answer open (the same answers);
 //   fallback (impact_zones.h): a pair still crossing (vertex-triangle or edge-edge), a vertex
 //     closer than thickness / 2 to a triangle, or a vertex in the pole, has its free vertices
 //     sent back to x0 with their momentum-weighted mean velocity (an inelastic
@@ -68,6 +71,9 @@ struct SelfCollisionStats {
   int sweeps = 0;        ///< response sweeps run
   int broad_phases = 0;  ///< broad phases run (1 unless a sweep moved a vertex out of its box)
   int tree_queries = 0;  ///< of those, how many queried the box trees (the rest filtered the list)
+  /// Candidates' start-of-step distances computed exactly; the rest were bounded from below by
+  /// the snapshot's, which decided their pairs (every candidate's on a new snapshot).
+  Index exact_gaps = 0;
 };
 
 class SelfCollision {
@@ -99,9 +105,10 @@ class SelfCollision {
  private:
   void broad_phase(const MatX3& x0, const MatX3& x, const VecX& inv_mass, bool shifted);
   void measure_motion(const MatX3& x0, const MatX3& x);
+  void carry_snapshot_gaps(const MatX3& x0, size_t exact);
+  Index exact_gaps() const;
   template <class K>
-  bool out_of_reach(const int32_t idx[4], Index k, const MatX3& x0, const MatX3& x,
-                    double need) const;
+  bool out_of_reach(const int32_t idx[4], Index k, const MatX3& x0, const MatX3& x, double need);
   bool find_violations(const MatX3& x0, const MatX3& x, const VecX& inv_mass,
                        const PoleParams* pole);
   // What a sweep's responses did: any response, a degenerate contact left to the fallback, a
@@ -131,7 +138,8 @@ class SelfCollision {
   ImpactZones zones_;
   // Per candidate pair (vertex-triangle pairs, then edge-edge pairs, as candidates_.pairs()):
   std::vector<uint8_t> flag_;      // violation found by the parallel pass
-  std::vector<double> start_gap_;  // distance at x0, m
+  std::vector<double> start_gap_;  // distance at x0, m; NaN until out_of_reach needs it
+  std::vector<double> snap_gap_;   // distance at snap_x_, m; NaN until out_of_reach needs it
   std::vector<Contact> contacts_;  // response in a sweep
   MatX3 x_sweep_;                  // N x 3 positions at the start of a sweep
   MatX3 dv_;                       // N x 3 summed velocity changes of a sweep
@@ -140,6 +148,16 @@ class SelfCollision {
   std::vector<uint8_t> moved_;     // per vertex: moved by the last sweep
   VecX motion_;                    // per vertex: displacement less the shift (measure_motion), m
   double motion_guard_ = 0;        // m, round-off guard of the bounds on motion_
+  // The snapshot the start gaps are bounded from (carry_snapshot_gaps): positions of an earlier
+  // broad phase's x0, the candidate pairs snap_gap_ was last carried to (in their order), and the
+  // round-off guard of the snapshot's coordinates.
+  MatX3 snap_x_;
+  MatX3 drift_;  // N x 3: x0 - snap_x_ (m), unless the snapshot is x0
+  CandidatePairs snap_pairs_;
+  std::vector<double> snap_carry_;  // scratch of the carry
+  double snap_guard_ = 0;
+  bool snapshot_ = false;  // snap_x_ holds a snapshot
+  bool snap_now_ = false;  // it was taken at the last broad phase's x0
   // The last sweep detected every candidate pair (the first of its broad phase) and found nothing
   // to do: no contact, no degenerate one, no pole push. Every candidate is then at least the
   // thickness apart along the whole step, so find_violations has no pair to flag at that x.

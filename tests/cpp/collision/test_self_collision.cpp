@@ -297,7 +297,9 @@ MatX3 drive(const MatX3& target, double dt, MatX3& x, MatX3& v) {
 // (part of the same mesh) comes down from 10 cm to 4 mm above the sheet (steps 100-140) and
 // slides along it (to step 300: contacts every step). Each step, one SelfCollision kept for the
 // whole run and one made for that step alone (its first queries are direct) answer the same
-// input: same positions, velocities and statistics, bit for bit.
+// input: same positions, velocities and statistics, bit for bit. The same holds for the start
+// gaps: the kept object bounds them from a snapshot of an earlier step, the new one computes
+// every one it needs, and the answers must not differ.
 TEST(SelfCollision, PairListGivesWhatAFreshQueryGives) {
   const int rows = 12, cols = 16;
   const double s = 0.05, dt = 0.01;
@@ -328,6 +330,7 @@ TEST(SelfCollision, PairListGivesWhatAFreshQueryGives) {
   SelfCollision kept(tris, rest.rows(), params());
   MatX3 x = target(0), v = MatX3::Zero(x.rows(), 3);
   int listed_steps = 0, listed_contacts = 0, direct_later = 0;
+  int bounded_steps = 0, computed_with_contacts = 0;
   for (int step = 1; step <= 300; ++step) {
     const MatX3 x0 = drive(target(step), dt, x, v);
     MatX3 xf = x, vf = v;
@@ -347,10 +350,17 @@ TEST(SelfCollision, PairListGivesWhatAFreshQueryGives) {
       listed_contacts += sk.contacts + sk.crossings > 0;
     }
     direct_later += step > 20 && sk.tree_queries > 0;
+    // Start gaps: a new object snapshots x0 and computes each one a pass asks for; the kept one
+    // bounds them from its snapshot and computes only those the bound leaves open.
+    EXPECT_GT(sf.exact_gaps, 0) << "step " << step;
+    bounded_steps += 4 * sk.exact_gaps < sk.candidates;
+    computed_with_contacts += sk.exact_gaps > 0 && sk.contacts + sk.crossings > 0;
   }
   EXPECT_GT(listed_steps, 100);    // the list served most steps
   EXPECT_GT(listed_contacts, 10);  // including steps with contacts
   EXPECT_GT(direct_later, 10);     // and was rebuilt, or skipped for direct queries, later on
+  EXPECT_GT(bounded_steps, 150);   // the snapshot's bounds decided most pairs on most steps
+  EXPECT_GT(computed_with_contacts, 10);  // and left the close ones to the exact gaps
 }
 
 // The pair list filtered on the OpenMP team: a 64 x 96 sheet (1 cm, thickness 0.5 mm) in a slow
