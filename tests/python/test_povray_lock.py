@@ -31,6 +31,19 @@ def test_a_second_writer_is_refused_naming_the_holder(tmp_path):
     assert export(tmp_path).frames == 3  # free again
 
 
+def test_a_refusal_names_the_holder_that_refused_even_if_it_finished_since(tmp_path, monkeypatch):
+    # The holder finishes between the refusal and the message: the message names the holder
+    # read at the refusal, not "another process" (seen in a race of two real runs).
+    lock = pov.ExportLock(tmp_path)
+    other = {"pid": 4321, "host": "elsewhere", "started": "earlier", "command": "flagsim run"}
+    (tmp_path / ".flagsim.lock").write_text(json.dumps(other))
+    reads = iter([other, None])
+    monkeypatch.setattr(lock, "_holder", lambda: next(reads))
+    with pytest.raises(pov.ExportBusy, match="is being written by pid 4321 on elsewhere"):
+        lock.acquire()
+    assert not lock.held
+
+
 def test_the_lock_of_a_process_that_died_is_taken_over(tmp_path):
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()

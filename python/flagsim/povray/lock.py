@@ -102,6 +102,7 @@ class ExportLock:
         return holder if isinstance(holder, dict) else {}
 
     def acquire(self) -> None:
+        holder = None
         for _ in range(3):  # a takeover can race with another process's; retry a few times
             if self._create():
                 self.held = True
@@ -120,7 +121,7 @@ class ExportLock:
                 self.path.unlink()
             except FileNotFoundError:
                 pass
-        holder = self._holder() or {}
+        # The holder that refused us, as read then: read again, it may have finished meanwhile.
         raise ExportBusy(
             f"{self.path.parent} is being written by "
             f"{_describe(holder) if holder else 'another process'}; wait for it to "
