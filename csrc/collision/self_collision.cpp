@@ -99,9 +99,9 @@ inline uint64_t pair_key(const CandidatePair& p) {
 }
 
 // out[k] = the value of `from` for pair k of `to` where from_pairs holds the same pair (both in
-// the candidates' order), else kUnknown. Returns to.size().
-size_t carry(const std::vector<CandidatePair>& from_pairs, const double* from,
-             const std::vector<CandidatePair>& to, double* out) {
+// the candidates' order), else kUnknown.
+void carry(const std::vector<CandidatePair>& from_pairs, const double* from,
+           const std::vector<CandidatePair>& to, double* out) {
   const size_t m = from_pairs.size();
   size_t j = 0;
   for (size_t k = 0; k < to.size(); ++k) {
@@ -109,7 +109,6 @@ size_t carry(const std::vector<CandidatePair>& from_pairs, const double* from,
     while (j < m && pair_key(from_pairs[j]) < key) ++j;
     out[k] = j < m && pair_key(from_pairs[j]) == key ? from[j] : kUnknown;
   }
-  return to.size();
 }
 
 // Whether a and b hold the same pairs in the same order.
@@ -138,16 +137,15 @@ void SelfCollision::carry_snapshot_gaps(const MatX3& x0, size_t exact) {
     snapshot_ = true;
     snap_guard_ = roundoff_guard(x0.size() ? x0.cwiseAbs().maxCoeff() : 0.0);
     snap_gap_.assign(pairs.size(), kUnknown);
+    snap_pairs_ = pairs;  // within the reserved capacity: no allocation
   } else if (!same_pairs(snap_pairs_, pairs)) {
     snap_carry_.resize(pairs.size());
-    const size_t V = carry(snap_pairs_.vertex_triangle, snap_gap_.data(), pairs.vertex_triangle,
-                           snap_carry_.data());
+    carry(snap_pairs_.vertex_triangle, snap_gap_.data(), pairs.vertex_triangle, snap_carry_.data());
     carry(snap_pairs_.edge_edge, snap_gap_.data() + snap_pairs_.vertex_triangle.size(),
-          pairs.edge_edge, snap_carry_.data() + V);
+          pairs.edge_edge, snap_carry_.data() + pairs.vertex_triangle.size());
     snap_gap_.swap(snap_carry_);
-  }
-  snap_pairs_.vertex_triangle.assign(pairs.vertex_triangle.begin(), pairs.vertex_triangle.end());
-  snap_pairs_.edge_edge.assign(pairs.edge_edge.begin(), pairs.edge_edge.end());
+    snap_pairs_ = pairs;
+  }  // (the same pairs: nothing to carry or copy)
   // Each vertex's displacement since the snapshot, for the bounds (out_of_reach).
   if (!snap_now_) drift_ = x0 - snap_x_;
 }
